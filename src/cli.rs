@@ -1,0 +1,267 @@
+//! Command-line parsing and the commands. anyhow lives only here.
+
+use anyhow::{bail, Context, Result};
+use clap::{Parser, Subcommand};
+use lumen::render;
+use std::path::{Path, PathBuf};
+
+#[derive(Parser)]
+#[command(
+    name = "lumen",
+    version,
+    about = "Calibrate cameras and measure scenes, validated against a built-in path tracer"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run a pipeline file; writes report.json and report.md to its output folder.
+    Run {
+        /// Pipeline file (TOML), e.g. pipelines/all.toml.
+        pipeline: PathBuf,
+        /// Output folder (default: out/<pipeline name>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+    },
+    /// Render a scene file to an image: .exr (linear float) or .png (sRGB, or raw sensor values
+    /// when the scene has a [sensor]).
+    Render {
+        scene: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
+        /// Samples per pixel (default: the scene's [render] spp).
+        #[arg(long)]
+        spp: Option<u32>,
+        /// Longest path in segments (default: the scene's max_depth).
+        #[arg(long)]
+        max_depth: Option<u32>,
+        #[arg(long)]
+        seed: Option<u64>,
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Truth images to write beside the output, comma-separated: depth, normal,
+        /// normal_camera, albedo, position, id, or variance (of the mean radiance).
+        #[arg(long, value_delimiter = ',')]
+        aov: Vec<String>,
+    },
+    /// Benchmarks.
+    Bench {
+        #[command(subcommand)]
+        what: Bench,
+    },
+}
+
+#[derive(Subcommand)]
+enum Bench {
+    /// Million paths per second on a scene (default: the Cornell box, 256×256, depth 8).
+    Render {
+        #[arg(long, default_value = "pipelines/scenes/cornell-box.toml")]
+        scene: PathBuf,
+        #[arg(long, default_value_t = 64)]
+        spp: u32,
+        #[arg(long, default_value_t = 8)]
+        max_depth: u32,
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Repetitions; the best is reported.
+        #[arg(long, default_value_t = 3)]
+        repeat: u32,
+    },
+}
+
+pub fn main() -> i32 {
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => {
+            let _ = e.print();
+            return if e.use_stderr() { 2 } else { 0 };
+        }
+    };
+    let result = match cli.command {
+        Command::Run {
+            pipeline,
+            out,
+            threads,
+        } => run_pipeline(&pipeline, out, threads),
+        Command::Render {
+            scene,
+            out,
+            spp,
+            max_depth,
+            seed,
+            threads,
+            aov,
+        } => render_cmd(&scene, &out, spp, max_depth, seed, threads, &aov).map(|_| 0),
+        Command::Bench {
+            what:
+                Bench::Render {
+                    scene,
+                    spp,
+                    max_depth,
+                    threads,
+                    repeat,
+                },
+        } => bench_render(&scene, spp, max_depth, threads, repeat).map(|_| 0),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            1
+        }
+    }
+}
+
+fn run_pipeline(path: &Path, out: Option<PathBuf>, threads: Option<usize>) -> Result<i32> {
+    let _ = (path, out, threads);
+    bail!("not yet")
+}
+
+/// `NAME.ext` → `NAME.<suffix>.exr`.
+fn sibling(out: &Path, suffix: &str) -> PathBuf {
+    let stem = out.file_stem().and_then(|s| s.to_str()).unwrap_or("render");
+    out.with_file_name(format!("{stem}.{suffix}.exr"))
+}
+
+fn render_cmd(
+    scene_path: &Path,
+    out: &Path,
+    spp: Option<u32>,
+    max_depth: Option<u32>,
+    seed: Option<u64>,
+    threads: Option<usize>,
+    aov: &[String],
+) -> Result<()> {
+    let ext = out
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    if ext != "exr" && ext != "png" {
+        bail!(
+            "--out {}: expected a file name ending in .exr or .png",
+            out.display()
+        );
+    }
+    for a in aov {
+        if a != "variance" && !render::truth::AOV_NAMES.contains(&a.as_str()) {
+            bail!(
+                "--aov {a}: expected one of variance, {}",
+                render::truth::AOV_NAMES.join(", ")
+            );
+        }
+    }
+    let scene = render::load(scene_path)?;
+    let mut settings = render::Settings::from_scene(&scene);
+    if let Some(s) = spp {
+        if s == 0 {
+            bail!("--spp must be at least 1");
+        }
+        settings.spp = s;
+    }
+    if let Some(d) = max_depth {
+        if d == 0 {
+            bail!("--max-depth must be at least 1");
+        }
+        settings.max_depth = d;
+    }
+    settings.seed = seed.unwrap_or(settings.seed);
+    settings.threads = threads;
+    settings.progress = true;
+    let t = std::time::Instant::now();
+    let film = render::render(&scene, &settings);
+    let secs = t.elapsed().as_secs_f64();
+    match (&scene.sensor, ext.as_str()) {
+        (Some(sensor), "png") => {
+            let codes = sensor.expose(&film.mean, settings.seed);
+            lumen::image::io::write_png_raw(
+                out,
+                film.mean.width,
+                film.mean.height,
+                3,
+                &codes,
+                sensor.bits,
+            )?;
+        }
+        _ => lumen::image::io::write(out, &film.mean)?,
+    }
+    if aov.iter().any(|a| a == "variance") {
+        lumen::image::io::write_exr(&sibling(out, "variance"), &film.variance)?;
+    }
+    let truth_names: Vec<&String> = aov.iter().filter(|a| *a != "variance").collect();
+    if !truth_names.is_empty() {
+        let truth = render::truth(&scene, None);
+        for name in truth_names {
+            if let Some(img) = truth.get(name) {
+                lumen::image::io::write_exr(&sibling(out, name), img)?;
+            }
+        }
+        if aov.iter().any(|a| a == "id") {
+            let ids = out.with_file_name(format!(
+                "{}.ids.json",
+                out.file_stem().and_then(|s| s.to_str()).unwrap_or("render")
+            ));
+            std::fs::write(&ids, serde_json::to_string_pretty(&scene.object_names)?)
+                .with_context(|| format!("cannot write {}", ids.display()))?;
+        }
+    }
+    let paths = film.mean.width as f64 * film.mean.height as f64 * settings.spp as f64;
+    eprintln!(
+        "rendered {} ({}x{}, {} spp, max depth {}) in {secs:.2} s: {:.2} M paths/s",
+        out.display(),
+        film.mean.width,
+        film.mean.height,
+        settings.spp,
+        settings.max_depth,
+        paths / secs / 1e6
+    );
+    if film.dropped_samples > 0 {
+        eprintln!(
+            "warning: {} non-finite samples were dropped",
+            film.dropped_samples
+        );
+    }
+    Ok(())
+}
+
+fn bench_render(
+    scene_path: &Path,
+    spp: u32,
+    max_depth: u32,
+    threads: Option<usize>,
+    repeat: u32,
+) -> Result<()> {
+    let scene = render::load(scene_path)?;
+    let mut settings = render::Settings::from_scene(&scene);
+    settings.spp = spp.max(1);
+    settings.max_depth = max_depth.max(1);
+    settings.threads = threads;
+    let paths = scene.camera.width as f64 * scene.camera.height as f64 * settings.spp as f64;
+    let mut best = f64::INFINITY;
+    for _ in 0..repeat.max(1) {
+        let t = std::time::Instant::now();
+        let film = render::render(&scene, &settings);
+        best = best.min(t.elapsed().as_secs_f64());
+        std::hint::black_box(film);
+    }
+    println!(
+        "lumen {}: {}x{} spp {} depth {} threads {}: {best:.3} s, {:.3} M paths/s",
+        scene_path.display(),
+        scene.camera.width,
+        scene.camera.height,
+        settings.spp,
+        settings.max_depth,
+        threads.map_or_else(
+            || rayon::current_num_threads().to_string(),
+            |t| t.to_string()
+        ),
+        paths / best / 1e6
+    );
+    Ok(())
+}

@@ -1,0 +1,257 @@
+//! Reading and writing images: OpenEXR (linear float) and PNG (8- or 16-bit).
+//!
+//! Writes go to a temporary file beside the target and are renamed into place, so an error
+//! never leaves a half-written result file.
+
+use super::Image;
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("cannot read image {path}: {message}")]
+    Read { path: PathBuf, message: String },
+    #[error("cannot write image {path}: {message}")]
+    Write { path: PathBuf, message: String },
+    #[error("unsupported image format for {path}: expected a .exr or .png file name")]
+    Format { path: PathBuf },
+}
+
+/// Writes to `path.tmp` with `write`, then renames to `path`.
+pub fn write_atomically(
+    path: &Path,
+    write: impl FnOnce(&Path) -> Result<(), String>,
+) -> Result<(), Error> {
+    let err = |message: String| Error::Write {
+        path: path.to_path_buf(),
+        message,
+    };
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| err(e.to_string()))?;
+    }
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+    let tmp = path.with_extension(format!("partial.{ext}"));
+    if let Err(e) = write(&tmp) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(err(e));
+    }
+    std::fs::rename(&tmp, path).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        err(e.to_string())
+    })
+}
+
+fn extension(path: &Path) -> String {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase()
+}
+
+/// Channel names used for 1, 3 and 4 channel images.
+fn channel_names(channels: u32) -> Vec<String> {
+    match channels {
+        1 => vec!["Y".into()],
+        3 => vec!["R".into(), "G".into(), "B".into()],
+        4 => vec!["R".into(), "G".into(), "B".into(), "A".into()],
+        n => (0..n).map(|i| format!("C{i}")).collect(),
+    }
+}
+
+/// Writes a linear float OpenEXR file (f32 samples; channels Y, or R G B, or R G B A).
+pub fn write_exr(path: &Path, img: &Image) -> Result<(), Error> {
+    use exr::prelude::{
+        AnyChannel, AnyChannels, Encoding, FlatSamples, Layer, LayerAttributes, SmallVec,
+        WritableImage,
+    };
+    let (w, h, c) = (
+        img.width as usize,
+        img.height as usize,
+        img.channels as usize,
+    );
+    let names = channel_names(img.channels);
+    let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = names
+        .iter()
+        .enumerate()
+        .map(|(k, name)| {
+            let samples: Vec<f32> = img.data.iter().skip(k).step_by(c).copied().collect();
+            AnyChannel::new(name.as_str(), FlatSamples::F32(samples))
+        })
+        .collect();
+    let layer = Layer::new(
+        (w, h),
+        LayerAttributes::default(),
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(list),
+    );
+    let image = exr::image::Image::from_layer(layer);
+    write_atomically(path, |tmp| {
+        image.write().to_file(tmp).map_err(|e| e.to_string())
+    })
+}
+
+/// Reads the first layer of an OpenEXR file as f32: R G B if present, else Y (one channel).
+pub fn read_exr(path: &Path) -> Result<Image, Error> {
+    use exr::prelude::{read, ReadChannels, ReadLayers};
+    let err = |message: String| Error::Read {
+        path: path.to_path_buf(),
+        message,
+    };
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+        .map_err(|e| err(e.to_string()))?;
+    let layer = &image.layer_data;
+    let (w, h) = (layer.size.0, layer.size.1);
+    let find = |name: &str| {
+        layer
+            .channel_data
+            .list
+            .iter()
+            .find(|c| c.name.to_string().eq_ignore_ascii_case(name))
+    };
+    let wanted: Vec<_> = match (find("R"), find("G"), find("B"), find("Y")) {
+        (Some(r), Some(g), Some(b), _) => vec![r, g, b],
+        (_, _, _, Some(y)) => vec![y],
+        _ => return Err(err("no R, G, B or Y channel".into())),
+    };
+    let c = wanted.len();
+    let mut out = Image::new(w as u32, h as u32, c as u32);
+    for (k, ch) in wanted.iter().enumerate() {
+        for (i, v) in ch.sample_data.values_as_f32().enumerate() {
+            out.data[i * c + k] = v;
+        }
+    }
+    Ok(out)
+}
+
+/// Writes an 8-bit sRGB-encoded PNG of a linear image (values clipped to [0, 1]).
+pub fn write_png_srgb(path: &Path, img: &Image) -> Result<(), Error> {
+    let bytes: Vec<u8> = img
+        .data
+        .iter()
+        .map(|&v| (super::srgb_encode(v) * 255.0 + 0.5) as u8)
+        .collect();
+    write_png_bytes(path, img.width, img.height, img.channels, &bytes)
+}
+
+fn color_type(channels: u32, sixteen: bool) -> Option<image::ExtendedColorType> {
+    use image::ExtendedColorType as T;
+    Some(match (channels, sixteen) {
+        (1, false) => T::L8,
+        (3, false) => T::Rgb8,
+        (4, false) => T::Rgba8,
+        (1, true) => T::L16,
+        (3, true) => T::Rgb16,
+        (4, true) => T::Rgba16,
+        _ => return None,
+    })
+}
+
+fn write_png_bytes(path: &Path, w: u32, h: u32, c: u32, bytes: &[u8]) -> Result<(), Error> {
+    let ct = color_type(c, false).ok_or_else(|| Error::Write {
+        path: path.into(),
+        message: format!("{c} channels"),
+    })?;
+    write_atomically(path, |tmp| {
+        image::save_buffer_with_format(tmp, bytes, w, h, ct, image::ImageFormat::Png)
+            .map_err(|e| e.to_string())
+    })
+}
+
+/// Writes raw integer sample values (already quantised) as an 8- or 16-bit PNG.
+pub fn write_png_raw(
+    path: &Path,
+    w: u32,
+    h: u32,
+    c: u32,
+    values: &[u16],
+    bits: u8,
+) -> Result<(), Error> {
+    if bits == 8 {
+        let bytes: Vec<u8> = values.iter().map(|&v| v.min(255) as u8).collect();
+        return write_png_bytes(path, w, h, c, &bytes);
+    }
+    let ct = color_type(c, true).ok_or_else(|| Error::Write {
+        path: path.into(),
+        message: format!("{c} channels"),
+    })?;
+    // PNG stores 16-bit samples big-endian; `save_buffer` expects native-endian u16 bytes.
+    let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_ne_bytes()).collect();
+    write_atomically(path, |tmp| {
+        image::save_buffer_with_format(tmp, &bytes, w, h, ct, image::ImageFormat::Png)
+            .map_err(|e| e.to_string())
+    })
+}
+
+/// Reads a PNG or JPEG as linear floats in [0, 1] without any transfer function (raw code
+/// values / max code value), keeping 16-bit depth. Colour images give 3 channels, grey 1.
+pub fn read_raw(path: &Path) -> Result<Image, Error> {
+    let err = |message: String| Error::Read {
+        path: path.to_path_buf(),
+        message,
+    };
+    let dynimg = image::open(path).map_err(|e| err(e.to_string()))?;
+    let (w, h) = (dynimg.width(), dynimg.height());
+    let grey = !dynimg.color().has_color();
+    Ok(if grey {
+        let buf = dynimg.into_luma16();
+        Image {
+            width: w,
+            height: h,
+            channels: 1,
+            data: buf.iter().map(|&v| v as f32 / 65535.0).collect(),
+        }
+    } else {
+        let buf = dynimg.into_rgb16();
+        Image {
+            width: w,
+            height: h,
+            channels: 3,
+            data: buf.iter().map(|&v| v as f32 / 65535.0).collect(),
+        }
+    })
+}
+
+/// Writes by extension: `.exr` linear float, `.png` 8-bit sRGB.
+pub fn write(path: &Path, img: &Image) -> Result<(), Error> {
+    match extension(path).as_str() {
+        "exr" => write_exr(path, img),
+        "png" => write_png_srgb(path, img),
+        _ => Err(Error::Format { path: path.into() }),
+    }
+}
+
+/// Reads by extension: `.exr` as stored; `.png`/`.jpg` as raw code values in [0, 1].
+pub fn read(path: &Path) -> Result<Image, Error> {
+    match extension(path).as_str() {
+        "exr" => read_exr(path),
+        "png" | "jpg" | "jpeg" => read_raw(path),
+        _ => Err(Error::Format { path: path.into() }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exr_round_trip() {
+        let dir = std::env::temp_dir().join(format!("lumen-io-{}", std::process::id()));
+        let mut img = Image::new(5, 3, 3);
+        for (i, v) in img.data.iter_mut().enumerate() {
+            *v = i as f32 * 0.25 - 1.0;
+        }
+        let p = dir.join("a.exr");
+        write_exr(&p, &img).unwrap();
+        assert_eq!(read_exr(&p).unwrap(), img);
+        let mut grey = Image::new(4, 2, 1);
+        grey.data[3] = 7.5;
+        write_exr(&p, &grey).unwrap();
+        assert_eq!(read_exr(&p).unwrap(), grey);
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}

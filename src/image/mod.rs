@@ -1,0 +1,85 @@
+//! Linear float images, their file formats, and image metrics.
+
+pub mod io;
+pub mod metrics;
+
+use serde::{Deserialize, Serialize};
+
+/// A linear float image with interleaved channels, row-major from the top-left pixel.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    pub channels: u32,
+    pub data: Vec<f32>,
+}
+
+impl Image {
+    pub fn new(width: u32, height: u32, channels: u32) -> Image {
+        Image {
+            width,
+            height,
+            channels,
+            data: vec![0.0; (width * height * channels) as usize],
+        }
+    }
+
+    pub fn pixel(&self, x: u32, y: u32) -> &[f32] {
+        let i = ((y * self.width + x) * self.channels) as usize;
+        &self.data[i..i + self.channels as usize]
+    }
+
+    pub fn pixel_mut(&mut self, x: u32, y: u32) -> &mut [f32] {
+        let i = ((y * self.width + x) * self.channels) as usize;
+        &mut self.data[i..i + self.channels as usize]
+    }
+
+    /// Mean of each channel over all pixels, in f64.
+    pub fn channel_means(&self) -> Vec<f64> {
+        let c = self.channels as usize;
+        let mut sums = vec![0.0f64; c];
+        for px in self.data.chunks_exact(c) {
+            for (s, &v) in sums.iter_mut().zip(px) {
+                *s += v as f64;
+            }
+        }
+        let n = (self.width * self.height).max(1) as f64;
+        sums.iter().map(|s| s / n).collect()
+    }
+
+    pub fn has_non_finite(&self) -> bool {
+        self.data.iter().any(|v| !v.is_finite())
+    }
+}
+
+/// sRGB transfer function (linear → encoded), IEC 61966-2-1.
+pub fn srgb_encode(v: f32) -> f32 {
+    let v = v.clamp(0.0, 1.0);
+    if v <= 0.003_130_8 {
+        12.92 * v
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// sRGB transfer function (encoded → linear).
+pub fn srgb_decode(v: f32) -> f32 {
+    if v <= 0.040_45 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn srgb_round_trip() {
+        for i in 0..=100 {
+            let v = i as f32 / 100.0;
+            assert!((srgb_decode(srgb_encode(v)) - v).abs() < 1e-6);
+        }
+    }
+}

@@ -1,0 +1,35 @@
+//! lumen: camera calibration, reconstruction, colour, HDR and photometric stereo, each validated
+//! against images rendered by its own physically based path tracer where the truth is known.
+//!
+//! # Conventions
+//!
+//! - **Frames.** `t_a_b` maps coordinates in frame b to frame a (`t_world_cam`: camera to
+//!   world). The camera frame is OpenCV's: x right, y down, z forward.
+//! - **Pixels.** Every pixel coordinate a user sees follows OpenCV: pixel centres at integer
+//!   coordinates, so a centred principal point is ((W−1)/2, (H−1)/2). The renderer integrates
+//!   pixel (i, j) over [i − ½, i + ½) × [j − ½, j + ½); the conversion lives in one place,
+//!   `render::integrator`.
+//! - **Numbers.** f64 for everything estimated or compared with truth (camera model, poses);
+//!   f32 (`glam::Vec3A`) for radiance, film and BVH traversal.
+//! - **Radiometry.** Linear RGB radiance in W·sr⁻¹·m⁻²; EXR files are linear; PNG previews are
+//!   sRGB-encoded; sensor PNGs hold raw linear code values.
+//! - **Depth.** Path depth counts segments (Mitsuba's `max_depth`).
+//! - **Errors.** One error enum per module, lifted into [`Error`]; a solver that fails returns
+//!   an error, never NaN.
+//! - **Determinism.** Every random number is a hash of (seed, pixel, sample, dimension), so
+//!   results do not depend on the thread count.
+
+pub mod image;
+pub mod math;
+pub mod pipeline;
+pub mod render;
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error(transparent)]
+    Render(#[from] render::Error),
+    #[error(transparent)]
+    Image(#[from] image::io::Error),
+    #[error(transparent)]
+    Pipeline(#[from] pipeline::Error),
+}

@@ -1,0 +1,11 @@
+//! Shared f64 geometry: the camera model (intrinsics + Brown–Conrady distortion) and rigid poses.
+//!
+//! Renderer and solvers both use these types, so projection and distortion have one source of
+//! truth: a 3D point projected here lands where the renderer draws it.
+
+pub mod camera;
+pub mod pose;
+pub mod stats;
+
+pub use camera::{CameraModel, Distortion, Intrinsics};
+pub use pose::Pose;

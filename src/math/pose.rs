@@ -1,0 +1,105 @@
+//! Rigid transforms. `t_a_b` maps coordinates in frame b to frame a: p_a = R·p_b + t.
+
+use glam::{DMat3, DVec3};
+use serde::{Deserialize, Serialize};
+
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Pose {
+    pub rotation: DMat3,
+    pub translation: DVec3,
+}
+
+impl Pose {
+    pub const IDENTITY: Pose = Pose {
+        rotation: DMat3::IDENTITY,
+        translation: DVec3::ZERO,
+    };
+
+    pub fn transform_point(&self, p: DVec3) -> DVec3 {
+        self.rotation * p + self.translation
+    }
+
+    pub fn transform_vector(&self, v: DVec3) -> DVec3 {
+        self.rotation * v
+    }
+
+    pub fn inverse(&self) -> Pose {
+        let rt = self.rotation.transpose();
+        Pose {
+            rotation: rt,
+            translation: -(rt * self.translation),
+        }
+    }
+
+    /// `self ∘ other`: first `other`, then `self`.
+    pub fn compose(&self, other: &Pose) -> Pose {
+        Pose {
+            rotation: self.rotation * other.rotation,
+            translation: self.rotation * other.translation + self.translation,
+        }
+    }
+
+    /// Camera-to-world pose of a camera at `origin` looking at `target`, OpenCV axes
+    /// (x right, y down, z forward), with `up` pointing up in the image.
+    pub fn look_at(origin: DVec3, target: DVec3, up: DVec3) -> Option<Pose> {
+        let z = (target - origin).normalize_or_zero();
+        let x = z.cross(up).normalize_or_zero();
+        if z == DVec3::ZERO || x == DVec3::ZERO {
+            return None;
+        }
+        let y = z.cross(x);
+        Some(Pose {
+            rotation: DMat3::from_cols(x, y, z),
+            translation: origin,
+        })
+    }
+
+    /// Rotation from a Rodrigues vector (axis × angle in radians), as OpenCV's `Rodrigues`.
+    pub fn rotation_from_rvec(rvec: DVec3) -> DMat3 {
+        let angle = rvec.length();
+        if angle < 1e-300 {
+            return DMat3::IDENTITY;
+        }
+        DMat3::from_axis_angle(rvec / angle, angle)
+    }
+
+    /// Largest deviation of RᵀR from the identity and det(R) from 1.
+    pub fn orthonormality_error(r: &DMat3) -> f64 {
+        let d = r.transpose() * *r - DMat3::IDENTITY;
+        let m = d
+            .to_cols_array()
+            .iter()
+            .fold(0.0f64, |a, &b| a.max(b.abs()));
+        m.max((r.determinant() - 1.0).abs())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn inverse_and_composition() {
+        let p = Pose {
+            rotation: Pose::rotation_from_rvec(DVec3::new(0.3, -0.2, 0.9)),
+            translation: DVec3::new(1.0, -2.0, 0.5),
+        };
+        let q = p.compose(&p.inverse());
+        assert!(Pose::orthonormality_error(&q.rotation) < 1e-12);
+        assert!((q.rotation - DMat3::IDENTITY)
+            .to_cols_array()
+            .iter()
+            .all(|v| v.abs() < 1e-12));
+        assert!(q.translation.length() < 1e-12);
+        let x = DVec3::new(0.2, 0.7, -1.1);
+        assert!((p.inverse().transform_point(p.transform_point(x)) - x).length() < 1e-12);
+    }
+
+    #[test]
+    fn look_at_uses_opencv_axes() {
+        let p = Pose::look_at(DVec3::new(0.0, 0.0, 3.9), DVec3::ZERO, DVec3::Y).unwrap();
+        assert!((p.rotation.x_axis - DVec3::X).length() < 1e-15);
+        assert!((p.rotation.y_axis + DVec3::Y).length() < 1e-15);
+        assert!((p.rotation.z_axis + DVec3::Z).length() < 1e-15);
+    }
+}

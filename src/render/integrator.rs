@@ -1,0 +1,337 @@
+//! Unidirectional path tracing with next-event estimation and Russian roulette.
+//!
+//! For a path x₀ (camera) → x₁ → … the estimator adds, at every vertex xₖ, one light sample:
+//!
+//!   L += β · f(xₖ) · Lₑ · cos θₖ · G / (p_light · p_pick),  β = Π f·cos / p_bsdf
+//!
+//! and emission found by BSDF sampling is counted only on the camera ray, since every emitter
+//! is reached by light sampling (no double counting, no MIS needed for diffuse-only scenes).
+//! Lambertian surfaces are two-sided; emitters emit on their front side only.
+//!
+//! Depth follows Mitsuba's convention: `max_depth` counts path segments, so 1 shows emitters
+//! seen directly and 2 is direct lighting only. Russian roulette starts after 3 segments with
+//! survival probability min(max(β), 0.95).
+//!
+//! Film: each pixel (i, j) of the image is integrated over the box [i − ½, i + ½) × [j − ½, j + ½)
+//! in OpenCV's pixel coordinates (centre at the integer), so sample position = index + ξ − ½.
+//! The film keeps the mean and the variance of that mean (sample variance / n) per channel.
+
+use super::geometry::{Hit, Prim, Ray};
+use super::sampler::Sampler;
+use super::scene::{Light, Scene};
+use crate::image::Image;
+use glam::{DVec2, Vec2, Vec3A};
+use rayon::prelude::*;
+use std::f32::consts::PI;
+
+/// What to render: samples, depth, seed, and which part of the image.
+#[derive(Clone, Debug)]
+pub struct Settings {
+    pub spp: u32,
+    pub max_depth: u32,
+    pub seed: u64,
+    /// Pixel window [x0, y0, x1, y1) to render; the whole image when `None`.
+    pub crop: Option<[u32; 4]>,
+    /// Worker threads; all available cores when `None`.
+    pub threads: Option<usize>,
+    pub progress: bool,
+}
+
+impl Settings {
+    pub fn from_scene(scene: &Scene) -> Settings {
+        Settings {
+            spp: scene.render.spp,
+            max_depth: scene.render.max_depth,
+            seed: scene.render.seed,
+            crop: None,
+            threads: None,
+            progress: false,
+        }
+    }
+}
+
+/// The film after rendering: mean radiance and the variance of that mean, per pixel.
+pub struct Film {
+    pub mean: Image,
+    pub variance: Image,
+    /// Pixel offset of the film in the full image (non-zero for a crop).
+    pub origin: [u32; 2],
+    /// Samples whose value was not finite and was dropped (should be 0).
+    pub dropped_samples: u64,
+}
+
+const RR_START: u32 = 3;
+
+/// Offset for spawning rays off a surface, scaled with the coordinates' magnitude.
+#[inline]
+fn epsilon(p: Vec3A) -> f32 {
+    1e-4 * (1.0 + p.abs().max_element())
+}
+
+/// Builds an orthonormal basis around unit `n` (Duff et al. 2017).
+#[inline]
+fn basis(n: Vec3A) -> (Vec3A, Vec3A) {
+    let s = if n.z >= 0.0 { 1.0 } else { -1.0 };
+    let a = -1.0 / (s + n.z);
+    let b = n.x * n.y * a;
+    (
+        Vec3A::new(1.0 + s * n.x * n.x * a, s * b, -s * n.x),
+        Vec3A::new(b, s + n.y * n.y * a, -n.y),
+    )
+}
+
+/// Cosine-weighted direction around `n` (Malley's method).
+#[inline]
+fn cosine_hemisphere(n: Vec3A, u1: f32, u2: f32) -> Vec3A {
+    let r = u1.sqrt();
+    let phi = 2.0 * PI * u2;
+    let (t, b) = basis(n);
+    let z = (1.0 - u1).max(0.0).sqrt();
+    (t * (r * phi.cos()) + b * (r * phi.sin()) + n * z).normalize()
+}
+
+/// Surface data at a hit.
+pub struct Surface {
+    pub p: Vec3A,
+    /// Geometric normal, flipped for reversed shapes: the side emitters emit from.
+    pub n: Vec3A,
+    pub uv: Vec2,
+    pub material: u32,
+    pub object_id: u32,
+}
+
+impl Scene {
+    pub fn surface(&self, ray: &Ray, hit: &Hit) -> Surface {
+        let info = &self.info[hit.prim as usize];
+        let prim = &self.bvh.prims[hit.prim as usize];
+        let p = ray.origin + ray.dir * hit.t;
+        let mut n = prim.normal(p);
+        if info.reverse {
+            n = -n;
+        }
+        let uv = match prim {
+            Prim::Triangle { .. } => {
+                info.uv[0] * (1.0 - hit.b1 - hit.b2) + info.uv[1] * hit.b1 + info.uv[2] * hit.b2
+            }
+            Prim::Sphere { center, .. } => {
+                let d = (p - *center).normalize();
+                Vec2::new(
+                    0.5 + d.z.atan2(d.x) / (2.0 * PI),
+                    d.y.clamp(-1.0, 1.0).acos() / PI,
+                )
+            }
+        };
+        Surface {
+            p,
+            n,
+            uv,
+            material: info.material,
+            object_id: info.object_id,
+        }
+    }
+
+    /// Radiance along a camera ray.
+    pub fn trace(&self, mut ray: Ray, max_depth: u32, s: &mut Sampler) -> Vec3A {
+        let mut beta = Vec3A::ONE;
+        let mut l = Vec3A::ZERO;
+        for depth in 1..=max_depth {
+            let Some(hit) = self.bvh.intersect(&ray, 0.0, f32::INFINITY) else {
+                break;
+            };
+            let surf = self.surface(&ray, &hit);
+            let mat = &self.materials[surf.material as usize];
+            let wo = -ray.dir;
+            if depth == 1 {
+                if let Some(le) = mat.emission {
+                    if surf.n.dot(wo) > 0.0 {
+                        l += beta * le;
+                    }
+                }
+            }
+            if depth == max_depth {
+                break;
+            }
+            // Two-sided diffuse: shade with the normal on the side the path arrived from.
+            let n = if surf.n.dot(wo) < 0.0 {
+                -surf.n
+            } else {
+                surf.n
+            };
+            let albedo = mat.albedo.eval(surf.uv);
+            let origin = surf.p + n * epsilon(surf.p);
+
+            let (u_pick, u_light) = (s.next(), s.next2());
+            if let Some((li, wi, dist)) = self.sample_light(u_pick, u_light, surf.p) {
+                let cos = n.dot(wi);
+                if cos > 0.0
+                    && !self.bvh.occluded(
+                        &Ray { origin, dir: wi },
+                        0.0,
+                        dist * (1.0 - 1e-4) - epsilon(surf.p),
+                    )
+                {
+                    l += beta * albedo * (cos / PI) * li;
+                }
+            }
+
+            let (u1, u2) = s.next2();
+            beta *= albedo;
+            let u_rr = s.next();
+            if depth >= RR_START {
+                let q = beta.max_element().min(0.95);
+                if u_rr >= q {
+                    break;
+                }
+                beta /= q;
+            }
+            if beta == Vec3A::ZERO {
+                break;
+            }
+            ray = Ray {
+                origin,
+                dir: cosine_hemisphere(n, u1, u2),
+            };
+        }
+        l
+    }
+
+    /// One light sample seen from `p`: (incident radiance divided by every pdf, unit direction
+    /// towards the light, distance). `None` when the sample carries nothing.
+    #[inline]
+    pub fn sample_light(
+        &self,
+        u_pick: f32,
+        u: (f32, f32),
+        p: Vec3A,
+    ) -> Option<(Vec3A, Vec3A, f32)> {
+        let (i, p_pick) = self.pick_light(u_pick)?;
+        match self.lights[i] {
+            Light::Point {
+                position,
+                intensity,
+            } => {
+                let d = position - p;
+                let r2 = d.length_squared();
+                let r = r2.sqrt();
+                Some((intensity / (r2 * p_pick), d / r, r))
+            }
+            Light::Directional {
+                to_light,
+                irradiance,
+            } => Some((irradiance / p_pick, to_light, f32::INFINITY)),
+            Light::Area {
+                prim,
+                radiance,
+                area,
+            } => {
+                let (y, mut ny) = self.bvh.prims[prim as usize].sample_area(u.0, u.1);
+                if self.info[prim as usize].reverse {
+                    ny = -ny;
+                }
+                let d = y - p;
+                let r2 = d.length_squared();
+                let r = r2.sqrt();
+                let wi = d / r;
+                let cos_light = -ny.dot(wi);
+                if cos_light <= 0.0 || r2 == 0.0 {
+                    return None;
+                }
+                // Area-measure pdf 1/A converted to solid angle: r² / (A cos θ_light).
+                Some((radiance * (cos_light * area / (r2 * p_pick)), wi, r))
+            }
+        }
+    }
+}
+
+/// Renders the scene into a film.
+pub fn render(scene: &Scene, settings: &Settings) -> Film {
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let [x0, y0, x1, y1] = settings.crop.unwrap_or([0, 0, w, h]);
+    let (fw, fh) = (x1.saturating_sub(x0), y1.saturating_sub(y0));
+    let mut mean = Image::new(fw, fh, 3);
+    let mut variance = Image::new(fw, fh, 3);
+    let bar = super::progress_bar(fh as u64, "render", settings.progress);
+    let dropped = std::sync::atomic::AtomicU64::new(0);
+    let mut work = || {
+        let (mean, variance) = (&mut mean, &mut variance);
+        mean.data
+            .par_chunks_mut(3 * fw as usize)
+            .zip(variance.data.par_chunks_mut(3 * fw as usize))
+            .enumerate()
+            .for_each(|(row, (mrow, vrow))| {
+                let y = y0 + row as u32;
+                let mut lost = 0;
+                for i in 0..fw as usize {
+                    let x = x0 + i as u32;
+                    let (m, v, d) = render_pixel(scene, settings, x, y);
+                    mrow[3 * i..3 * i + 3].copy_from_slice(&m);
+                    vrow[3 * i..3 * i + 3].copy_from_slice(&v);
+                    lost += d;
+                }
+                if lost > 0 {
+                    dropped.fetch_add(lost, std::sync::atomic::Ordering::Relaxed);
+                }
+                bar.inc(1);
+            })
+    };
+    match settings.threads.and_then(|n| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n.max(1))
+            .build()
+            .ok()
+    }) {
+        Some(pool) => pool.install(work),
+        None => work(),
+    }
+    bar.finish_and_clear();
+    Film {
+        mean,
+        variance,
+        origin: [x0, y0],
+        dropped_samples: dropped.into_inner(),
+    }
+}
+
+/// Mean and variance of the mean of one pixel, and the number of non-finite samples dropped.
+fn render_pixel(scene: &Scene, settings: &Settings, x: u32, y: u32) -> ([f32; 3], [f32; 3], u64) {
+    let pixel_index = y as u64 * scene.camera.width as u64 + x as u64;
+    let mut sum = [0.0f64; 3];
+    let mut sum2 = [0.0f64; 3];
+    let mut dropped = 0;
+    let origin = Vec3A::from(scene.t_world_cam.translation.as_vec3());
+    let rot = scene.t_world_cam.rotation;
+    for k in 0..settings.spp {
+        let mut s = Sampler::new(settings.seed, pixel_index, k as u64);
+        let (jx, jy) = s.next2();
+        let px = DVec2::new(x as f64 + jx as f64 - 0.5, y as f64 + jy as f64 - 0.5);
+        let l = match scene.camera.pixel_ray(px) {
+            Some(d) => {
+                let dir = Vec3A::from((rot * d).as_vec3());
+                scene.trace(Ray { origin, dir }, settings.max_depth, &mut s)
+            }
+            None => Vec3A::ZERO, // beyond the fold of the distortion: no scene ray maps here
+        };
+        if !l.is_finite() {
+            dropped += 1;
+            continue;
+        }
+        for c in 0..3 {
+            let v = l[c] as f64;
+            sum[c] += v;
+            sum2[c] += v * v;
+        }
+    }
+    let n = (settings.spp as u64 - dropped).max(1) as f64;
+    let mut mean = [0.0f32; 3];
+    let mut var = [0.0f32; 3];
+    for c in 0..3 {
+        let m = sum[c] / n;
+        mean[c] = m as f32;
+        var[c] = if n > 1.0 {
+            ((sum2[c] - n * m * m).max(0.0) / (n - 1.0) / n) as f32
+        } else {
+            0.0
+        };
+    }
+    (mean, var, dropped)
+}

@@ -1,0 +1,56 @@
+//! The physically based path tracer that renders each stage's synthetic input with its truth.
+//!
+//! `scene` reads scene files; `bvh` and `geometry` find hits; `integrator` traces paths into a
+//! `Film` (mean + variance); `truth` writes ground-truth images; `sensor` turns radiance into
+//! noisy, quantised code values.
+
+pub mod bvh;
+pub mod geometry;
+pub mod integrator;
+pub mod obj;
+pub mod sampler;
+pub mod scene;
+pub mod sensor;
+pub mod texture;
+pub mod truth;
+
+pub use integrator::{render, Film, Settings};
+pub use scene::{load, Scene};
+pub use truth::{truth, Truth};
+
+use std::path::PathBuf;
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("cannot read {path}: {message}")]
+    Io { path: PathBuf, message: String },
+    #[error("{path}: {message}")]
+    Parse { path: PathBuf, message: String },
+    #[error("{path}: `{field}` {message}")]
+    Invalid {
+        path: PathBuf,
+        field: String,
+        message: String,
+    },
+    #[error(transparent)]
+    Obj(#[from] obj::ObjError),
+    #[error("{path}: the mesh has no faces")]
+    EmptyMesh { path: PathBuf },
+    #[error(transparent)]
+    Image(#[from] crate::image::io::Error),
+}
+
+/// A progress bar on stderr when `show` is set and stderr is a terminal; hidden otherwise.
+pub fn progress_bar(len: u64, what: &str, show: bool) -> indicatif::ProgressBar {
+    if !show {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(len);
+    if let Ok(style) = indicatif::ProgressStyle::with_template(
+        "{msg:>10} [{bar:40}] {pos}/{len} {elapsed_precise} eta {eta}",
+    ) {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar.set_message(what.to_string());
+    bar
+}

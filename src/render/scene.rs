@@ -1,0 +1,777 @@
+//! Scene files (TOML) and the scene the integrator traces.
+//!
+//! A scene file holds a `[camera]`, optional `[render]` defaults and `[sensor]`, a list of
+//! `[[materials]]`, `[[shapes]]` and `[[lights]]`. Paths inside it are relative to the file.
+//! Units are the scene's own length unit; radiance in W·sr⁻¹·m⁻² (linear RGB), point-light
+//! intensity in W·sr⁻¹ (or power in W), directional-light irradiance in W·m⁻².
+//! See `pipelines/scenes/*.toml` for examples of every field.
+
+use super::bvh::Bvh;
+use super::geometry::{Prim, PrimInfo};
+use super::texture::Texture;
+use super::{obj, Error};
+use crate::math::{CameraModel, Distortion, Intrinsics, Pose};
+use glam::{DMat3, DVec2, DVec3, Vec2, Vec3A};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+// ---------------------------------------------------------------------------------------------
+// File format
+// ---------------------------------------------------------------------------------------------
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneFile {
+    pub camera: CameraSpec,
+    #[serde(default)]
+    pub render: RenderSpec,
+    pub sensor: Option<super::sensor::Sensor>,
+    #[serde(default)]
+    pub materials: Vec<MaterialSpec>,
+    #[serde(default)]
+    pub shapes: Vec<ShapeSpec>,
+    #[serde(default)]
+    pub lights: Vec<LightSpec>,
+}
+
+/// Camera: size, then either `fov_deg` (on the shorter side, centred principal point) or
+/// `fx, fy, cx, cy` (OpenCV pixels), optional `distortion = [k1, k2, p1, p2, k3]`, and a pose:
+/// `look_at = { origin, target, up }` or `t_world_cam = { rotation | rvec, translation }`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraSpec {
+    pub width: u32,
+    pub height: u32,
+    pub fov_deg: Option<f64>,
+    pub fx: Option<f64>,
+    pub fy: Option<f64>,
+    pub cx: Option<f64>,
+    pub cy: Option<f64>,
+    pub distortion: Option<[f64; 5]>,
+    pub look_at: Option<LookAt>,
+    pub t_world_cam: Option<TransformSpec>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LookAt {
+    pub origin: [f64; 3],
+    pub target: [f64; 3],
+    pub up: [f64; 3],
+}
+
+/// A rigid (plus optional scale, for shapes) transform: p' = R·(s ⊙ p) + t. `rotation` is a
+/// 3×3 matrix given as rows; `rvec` a Rodrigues vector (radians), as OpenCV's.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TransformSpec {
+    pub rotation: Option<[[f64; 3]; 3]>,
+    pub rvec: Option<[f64; 3]>,
+    #[serde(default)]
+    pub translation: [f64; 3],
+    pub scale: Option<Scale>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+pub enum Scale {
+    Uniform(f64),
+    PerAxis([f64; 3]),
+}
+
+/// Render settings a scene may carry; the CLI and pipeline files override them.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RenderSpec {
+    /// Samples per pixel (default 16).
+    #[serde(default = "default_spp")]
+    pub spp: u32,
+    /// Longest path in segments, Mitsuba's convention: 1 shows only emitters seen directly,
+    /// 2 adds direct lighting, 8 allows 7 bounces (default 8).
+    #[serde(default = "default_depth")]
+    pub max_depth: u32,
+    /// Seed of every random stream (default 1).
+    #[serde(default = "default_seed")]
+    pub seed: u64,
+}
+
+fn default_spp() -> u32 {
+    16
+}
+fn default_depth() -> u32 {
+    8
+}
+fn default_seed() -> u64 {
+    1
+}
+
+impl Default for RenderSpec {
+    fn default() -> Self {
+        RenderSpec {
+            spp: default_spp(),
+            max_depth: default_depth(),
+            seed: default_seed(),
+        }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialSpec {
+    pub name: String,
+    /// Only `"lambertian"` so far.
+    #[serde(rename = "type")]
+    pub kind: String,
+    pub albedo: TextureSpec,
+    /// Emitted radiance (linear RGB), one-sided along the surface normal: makes every shape
+    /// with this material an area light.
+    pub emission: Option<[f64; 3]>,
+}
+
+/// A colour: constant `[r, g, b]`, an image `{ texture = "file.png" }` (8-bit files are
+/// sRGB-decoded, 16-bit and EXR taken as linear) or a procedural checkerboard
+/// `{ checker = { squares = [nu, nv], even = [..], odd = [..] } }` over texture coordinates.
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+pub enum TextureSpec {
+    Constant([f64; 3]),
+    Image { texture: String },
+    Checker { checker: CheckerSpec },
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CheckerSpec {
+    /// Number of squares along u and v over the [0, 1]² texture domain.
+    pub squares: [u32; 2],
+    pub even: [f64; 3],
+    pub odd: [f64; 3],
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
+pub enum ShapeSpec {
+    /// An OBJ file. `material` is used for faces whose `usemtl` names no scene material;
+    /// `object_materials` maps OBJ object names (`o`) to scene materials, overriding both.
+    Mesh {
+        file: String,
+        material: Option<String>,
+        #[serde(default)]
+        object_materials: std::collections::BTreeMap<String, String>,
+        #[serde(default)]
+        transform: TransformSpec,
+        #[serde(default)]
+        reverse_orientation: bool,
+    },
+    Sphere {
+        center: [f64; 3],
+        radius: f64,
+        material: String,
+        #[serde(default)]
+        reverse_orientation: bool,
+    },
+    /// A parallelogram `corner + s·edge_u + t·edge_v`, s, t ∈ [0, 1] (the texture coordinates),
+    /// facing edge_u × edge_v.
+    Quad {
+        corner: [f64; 3],
+        edge_u: [f64; 3],
+        edge_v: [f64; 3],
+        material: String,
+        #[serde(default)]
+        reverse_orientation: bool,
+    },
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
+pub enum LightSpec {
+    /// Isotropic point light: `intensity` (W/sr) or `power` (W, = 4π·intensity).
+    Point {
+        position: [f64; 3],
+        intensity: Option<[f64; 3]>,
+        power: Option<[f64; 3]>,
+    },
+    /// Distant light from direction `to_light` (towards the light), `irradiance` in W/m² on a
+    /// surface facing it.
+    Directional {
+        to_light: [f64; 3],
+        irradiance: [f64; 3],
+    },
+}
+
+// ---------------------------------------------------------------------------------------------
+// The built scene
+// ---------------------------------------------------------------------------------------------
+
+pub struct Material {
+    pub name: String,
+    pub albedo: Texture,
+    pub emission: Option<Vec3A>,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub enum Light {
+    Point {
+        position: Vec3A,
+        intensity: Vec3A,
+    },
+    Directional {
+        to_light: Vec3A,
+        irradiance: Vec3A,
+    },
+    /// An emissive primitive (index into the BVH's leaf-ordered primitives).
+    Area {
+        prim: u32,
+        radiance: Vec3A,
+        area: f32,
+    },
+}
+
+pub struct Scene {
+    pub camera: CameraModel,
+    pub t_world_cam: Pose,
+    pub render: RenderSpec,
+    pub sensor: Option<super::sensor::Sensor>,
+    pub materials: Vec<Material>,
+    pub bvh: Bvh,
+    /// Per primitive, in the BVH's leaf order.
+    pub info: Vec<PrimInfo>,
+    pub lights: Vec<Light>,
+    /// Cumulative light-selection probabilities, proportional to power.
+    pub light_cdf: Vec<f32>,
+    /// Object names by id (index 0 is the background).
+    pub object_names: Vec<String>,
+    /// Centre and radius of a sphere bounding the geometry.
+    pub bounds_center: Vec3A,
+    pub bounds_radius: f32,
+}
+
+fn field_err(path: &Path, field: &str, message: impl Into<String>) -> Error {
+    Error::Invalid {
+        path: path.to_path_buf(),
+        field: field.to_string(),
+        message: message.into(),
+    }
+}
+
+fn finite3(path: &Path, field: &str, v: [f64; 3]) -> Result<DVec3, Error> {
+    if v.iter().all(|c| c.is_finite()) {
+        Ok(DVec3::from_array(v))
+    } else {
+        Err(field_err(
+            path,
+            field,
+            format!("{v:?} must be finite numbers"),
+        ))
+    }
+}
+
+fn non_negative3(path: &Path, field: &str, v: [f64; 3]) -> Result<Vec3A, Error> {
+    let d = finite3(path, field, v)?;
+    if d.min_element() < 0.0 {
+        return Err(field_err(
+            path,
+            field,
+            format!("{v:?} must not be negative"),
+        ));
+    }
+    Ok(d.as_vec3().into())
+}
+
+impl TransformSpec {
+    /// Builds the transform, checking every number.
+    fn build(&self, path: &Path, field: &str) -> Result<(DMat3, DVec3, DVec3), Error> {
+        let rotation = match (&self.rotation, &self.rvec) {
+            (Some(_), Some(_)) => {
+                return Err(field_err(
+                    path,
+                    field,
+                    "give either `rotation` or `rvec`, not both",
+                ))
+            }
+            (Some(rows), None) => {
+                for (i, r) in rows.iter().enumerate() {
+                    finite3(path, &format!("{field}.rotation[{i}]"), *r)?;
+                }
+                let m = DMat3::from_cols_array_2d(rows).transpose();
+                let e = Pose::orthonormality_error(&m);
+                if e > 1e-6 {
+                    return Err(field_err(
+                        path,
+                        &format!("{field}.rotation"),
+                        format!(
+                            "is not a rotation matrix (orthonormality error {e:.2e}, det {:.6})",
+                            m.determinant()
+                        ),
+                    ));
+                }
+                m
+            }
+            (None, Some(r)) => {
+                Pose::rotation_from_rvec(finite3(path, &format!("{field}.rvec"), *r)?)
+            }
+            (None, None) => DMat3::IDENTITY,
+        };
+        let translation = finite3(path, &format!("{field}.translation"), self.translation)?;
+        let scale = match self.scale {
+            None => DVec3::ONE,
+            Some(Scale::Uniform(s)) => DVec3::splat(s),
+            Some(Scale::PerAxis(s)) => DVec3::from_array(s),
+        };
+        if !scale.is_finite()
+            || scale.min_element().abs() == 0.0
+            || scale.abs().min_element() == 0.0
+        {
+            return Err(field_err(
+                path,
+                &format!("{field}.scale"),
+                format!("{scale} must be finite and non-zero"),
+            ));
+        }
+        Ok((rotation, translation, scale))
+    }
+}
+
+/// Reads a scene file.
+pub fn load(path: &Path) -> Result<Scene, Error> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::Io {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    let file: SceneFile = toml::from_str(&text).map_err(|e| Error::Parse {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    build(&file, path)
+}
+
+/// Builds a scene from its parsed file; `path` resolves relative paths and names errors.
+pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
+    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let (camera, t_world_cam) = build_camera(&file.camera, path)?;
+    if file.render.spp == 0 {
+        return Err(field_err(path, "render.spp", "must be at least 1"));
+    }
+    if file.render.max_depth == 0 {
+        return Err(field_err(path, "render.max_depth", "must be at least 1"));
+    }
+    if let Some(s) = &file.sensor {
+        s.validate().map_err(|m| field_err(path, "sensor", m))?;
+    }
+
+    let mut materials = Vec::new();
+    for (i, m) in file.materials.iter().enumerate() {
+        let field = format!("materials[{i}] ({})", m.name);
+        if m.kind != "lambertian" {
+            return Err(field_err(
+                path,
+                &format!("{field}.type"),
+                format!(
+                    "'{}' is not a known material (expected \"lambertian\")",
+                    m.kind
+                ),
+            ));
+        }
+        if materials.iter().any(|x: &Material| x.name == m.name) {
+            return Err(field_err(
+                path,
+                &format!("{field}.name"),
+                "is used by an earlier material",
+            ));
+        }
+        let albedo = Texture::build(&m.albedo, &dir, path, &format!("{field}.albedo"))?;
+        let emission = m
+            .emission
+            .map(|e| non_negative3(path, &format!("{field}.emission"), e))
+            .transpose()?;
+        materials.push(Material {
+            name: m.name.clone(),
+            albedo,
+            emission,
+        });
+    }
+    let material_index = |name: &str, field: &str| -> Result<u32, Error> {
+        materials
+            .iter()
+            .position(|m| m.name == name)
+            .map(|i| i as u32)
+            .ok_or_else(|| {
+                field_err(
+                    path,
+                    field,
+                    format!("names material '{name}', which the scene does not define"),
+                )
+            })
+    };
+
+    let mut prims = Vec::new();
+    let mut info = Vec::new();
+    let mut object_names = vec!["background".to_string()];
+    for (i, shape) in file.shapes.iter().enumerate() {
+        let field = format!("shapes[{i}]");
+        match shape {
+            ShapeSpec::Mesh {
+                file: f,
+                material,
+                object_materials,
+                transform,
+                reverse_orientation,
+            } => {
+                let mesh_path = dir.join(f);
+                let mesh = obj::read(&mesh_path)?;
+                if mesh.triangles.is_empty() {
+                    return Err(Error::EmptyMesh { path: mesh_path });
+                }
+                let (r, t, s) = transform.build(path, &format!("{field}.transform"))?;
+                let default = material
+                    .as_deref()
+                    .map(|m| material_index(m, &format!("{field}.material")))
+                    .transpose()?;
+                for (obj_name, mat) in object_materials {
+                    if !mesh.objects.contains(obj_name) {
+                        return Err(field_err(
+                            path,
+                            &format!("{field}.object_materials"),
+                            format!("'{obj_name}' is not an object of {}", mesh_path.display()),
+                        ));
+                    }
+                    material_index(mat, &format!("{field}.object_materials.{obj_name}"))?;
+                }
+                let first_id = object_names.len() as u32;
+                object_names.extend(mesh.objects.iter().cloned());
+                let positions: Vec<Vec3A> = mesh
+                    .positions
+                    .iter()
+                    .map(|&p| (r * (s * p) + t).as_vec3().into())
+                    .collect();
+                // A negative determinant mirrors the mesh and so flips its winding.
+                let mirrored = s.x * s.y * s.z < 0.0;
+                for tri in &mesh.triangles {
+                    let obj_name = &mesh.objects[tri.object as usize];
+                    let mtl = if let Some(m) = object_materials.get(obj_name) {
+                        material_index(m, "")?
+                    } else {
+                        let by_usemtl = tri.material.and_then(|m| {
+                            let n = &mesh.materials[m as usize];
+                            materials
+                                .iter()
+                                .position(|x| &x.name == n)
+                                .map(|i| i as u32)
+                        });
+                        match by_usemtl.or(default) {
+                            Some(m) => m,
+                            None => {
+                                let what = tri
+                                    .material
+                                    .map(|m| mesh.materials[m as usize].clone())
+                                    .unwrap_or_else(|| "(none)".into());
+                                return Err(field_err(path, &format!("{field}.material"), format!("is not set, and the OBJ's usemtl {what} names no scene material")));
+                            }
+                        }
+                    };
+                    let [a, b, c] = tri.v.map(|k| positions[k as usize]);
+                    let (e1, e2) = (b - a, c - a);
+                    if e1.cross(e2).length_squared() == 0.0 {
+                        continue; // degenerate triangle: no area, never hit
+                    }
+                    let uv = match tri.vt {
+                        Some(vt) => vt.map(|k| mesh.uvs[k as usize].as_vec2()),
+                        None => [Vec2::ZERO, Vec2::X, Vec2::Y],
+                    };
+                    prims.push(Prim::Triangle { v0: a, e1, e2 });
+                    info.push(PrimInfo {
+                        material: mtl,
+                        object_id: first_id + tri.object,
+                        reverse: *reverse_orientation ^ mirrored,
+                        uv,
+                    });
+                }
+            }
+            ShapeSpec::Sphere {
+                center,
+                radius,
+                material,
+                reverse_orientation,
+            } => {
+                let c = finite3(path, &format!("{field}.center"), *center)?;
+                if !(radius.is_finite() && *radius > 0.0) {
+                    return Err(field_err(
+                        path,
+                        &format!("{field}.radius"),
+                        format!("{radius} must be positive"),
+                    ));
+                }
+                let mtl = material_index(material, &format!("{field}.material"))?;
+                object_names.push(format!("sphere{i}"));
+                prims.push(Prim::Sphere {
+                    center: c.as_vec3().into(),
+                    radius: *radius as f32,
+                });
+                info.push(PrimInfo {
+                    material: mtl,
+                    object_id: object_names.len() as u32 - 1,
+                    reverse: *reverse_orientation,
+                    uv: [Vec2::ZERO; 3],
+                });
+            }
+            ShapeSpec::Quad {
+                corner,
+                edge_u,
+                edge_v,
+                material,
+                reverse_orientation,
+            } => {
+                let o = finite3(path, &format!("{field}.corner"), *corner)?;
+                let u = finite3(path, &format!("{field}.edge_u"), *edge_u)?;
+                let v = finite3(path, &format!("{field}.edge_v"), *edge_v)?;
+                if u.cross(v).length() == 0.0 {
+                    return Err(field_err(
+                        path,
+                        &field,
+                        "edge_u and edge_v are parallel: the quad has no area",
+                    ));
+                }
+                let mtl = material_index(material, &format!("{field}.material"))?;
+                object_names.push(format!("quad{i}"));
+                let id = object_names.len() as u32 - 1;
+                let [o, u, v] = [o, u, v].map(|x| Vec3A::from(x.as_vec3()));
+                for (a, e1, e2, uv) in [
+                    (o, u, u + v, [Vec2::ZERO, Vec2::X, Vec2::ONE]),
+                    (o, u + v, v, [Vec2::ZERO, Vec2::ONE, Vec2::Y]),
+                ] {
+                    prims.push(Prim::Triangle { v0: a, e1, e2 });
+                    info.push(PrimInfo {
+                        material: mtl,
+                        object_id: id,
+                        reverse: *reverse_orientation,
+                        uv,
+                    });
+                }
+            }
+        }
+    }
+
+    let bvh = Bvh::build(&prims);
+    let info: Vec<PrimInfo> = bvh.order.iter().map(|&i| info[i as usize]).collect();
+    let (bounds_center, bounds_radius) = bounding_sphere(&bvh.prims, t_world_cam.translation);
+
+    let mut lights = Vec::new();
+    for (i, l) in file.lights.iter().enumerate() {
+        let field = format!("lights[{i}]");
+        lights.push(match l {
+            LightSpec::Point {
+                position,
+                intensity,
+                power,
+            } => {
+                let intensity = match (intensity, power) {
+                    (Some(i), None) => non_negative3(path, &format!("{field}.intensity"), *i)?,
+                    (None, Some(p)) => {
+                        non_negative3(path, &format!("{field}.power"), *p)?
+                            / (4.0 * std::f32::consts::PI)
+                    }
+                    _ => {
+                        return Err(field_err(
+                            path,
+                            &field,
+                            "give exactly one of `intensity` (W/sr) or `power` (W)",
+                        ))
+                    }
+                };
+                Light::Point {
+                    position: finite3(path, &format!("{field}.position"), *position)?
+                        .as_vec3()
+                        .into(),
+                    intensity,
+                }
+            }
+            LightSpec::Directional {
+                to_light,
+                irradiance,
+            } => {
+                let d = finite3(path, &format!("{field}.to_light"), *to_light)?;
+                if d.length() == 0.0 {
+                    return Err(field_err(
+                        path,
+                        &format!("{field}.to_light"),
+                        "must not be the zero vector",
+                    ));
+                }
+                Light::Directional {
+                    to_light: d.normalize().as_vec3().into(),
+                    irradiance: non_negative3(path, &format!("{field}.irradiance"), *irradiance)?,
+                }
+            }
+        });
+    }
+    for (k, (p, inf)) in bvh.prims.iter().zip(&info).enumerate() {
+        if let Some(e) = materials[inf.material as usize].emission {
+            if e.max_element() > 0.0 {
+                lights.push(Light::Area {
+                    prim: k as u32,
+                    radiance: e,
+                    area: p.area(),
+                });
+            }
+        }
+    }
+    let light_cdf = light_cdf(&lights, bounds_radius);
+
+    Ok(Scene {
+        camera,
+        t_world_cam,
+        render: file.render.clone(),
+        sensor: file.sensor.clone(),
+        materials,
+        bvh,
+        info,
+        lights,
+        light_cdf,
+        object_names,
+        bounds_center,
+        bounds_radius,
+    })
+}
+
+fn build_camera(c: &CameraSpec, path: &Path) -> Result<(CameraModel, Pose), Error> {
+    let mut camera = match (c.fov_deg, c.fx, c.fy, c.cx, c.cy) {
+        (Some(fov), None, None, None, None) => {
+            if !(fov > 0.0 && fov < 180.0) {
+                return Err(field_err(
+                    path,
+                    "camera.fov_deg",
+                    format!("{fov} must be in (0, 180) degrees"),
+                ));
+            }
+            CameraModel::from_fov(c.width, c.height, fov)
+        }
+        (None, Some(fx), Some(fy), Some(cx), Some(cy)) => CameraModel {
+            width: c.width,
+            height: c.height,
+            intrinsics: Intrinsics { fx, fy, cx, cy },
+            distortion: Distortion::default(),
+        },
+        _ => {
+            return Err(field_err(
+                path,
+                "camera",
+                "give either `fov_deg` or all of `fx`, `fy`, `cx`, `cy`",
+            ))
+        }
+    };
+    if let Some(d) = c.distortion {
+        camera.distortion = Distortion::from_array(d);
+    }
+    camera
+        .validate()
+        .map_err(|m| field_err(path, "camera", m))?;
+    let pose = match (&c.look_at, &c.t_world_cam) {
+        (Some(l), None) => {
+            let o = finite3(path, "camera.look_at.origin", l.origin)?;
+            let t = finite3(path, "camera.look_at.target", l.target)?;
+            let u = finite3(path, "camera.look_at.up", l.up)?;
+            Pose::look_at(o, t, u).ok_or_else(|| {
+                field_err(
+                    path,
+                    "camera.look_at",
+                    "origin equals target, or up is parallel to the view direction",
+                )
+            })?
+        }
+        (None, Some(t)) => {
+            if t.scale.is_some() {
+                return Err(field_err(
+                    path,
+                    "camera.t_world_cam.scale",
+                    "a camera pose is rigid: no scale",
+                ));
+            }
+            let (r, tr, _) = t.build(path, "camera.t_world_cam")?;
+            Pose {
+                rotation: r,
+                translation: tr,
+            }
+        }
+        _ => {
+            return Err(field_err(
+                path,
+                "camera",
+                "give exactly one of `look_at` or `t_world_cam`",
+            ))
+        }
+    };
+    Ok((camera, pose))
+}
+
+fn bounding_sphere(prims: &[Prim], camera: DVec3) -> (Vec3A, f32) {
+    let mut lo = Vec3A::from(camera.as_vec3());
+    let mut hi = lo;
+    for p in prims {
+        let (a, b) = p.bounds();
+        lo = lo.min(a);
+        hi = hi.max(b);
+    }
+    ((lo + hi) * 0.5, ((hi - lo) * 0.5).length().max(1e-3))
+}
+
+/// Light power used to choose among lights: mean over channels of Φ.
+pub fn light_power(l: &Light, scene_radius: f32) -> f32 {
+    let pi = std::f32::consts::PI;
+    let mean = |v: Vec3A| (v.x + v.y + v.z) / 3.0;
+    match *l {
+        Light::Point { intensity, .. } => 4.0 * pi * mean(intensity),
+        Light::Directional { irradiance, .. } => {
+            pi * scene_radius * scene_radius * mean(irradiance)
+        }
+        Light::Area { radiance, area, .. } => pi * area * mean(radiance),
+    }
+}
+
+fn light_cdf(lights: &[Light], scene_radius: f32) -> Vec<f32> {
+    let powers: Vec<f64> = lights
+        .iter()
+        .map(|l| light_power(l, scene_radius) as f64)
+        .collect();
+    let total: f64 = powers.iter().sum();
+    let mut acc = 0.0;
+    powers
+        .iter()
+        .map(|p| {
+            acc += if total > 0.0 {
+                p / total
+            } else {
+                1.0 / lights.len() as f64
+            };
+            acc as f32
+        })
+        .collect()
+}
+
+impl Scene {
+    /// Picks a light in proportion to its power: (index, probability).
+    #[inline]
+    pub fn pick_light(&self, u: f32) -> Option<(usize, f32)> {
+        let n = self.light_cdf.len();
+        if n == 0 {
+            return None;
+        }
+        let i = self.light_cdf.partition_point(|&c| c <= u).min(n - 1);
+        let prev = if i == 0 { 0.0 } else { self.light_cdf[i - 1] };
+        let p = self.light_cdf[i] - prev;
+        (p > 0.0).then_some((i, p))
+    }
+
+    /// World-space ray origin and unit direction through OpenCV pixel coordinates `px`.
+    pub fn camera_ray(&self, px: DVec2) -> Option<(DVec3, DVec3)> {
+        let d = self.camera.pixel_ray(px)?;
+        Some((self.t_world_cam.translation, self.t_world_cam.rotation * d))
+    }
+
+    /// Resolves a path named in a scene file.
+    pub fn resolve(scene_path: &Path, name: &str) -> PathBuf {
+        scene_path
+            .parent()
+            .map(|d| d.join(name))
+            .unwrap_or_else(|| PathBuf::from(name))
+    }
+}

@@ -1,0 +1,145 @@
+//! Colour textures: constant, image (bilinear, wrapping) and procedural checkerboard.
+
+use super::scene::TextureSpec;
+use super::Error;
+use glam::{Vec2, Vec3A};
+use std::path::Path;
+
+pub enum Texture {
+    Constant(Vec3A),
+    Image {
+        width: u32,
+        height: u32,
+        texels: Vec<Vec3A>,
+    },
+    Checker {
+        squares: [u32; 2],
+        even: Vec3A,
+        odd: Vec3A,
+    },
+}
+
+/// An albedo above 1 would create energy; each value must lie in [0, 1].
+fn albedo3(v: [f64; 3], path: &Path, field: &str) -> Result<Vec3A, Error> {
+    if v.iter().all(|c| c.is_finite() && (0.0..=1.0).contains(c)) {
+        Ok(Vec3A::new(v[0] as f32, v[1] as f32, v[2] as f32))
+    } else {
+        Err(Error::Invalid {
+            path: path.into(),
+            field: field.into(),
+            message: format!("{v:?}: each value must be in [0, 1]"),
+        })
+    }
+}
+
+impl Texture {
+    pub fn build(
+        spec: &TextureSpec,
+        dir: &Path,
+        path: &Path,
+        field: &str,
+    ) -> Result<Texture, Error> {
+        Ok(match spec {
+            TextureSpec::Constant(v) => Texture::Constant(albedo3(*v, path, field)?),
+            TextureSpec::Checker { checker } => {
+                if checker.squares.contains(&0) {
+                    return Err(Error::Invalid {
+                        path: path.into(),
+                        field: format!("{field}.checker.squares"),
+                        message: "must be at least 1 each".into(),
+                    });
+                }
+                Texture::Checker {
+                    squares: checker.squares,
+                    even: albedo3(checker.even, path, &format!("{field}.checker.even"))?,
+                    odd: albedo3(checker.odd, path, &format!("{field}.checker.odd"))?,
+                }
+            }
+            TextureSpec::Image { texture } => {
+                let file = dir.join(texture);
+                let img = crate::image::io::read(&file)?;
+                let eight_bit = is_eight_bit(&file);
+                let c = img.channels as usize;
+                let texels = img
+                    .data
+                    .chunks_exact(c)
+                    .map(|p| {
+                        let rgb = if c >= 3 {
+                            [p[0], p[1], p[2]]
+                        } else {
+                            [p[0]; 3]
+                        };
+                        let lin = rgb.map(|v| {
+                            if eight_bit {
+                                crate::image::srgb_decode(v)
+                            } else {
+                                v
+                            }
+                        });
+                        Vec3A::from(lin).clamp(Vec3A::ZERO, Vec3A::ONE)
+                    })
+                    .collect();
+                Texture::Image {
+                    width: img.width,
+                    height: img.height,
+                    texels,
+                }
+            }
+        })
+    }
+
+    /// Value at texture coordinates (u, v); v = 0 is the bottom row of an image, as in OBJ.
+    #[inline]
+    pub fn eval(&self, uv: Vec2) -> Vec3A {
+        match self {
+            Texture::Constant(c) => *c,
+            Texture::Checker { squares, even, odd } => {
+                let i = (uv.x * squares[0] as f32).floor() as i64
+                    + (uv.y * squares[1] as f32).floor() as i64;
+                if i.rem_euclid(2) == 0 {
+                    *even
+                } else {
+                    *odd
+                }
+            }
+            Texture::Image {
+                width,
+                height,
+                texels,
+            } => {
+                let (w, h) = (*width as i64, *height as i64);
+                let x = uv.x * w as f32 - 0.5;
+                let y = (1.0 - uv.y) * h as f32 - 0.5;
+                let (x0, y0) = (x.floor(), y.floor());
+                let (fx, fy) = (x - x0, y - y0);
+                let at = |i: i64, j: i64| texels[(j.rem_euclid(h) * w + i.rem_euclid(w)) as usize];
+                let (i, j) = (x0 as i64, y0 as i64);
+                (at(i, j) * (1.0 - fx) + at(i + 1, j) * fx) * (1.0 - fy)
+                    + (at(i, j + 1) * (1.0 - fx) + at(i + 1, j + 1) * fx) * fy
+            }
+        }
+    }
+}
+
+/// 8-bit images hold sRGB-encoded values; 16-bit and float ones are taken as linear.
+fn is_eight_bit(path: &Path) -> bool {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    if ext == "exr" {
+        return false;
+    }
+    image::open(path)
+        .map(|i| {
+            matches!(
+                i.color(),
+                image::ColorType::L8
+                    | image::ColorType::La8
+                    | image::ColorType::Rgb8
+                    | image::ColorType::Rgba8
+            )
+        })
+        .unwrap_or(false)
+}
