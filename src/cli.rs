@@ -2,7 +2,7 @@
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
-use lumen::render;
+use lumen::{pipeline, render};
 use std::path::{Path, PathBuf};
 
 #[derive(Parser)]
@@ -118,9 +118,42 @@ pub fn main() -> i32 {
     }
 }
 
+/// Exit code of `lumen run` when a metric missed its bound without a declared expected miss.
+const EXIT_METRIC_MISSED: i32 = 3;
+
 fn run_pipeline(path: &Path, out: Option<PathBuf>, threads: Option<usize>) -> Result<i32> {
-    let _ = (path, out, threads);
-    bail!("not yet")
+    let file = pipeline::load(path)?;
+    let name = pipeline::pipeline_name(&file, path);
+    let out = out.unwrap_or_else(|| Path::new("out").join(&name));
+    let opts = pipeline::RunOptions {
+        threads,
+        progress: true,
+    };
+    let report = pipeline::run(path, &file, &opts)?;
+    report.write(&out)?;
+    eprintln!(
+        "wrote {} and {}",
+        out.join("report.json").display(),
+        out.join("report.md").display()
+    );
+    for s in &report.stages {
+        let met = s.metrics.iter().filter(|m| m.pass == Some(true)).count();
+        let bounded = s.metrics.iter().filter(|m| m.bound.is_some()).count();
+        eprintln!(
+            "  {:<10} {:<20} {met}/{bounded} bounds met, {:.2} s",
+            s.stage,
+            s.case,
+            s.timings_s.get("total").copied().unwrap_or(0.0)
+        );
+    }
+    let failures = report.failures();
+    if failures.is_empty() {
+        return Ok(0);
+    }
+    for f in failures {
+        eprintln!("error: metric {f}");
+    }
+    Ok(EXIT_METRIC_MISSED)
 }
 
 /// `NAME.ext` → `NAME.<suffix>.exr`.

@@ -92,80 +92,106 @@ impl Bvh {
     /// Closest hit within (t_min, t_max). `Hit::prim` indexes `self.prims` (leaf order).
     #[inline]
     pub fn intersect(&self, ray: &Ray, t_min: f32, mut t_max: f32) -> Option<Hit> {
-        if self.nodes.is_empty() {
+        let q = Query::new(ray, t_min);
+        let mut best: Option<Hit> = None;
+        let Some(root) = self.nodes.first() else {
+            return None;
+        };
+        if q.enter(root, t_max).is_none() {
             return None;
         }
-        let inv = ray.dir.recip();
-        let neg = [inv.x < 0.0, inv.y < 0.0, inv.z < 0.0];
-        let mut stack = [0u32; 64];
+        // Stack of (node, entry distance): a far child is skipped when popped if a closer hit
+        // was found meanwhile.
+        let mut stack = [(0u32, 0.0f32); 64];
         let mut sp = 0usize;
-        let mut node_index = 0u32;
-        let mut best: Option<Hit> = None;
+        let mut index = 0u32;
         loop {
-            let node = &self.nodes[node_index as usize];
-            if slab(node, ray.origin, inv, t_min, t_max) {
-                let count = node.count_axis & COUNT_MASK;
-                if count > 0 {
-                    let first = node.offset as usize;
-                    for (k, prim) in self.prims[first..first + count as usize].iter().enumerate() {
-                        if let Some((t, b1, b2)) = prim.intersect(ray, t_min, t_max) {
-                            t_max = t;
-                            best = Some(Hit {
-                                t,
-                                prim: (first + k) as u32,
-                                b1,
-                                b2,
-                            });
-                        }
+            let node = &self.nodes[index as usize];
+            let count = node.count_axis & COUNT_MASK;
+            if count > 0 {
+                let first = node.offset as usize;
+                for (k, prim) in self.prims[first..first + count as usize].iter().enumerate() {
+                    if let Some((t, b1, b2)) = prim.intersect(ray, t_min, t_max) {
+                        t_max = t;
+                        best = Some(Hit {
+                            t,
+                            prim: (first + k) as u32,
+                            b1,
+                            b2,
+                        });
                     }
-                } else {
-                    let axis = (node.count_axis >> AXIS_SHIFT) as usize;
-                    // Visit the child nearer along the ray first.
-                    let (near, far) = if neg[axis] {
-                        (node.offset, node_index + 1)
-                    } else {
-                        (node_index + 1, node.offset)
-                    };
-                    stack[sp] = far;
-                    sp += 1;
-                    node_index = near;
-                    continue;
+                }
+            } else {
+                let (a, b) = (index + 1, node.offset);
+                let ta = q.enter(&self.nodes[a as usize], t_max);
+                let tb = q.enter(&self.nodes[b as usize], t_max);
+                match (ta, tb) {
+                    (Some(ta), Some(tb)) => {
+                        let (near, far, tfar) = if ta <= tb { (a, b, tb) } else { (b, a, ta) };
+                        stack[sp] = (far, tfar);
+                        sp += 1;
+                        index = near;
+                        continue;
+                    }
+                    (Some(_), None) => {
+                        index = a;
+                        continue;
+                    }
+                    (None, Some(_)) => {
+                        index = b;
+                        continue;
+                    }
+                    (None, None) => {}
                 }
             }
-            if sp == 0 {
-                return best;
+            loop {
+                if sp == 0 {
+                    return best;
+                }
+                sp -= 1;
+                let (next, t_enter) = stack[sp];
+                if t_enter <= t_max {
+                    index = next;
+                    break;
+                }
             }
-            sp -= 1;
-            node_index = stack[sp];
         }
     }
 
     /// Whether anything lies within (t_min, t_max): the shadow-ray query.
     #[inline]
     pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
-        if self.nodes.is_empty() {
+        let q = Query::new(ray, t_min);
+        let Some(root) = self.nodes.first() else {
+            return false;
+        };
+        if q.enter(root, t_max).is_none() {
             return false;
         }
-        let inv = ray.dir.recip();
         let mut stack = [0u32; 64];
         let mut sp = 0usize;
-        let mut node_index = 0u32;
+        let mut index = 0u32;
         loop {
-            let node = &self.nodes[node_index as usize];
-            if slab(node, ray.origin, inv, t_min, t_max) {
-                let count = node.count_axis & COUNT_MASK;
-                if count > 0 {
-                    let first = node.offset as usize;
-                    if self.prims[first..first + count as usize]
-                        .iter()
-                        .any(|p| p.intersect(ray, t_min, t_max).is_some())
-                    {
-                        return true;
+            let node = &self.nodes[index as usize];
+            let count = node.count_axis & COUNT_MASK;
+            if count > 0 {
+                let first = node.offset as usize;
+                if self.prims[first..first + count as usize]
+                    .iter()
+                    .any(|p| p.intersect(ray, t_min, t_max).is_some())
+                {
+                    return true;
+                }
+            } else {
+                let (a, b) = (index + 1, node.offset);
+                let ha = q.enter(&self.nodes[a as usize], t_max).is_some();
+                let hb = q.enter(&self.nodes[b as usize], t_max).is_some();
+                if ha || hb {
+                    if ha && hb {
+                        stack[sp] = b;
+                        sp += 1;
                     }
-                } else {
-                    stack[sp] = node.offset;
-                    sp += 1;
-                    node_index += 1;
+                    index = if ha { a } else { b };
                     continue;
                 }
             }
@@ -173,7 +199,7 @@ impl Bvh {
                 return false;
             }
             sp -= 1;
-            node_index = stack[sp];
+            index = stack[sp];
         }
     }
 
@@ -194,13 +220,33 @@ impl Bvh {
     }
 }
 
-#[inline(always)]
-fn slab(node: &Node, origin: Vec3A, inv: Vec3A, t_min: f32, t_max: f32) -> bool {
-    let t0 = (Vec3A::from(node.lo) - origin) * inv;
-    let t1 = (Vec3A::from(node.hi) - origin) * inv;
-    let near = t0.min(t1).max_element().max(t_min);
-    let far = t0.max(t1).min_element().min(t_max);
-    near <= far
+/// A ray prepared for box tests: t = (bound − origin)·inv = bound·inv − origin·inv.
+struct Query {
+    inv: Vec3A,
+    origin_inv: Vec3A,
+    t_min: f32,
+}
+
+impl Query {
+    #[inline(always)]
+    fn new(ray: &Ray, t_min: f32) -> Query {
+        let inv = ray.dir.recip();
+        Query {
+            inv,
+            origin_inv: ray.origin * inv,
+            t_min,
+        }
+    }
+
+    /// Entry distance into the node's box if the ray meets it within (t_min, t_max).
+    #[inline(always)]
+    fn enter(&self, node: &Node, t_max: f32) -> Option<f32> {
+        let t0 = Vec3A::from(node.lo) * self.inv - self.origin_inv;
+        let t1 = Vec3A::from(node.hi) * self.inv - self.origin_inv;
+        let near = t0.min(t1).max_element().max(self.t_min);
+        let far = t0.max(t1).min_element().min(t_max);
+        (near <= far).then_some(near)
+    }
 }
 
 /// Builds the subtree for `items` (which it reorders) and returns its node index.

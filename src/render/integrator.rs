@@ -9,8 +9,8 @@
 //! Lambertian surfaces are two-sided; emitters emit on their front side only.
 //!
 //! Depth follows Mitsuba's convention: `max_depth` counts path segments, so 1 shows emitters
-//! seen directly and 2 is direct lighting only. Russian roulette starts after 3 segments with
-//! survival probability min(max(β), 0.95).
+//! seen directly and 2 is direct lighting only. Russian roulette starts after 5 segments (as in
+//! Mitsuba) with survival probability min(max(β), 0.95).
 //!
 //! Film: each pixel (i, j) of the image is integrated over the box [i − ½, i + ½) × [j − ½, j + ½)
 //! in OpenCV's pixel coordinates (centre at the integer), so sample position = index + ξ − ½.
@@ -60,7 +60,7 @@ pub struct Film {
     pub dropped_samples: u64,
 }
 
-const RR_START: u32 = 3;
+const RR_START: u32 = 5;
 
 /// Offset for spawning rays off a surface, scaled with the coordinates' magnitude.
 #[inline]
