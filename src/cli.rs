@@ -84,30 +84,13 @@ pub fn main() -> i32 {
         }
     };
     let result = match cli.command {
-        Command::Run {
-            pipeline,
-            out,
-            threads,
-        } => run_pipeline(&pipeline, out, threads),
-        Command::Render {
-            scene,
-            out,
-            spp,
-            max_depth,
-            seed,
-            threads,
-            aov,
-        } => render_cmd(&scene, &out, spp, max_depth, seed, threads, &aov).map(|_| 0),
-        Command::Bench {
-            what:
-                Bench::Render {
-                    scene,
-                    spp,
-                    max_depth,
-                    threads,
-                    repeat,
-                },
-        } => bench_render(&scene, spp, max_depth, threads, repeat).map(|_| 0),
+        Command::Run { pipeline, out, threads } => run_pipeline(&pipeline, out, threads),
+        Command::Render { scene, out, spp, max_depth, seed, threads, aov } => {
+            render_cmd(&scene, &out, spp, max_depth, seed, threads, &aov).map(|_| 0)
+        }
+        Command::Bench { what: Bench::Render { scene, spp, max_depth, threads, repeat } } => {
+            bench_render(&scene, spp, max_depth, threads, repeat).map(|_| 0)
+        }
     };
     match result {
         Ok(code) => code,
@@ -125,17 +108,10 @@ fn run_pipeline(path: &Path, out: Option<PathBuf>, threads: Option<usize>) -> Re
     let file = pipeline::load(path)?;
     let name = pipeline::pipeline_name(&file, path);
     let out = out.unwrap_or_else(|| Path::new("out").join(&name));
-    let opts = pipeline::RunOptions {
-        threads,
-        progress: true,
-    };
+    let opts = pipeline::RunOptions { threads, progress: true, out_dir: out.clone() };
     let report = pipeline::run(path, &file, &opts)?;
     report.write(&out)?;
-    eprintln!(
-        "wrote {} and {}",
-        out.join("report.json").display(),
-        out.join("report.md").display()
-    );
+    eprintln!("wrote {} and {}", out.join("report.json").display(), out.join("report.md").display());
     for s in &report.stages {
         let met = s.metrics.iter().filter(|m| m.pass == Some(true)).count();
         let bounded = s.metrics.iter().filter(|m| m.bound.is_some()).count();
@@ -171,23 +147,13 @@ fn render_cmd(
     threads: Option<usize>,
     aov: &[String],
 ) -> Result<()> {
-    let ext = out
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
+    let ext = out.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     if ext != "exr" && ext != "png" {
-        bail!(
-            "--out {}: expected a file name ending in .exr or .png",
-            out.display()
-        );
+        bail!("--out {}: expected a file name ending in .exr or .png", out.display());
     }
     for a in aov {
         if a != "variance" && !render::truth::AOV_NAMES.contains(&a.as_str()) {
-            bail!(
-                "--aov {a}: expected one of variance, {}",
-                render::truth::AOV_NAMES.join(", ")
-            );
+            bail!("--aov {a}: expected one of variance, {}", render::truth::AOV_NAMES.join(", "));
         }
     }
     let scene = render::load(scene_path)?;
@@ -213,14 +179,7 @@ fn render_cmd(
     match (&scene.sensor, ext.as_str()) {
         (Some(sensor), "png") => {
             let codes = sensor.expose(&film.mean, settings.seed);
-            lumen::image::io::write_png_raw(
-                out,
-                film.mean.width,
-                film.mean.height,
-                3,
-                &codes,
-                sensor.bits,
-            )?;
+            lumen::image::io::write_png_raw(out, film.mean.width, film.mean.height, 3, &codes, sensor.bits)?;
         }
         _ => lumen::image::io::write(out, &film.mean)?,
     }
@@ -255,10 +214,7 @@ fn render_cmd(
         paths / secs / 1e6
     );
     if film.dropped_samples > 0 {
-        eprintln!(
-            "warning: {} non-finite samples were dropped",
-            film.dropped_samples
-        );
+        eprintln!("warning: {} non-finite samples were dropped", film.dropped_samples);
     }
     Ok(())
 }
@@ -290,10 +246,7 @@ fn bench_render(
         scene.camera.height,
         settings.spp,
         settings.max_depth,
-        threads.map_or_else(
-            || rayon::current_num_threads().to_string(),
-            |t| t.to_string()
-        ),
+        threads.map_or_else(|| rayon::current_num_threads().to_string(), |t| t.to_string()),
         paths / best / 1e6
     );
     Ok(())

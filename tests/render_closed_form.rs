@@ -12,15 +12,8 @@ use lumen::render;
 #[test]
 fn furnace_is_one_everywhere() {
     let scene = render::load(&common::root().join("pipelines/scenes/furnace.toml")).unwrap();
-    let mut s = common::settings(&scene, 16384, 1000);
-    s.crop = Some([8, 8, 24, 24]);
-    let film = render::render(&scene, &s);
-    let worst = film
-        .mean
-        .data
-        .iter()
-        .map(|&v| (v as f64 - 1.0).abs())
-        .fold(0.0, f64::max);
+    let film = render::render(&scene, &common::settings(&scene, 16384, 1000));
+    let worst = film.mean.data.iter().map(|&v| (v as f64 - 1.0).abs()).fold(0.0, f64::max);
     assert!(worst < 0.01, "worst pixel differs from 1 by {worst}");
     assert_eq!(film.dropped_samples, 0);
 }
@@ -66,18 +59,10 @@ fn lambertian_plane_under_point_light() {
         let r2 = to.length_squared();
         intensity * (to.z / r2.sqrt()) / r2 / std::f64::consts::PI
     };
-    let nodes = [
-        -0.861_136_311_594_053,
-        -0.339_981_043_584_856,
-        0.339_981_043_584_856,
-        0.861_136_311_594_053,
-    ];
-    let weights = [
-        0.347_854_845_137_454,
-        0.652_145_154_862_546,
-        0.652_145_154_862_546,
-        0.347_854_845_137_454,
-    ];
+    let nodes =
+        [-0.861_136_311_594_053, -0.339_981_043_584_856, 0.339_981_043_584_856, 0.861_136_311_594_053];
+    let weights =
+        [0.347_854_845_137_454, 0.652_145_154_862_546, 0.652_145_154_862_546, 0.347_854_845_137_454];
     let tests = (48 * 48 * 3) as usize;
     let alpha = stats::sidak_alpha(0.01, tests);
     let (mut within3, mut worst_p) = (0, 1.0f64);
@@ -86,8 +71,7 @@ fn lambertian_plane_under_point_light() {
             let mut e = 0.0;
             for (a, wa) in nodes.iter().zip(weights) {
                 for (b, wb) in nodes.iter().zip(weights) {
-                    e += wa * wb / 4.0
-                        * radiance_at(DVec2::new(i as f64 + a / 2.0, j as f64 + b / 2.0));
+                    e += wa * wb / 4.0 * radiance_at(DVec2::new(i as f64 + a / 2.0, j as f64 + b / 2.0));
                 }
             }
             for c in 0..3 {
@@ -103,14 +87,8 @@ fn lambertian_plane_under_point_light() {
         }
     }
     let frac = within3 as f64 / tests as f64;
-    assert!(
-        frac >= 0.99,
-        "only {frac} of pixel channels within 3 standard errors (expect 0.9973)"
-    );
-    assert!(
-        worst_p >= alpha,
-        "a pixel channel is off by p = {worst_p:.2e} < Šidák α = {alpha:.2e}"
-    );
+    assert!(frac >= 0.99, "only {frac} of pixel channels within 3 standard errors (expect 0.9973)");
+    assert!(worst_p >= alpha, "a pixel channel is off by p = {worst_p:.2e} < Šidák α = {alpha:.2e}");
 }
 
 /// The truth images of the same plane: depth, normals and position are known exactly.
@@ -178,37 +156,20 @@ material = "floor"
     let expected = 0.9 / std::f64::consts::PI * e;
     let got = film.mean.data[0] as f64;
     let se = (film.variance.data[0] as f64).sqrt();
-    assert!(
-        ((got - expected) / se).abs() < 4.0,
-        "got {got}, expected {expected}, standard error {se}"
-    );
-    assert!(
-        (got / expected - 1.0).abs() < 2e-3,
-        "got {got}, expected {expected}"
-    );
+    assert!(((got - expected) / se).abs() < 4.0, "got {got}, expected {expected}, standard error {se}");
+    assert!((got / expected - 1.0).abs() < 2e-3, "got {got}, expected {expected}");
 }
 
 fn camera_640(distortion: Distortion) -> CameraModel {
     CameraModel {
         width: 640,
         height: 480,
-        intrinsics: Intrinsics {
-            fx: 500.0,
-            fy: 500.0,
-            cx: 319.5,
-            cy: 239.5,
-        },
+        intrinsics: Intrinsics { fx: 500.0, fy: 500.0, cx: 319.5, cy: 239.5 },
         distortion,
     }
 }
 
-const STRONG: Distortion = Distortion {
-    k1: -0.3,
-    k2: 0.1,
-    p1: 0.001,
-    p2: -0.0005,
-    k3: 0.0,
-};
+const STRONG: Distortion = Distortion { k1: -0.3, k2: 0.1, p1: 0.001, p2: -0.0005, k3: 0.0 };
 
 /// The silhouette of a sphere (centre `c` in the camera frame, radius `r`) projected by the
 /// forward camera model: a closed polygon in pixel coordinates.
@@ -222,8 +183,7 @@ fn projected_silhouette(cam: &CameraModel, c: DVec3, r: f64, n: usize) -> Vec<DV
     (0..n)
         .map(|k| {
             let phi = 2.0 * std::f64::consts::PI * k as f64 / n as f64;
-            cam.project(centre + rho * (phi.cos() * u + phi.sin() * v))
-                .unwrap()
+            cam.project(centre + rho * (phi.cos() * u + phi.sin() * v)).unwrap()
         })
         .collect()
 }
@@ -232,12 +192,9 @@ fn projected_silhouette(cam: &CameraModel, c: DVec3, r: f64, n: usize) -> Vec<DV
 fn area_in_pixel(poly: &[DVec2], x: f64, y: f64) -> f64 {
     let mut pts = poly.to_vec();
     // Each half-plane as (axis, bound, keep-below).
-    for (axis, bound, below) in [
-        (0, x + 0.5, true),
-        (0, x - 0.5, false),
-        (1, y + 0.5, true),
-        (1, y - 0.5, false),
-    ] {
+    for (axis, bound, below) in
+        [(0, x + 0.5, true), (0, x - 0.5, false), (1, y + 0.5, true), (1, y - 0.5, false)]
+    {
         let inside = |p: DVec2| {
             if below {
                 p[axis] <= bound
@@ -280,11 +237,7 @@ fn projection_matches_camera_model() {
     for distortion in [Distortion::default(), STRONG] {
         let cam = camera_640(distortion);
         let d = distortion.to_array();
-        for p in [
-            DVec3::new(0.0, 0.0, 1.0),
-            DVec3::new(0.45, -0.3, 1.0),
-            DVec3::new(-0.55, 0.4, 1.2),
-        ] {
+        for p in [DVec3::new(0.0, 0.0, 1.0), DVec3::new(0.45, -0.3, 1.0), DVec3::new(-0.55, 0.4, 1.2)] {
             let radius = 0.003;
             let text = format!(
                 r#"
@@ -335,14 +288,8 @@ material = "glow"
             assert!(sum > 3.0, "the sphere is not in the window around {uv}");
             let (c, e) = (c / sum, e / esum);
             let err = (c - e).length();
-            eprintln!(
-                "projection of {p} (k1 = {}): centroid off by {err:.4} px",
-                distortion.k1
-            );
-            assert!(
-                err < 0.02,
-                "centroid {c} vs projected {e}: {err} px (distortion {distortion:?})"
-            );
+            eprintln!("projection of {p} (k1 = {}): centroid off by {err:.4} px", distortion.k1);
+            assert!(err < 0.02, "centroid {c} vs projected {e}: {err} px (distortion {distortion:?})");
             // The render's total is the silhouette's area, within 5 standard errors.
             assert!(
                 (sum - esum).abs() < 5.0 * var.sqrt(),
@@ -356,18 +303,13 @@ material = "glow"
 /// distort ∘ undistort = id to 1e-9 px over the whole image, and the converse.
 #[test]
 fn distortion_round_trip() {
-    let strong = Distortion {
-        k3: -0.02,
-        ..STRONG
-    };
+    let strong = Distortion { k3: -0.02, ..STRONG };
     let cam = camera_640(strong);
     let mut worst = 0.0f64;
     for j in (0..=480).step_by(4) {
         for i in (0..=640).step_by(4) {
             let px = DVec2::new(i as f64 - 0.5, j as f64 - 0.5);
-            let n = cam
-                .undistort_pixel(px)
-                .unwrap_or_else(|| panic!("no undistortion at {px}"));
+            let n = cam.undistort_pixel(px).unwrap_or_else(|| panic!("no undistortion at {px}"));
             let back = cam.normalized_to_pixel(cam.distortion.distort(n));
             worst = worst.max((back - px).length());
         }
@@ -377,10 +319,7 @@ fn distortion_round_trip() {
         for i in -10..=10 {
             let n = DVec2::new(i as f64 * 0.06, j as f64 * 0.045);
             let back = strong.undistort(strong.distort(n)).unwrap();
-            assert!(
-                (back - n).length() < 1e-12,
-                "undistort(distort({n})) = {back}"
-            );
+            assert!((back - n).length() < 1e-12, "undistort(distort({n})) = {back}");
         }
     }
 }
@@ -395,17 +334,46 @@ fn one_and_two_threads_are_bit_identical() {
     let a = render::render(&scene, &s);
     s.threads = Some(2);
     let b = render::render(&scene, &s);
-    assert!(a
-        .mean
-        .data
-        .iter()
-        .zip(&b.mean.data)
-        .all(|(x, y)| x.to_bits() == y.to_bits()));
-    assert!(a
-        .variance
-        .data
-        .iter()
-        .zip(&b.variance.data)
-        .all(|(x, y)| x.to_bits() == y.to_bits()));
+    assert!(a.mean.data.iter().zip(&b.mean.data).all(|(x, y)| x.to_bits() == y.to_bits()));
+    assert!(a.variance.data.iter().zip(&b.variance.data).all(|(x, y)| x.to_bits() == y.to_bits()));
     assert!(a.mean.data.iter().any(|&v| v > 0.0));
+}
+
+/// A plane under a directional light: L = ρ/π · E · cosθ, the same in every pixel; and a
+/// checkerboard albedo shows its two values in its two kinds of squares.
+#[test]
+fn directional_light_and_checker_texture() {
+    let text = r#"
+[camera]
+width = 16
+height = 16
+fx = 20.0
+fy = 20.0
+cx = 7.5
+cy = 7.5
+look_at = { origin = [0.0, 0.0, 2.0], target = [0.0, 0.0, 0.0], up = [0.0, 1.0, 0.0] }
+[[materials]]
+name = "board"
+type = "lambertian"
+albedo = { checker = { squares = [2, 2], even = [0.8, 0.8, 0.8], odd = [0.2, 0.2, 0.2] } }
+[[shapes]]
+type = "quad"
+corner = [-2.0, -2.0, 0.0]
+edge_u = [4.0, 0.0, 0.0]
+edge_v = [0.0, 4.0, 0.0]
+material = "board"
+[[lights]]
+type = "directional"
+to_light = [0.0, 0.6, 0.8]
+irradiance = [3.0, 3.0, 3.0]
+"#;
+    let dir = tempfile::tempdir().unwrap();
+    let scene = common::scene(text, dir.path()).unwrap();
+    let film = render::render(&scene, &common::settings(&scene, 4, 2));
+    let e = 3.0 * 0.8 / std::f64::consts::PI;
+    // Quadrants: u < 0.5 ⇔ x < 0 (image left), v < 0.5 ⇔ y < 0 (image bottom, as y is down).
+    for (i, j, rho) in [(2, 13, 0.8), (13, 2, 0.8), (2, 2, 0.2), (13, 13, 0.2)] {
+        let got = film.mean.pixel(i, j)[1] as f64;
+        assert!((got - rho * e).abs() < 1e-5 * e, "pixel ({i}, {j}): {got} vs {}", rho * e);
+    }
 }

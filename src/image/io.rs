@@ -17,14 +17,8 @@ pub enum Error {
 }
 
 /// Writes to `path.tmp` with `write`, then renames to `path`.
-pub fn write_atomically(
-    path: &Path,
-    write: impl FnOnce(&Path) -> Result<(), String>,
-) -> Result<(), Error> {
-    let err = |message: String| Error::Write {
-        path: path.to_path_buf(),
-        message,
-    };
+pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<(), String>) -> Result<(), Error> {
+    let err = |message: String| Error::Write { path: path.to_path_buf(), message };
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|e| err(e.to_string()))?;
     }
@@ -41,10 +35,7 @@ pub fn write_atomically(
 }
 
 fn extension(path: &Path) -> String {
-    path.extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase()
+    path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase()
 }
 
 /// Channel names used for 1, 3 and 4 channel images.
@@ -60,14 +51,9 @@ fn channel_names(channels: u32) -> Vec<String> {
 /// Writes a linear float OpenEXR file (f32 samples; channels Y, or R G B, or R G B A).
 pub fn write_exr(path: &Path, img: &Image) -> Result<(), Error> {
     use exr::prelude::{
-        AnyChannel, AnyChannels, Encoding, FlatSamples, Layer, LayerAttributes, SmallVec,
-        WritableImage,
+        AnyChannel, AnyChannels, Encoding, FlatSamples, Layer, LayerAttributes, SmallVec, WritableImage,
     };
-    let (w, h, c) = (
-        img.width as usize,
-        img.height as usize,
-        img.channels as usize,
-    );
+    let (w, h, c) = (img.width as usize, img.height as usize, img.channels as usize);
     let names = channel_names(img.channels);
     let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = names
         .iter()
@@ -77,25 +63,16 @@ pub fn write_exr(path: &Path, img: &Image) -> Result<(), Error> {
             AnyChannel::new(name.as_str(), FlatSamples::F32(samples))
         })
         .collect();
-    let layer = Layer::new(
-        (w, h),
-        LayerAttributes::default(),
-        Encoding::SMALL_LOSSLESS,
-        AnyChannels::sort(list),
-    );
+    let layer =
+        Layer::new((w, h), LayerAttributes::default(), Encoding::SMALL_LOSSLESS, AnyChannels::sort(list));
     let image = exr::image::Image::from_layer(layer);
-    write_atomically(path, |tmp| {
-        image.write().to_file(tmp).map_err(|e| e.to_string())
-    })
+    write_atomically(path, |tmp| image.write().to_file(tmp).map_err(|e| e.to_string()))
 }
 
 /// Reads the first layer of an OpenEXR file as f32: R G B if present, else Y (one channel).
 pub fn read_exr(path: &Path) -> Result<Image, Error> {
     use exr::prelude::{read, ReadChannels, ReadLayers};
-    let err = |message: String| Error::Read {
-        path: path.to_path_buf(),
-        message,
-    };
+    let err = |message: String| Error::Read { path: path.to_path_buf(), message };
     let image = read()
         .no_deep_data()
         .largest_resolution_level()
@@ -106,13 +83,8 @@ pub fn read_exr(path: &Path) -> Result<Image, Error> {
         .map_err(|e| err(e.to_string()))?;
     let layer = &image.layer_data;
     let (w, h) = (layer.size.0, layer.size.1);
-    let find = |name: &str| {
-        layer
-            .channel_data
-            .list
-            .iter()
-            .find(|c| c.name.to_string().eq_ignore_ascii_case(name))
-    };
+    let find =
+        |name: &str| layer.channel_data.list.iter().find(|c| c.name.to_string().eq_ignore_ascii_case(name));
     let wanted: Vec<_> = match (find("R"), find("G"), find("B"), find("Y")) {
         (Some(r), Some(g), Some(b), _) => vec![r, g, b],
         (_, _, _, Some(y)) => vec![y],
@@ -130,11 +102,7 @@ pub fn read_exr(path: &Path) -> Result<Image, Error> {
 
 /// Writes an 8-bit sRGB-encoded PNG of a linear image (values clipped to [0, 1]).
 pub fn write_png_srgb(path: &Path, img: &Image) -> Result<(), Error> {
-    let bytes: Vec<u8> = img
-        .data
-        .iter()
-        .map(|&v| (super::srgb_encode(v) * 255.0 + 0.5) as u8)
-        .collect();
+    let bytes: Vec<u8> = img.data.iter().map(|&v| (super::srgb_encode(v) * 255.0 + 0.5) as u8).collect();
     write_png_bytes(path, img.width, img.height, img.channels, &bytes)
 }
 
@@ -152,10 +120,8 @@ fn color_type(channels: u32, sixteen: bool) -> Option<image::ExtendedColorType> 
 }
 
 fn write_png_bytes(path: &Path, w: u32, h: u32, c: u32, bytes: &[u8]) -> Result<(), Error> {
-    let ct = color_type(c, false).ok_or_else(|| Error::Write {
-        path: path.into(),
-        message: format!("{c} channels"),
-    })?;
+    let ct = color_type(c, false)
+        .ok_or_else(|| Error::Write { path: path.into(), message: format!("{c} channels") })?;
     write_atomically(path, |tmp| {
         image::save_buffer_with_format(tmp, bytes, w, h, ct, image::ImageFormat::Png)
             .map_err(|e| e.to_string())
@@ -163,22 +129,13 @@ fn write_png_bytes(path: &Path, w: u32, h: u32, c: u32, bytes: &[u8]) -> Result<
 }
 
 /// Writes raw integer sample values (already quantised) as an 8- or 16-bit PNG.
-pub fn write_png_raw(
-    path: &Path,
-    w: u32,
-    h: u32,
-    c: u32,
-    values: &[u16],
-    bits: u8,
-) -> Result<(), Error> {
+pub fn write_png_raw(path: &Path, w: u32, h: u32, c: u32, values: &[u16], bits: u8) -> Result<(), Error> {
     if bits == 8 {
         let bytes: Vec<u8> = values.iter().map(|&v| v.min(255) as u8).collect();
         return write_png_bytes(path, w, h, c, &bytes);
     }
-    let ct = color_type(c, true).ok_or_else(|| Error::Write {
-        path: path.into(),
-        message: format!("{c} channels"),
-    })?;
+    let ct = color_type(c, true)
+        .ok_or_else(|| Error::Write { path: path.into(), message: format!("{c} channels") })?;
     // PNG stores 16-bit samples big-endian; `save_buffer` expects native-endian u16 bytes.
     let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_ne_bytes()).collect();
     write_atomically(path, |tmp| {
@@ -190,29 +147,16 @@ pub fn write_png_raw(
 /// Reads a PNG or JPEG as linear floats in [0, 1] without any transfer function (raw code
 /// values / max code value), keeping 16-bit depth. Colour images give 3 channels, grey 1.
 pub fn read_raw(path: &Path) -> Result<Image, Error> {
-    let err = |message: String| Error::Read {
-        path: path.to_path_buf(),
-        message,
-    };
+    let err = |message: String| Error::Read { path: path.to_path_buf(), message };
     let dynimg = image::open(path).map_err(|e| err(e.to_string()))?;
     let (w, h) = (dynimg.width(), dynimg.height());
     let grey = !dynimg.color().has_color();
     Ok(if grey {
         let buf = dynimg.into_luma16();
-        Image {
-            width: w,
-            height: h,
-            channels: 1,
-            data: buf.iter().map(|&v| v as f32 / 65535.0).collect(),
-        }
+        Image { width: w, height: h, channels: 1, data: buf.iter().map(|&v| v as f32 / 65535.0).collect() }
     } else {
         let buf = dynimg.into_rgb16();
-        Image {
-            width: w,
-            height: h,
-            channels: 3,
-            data: buf.iter().map(|&v| v as f32 / 65535.0).collect(),
-        }
+        Image { width: w, height: h, channels: 3, data: buf.iter().map(|&v| v as f32 / 65535.0).collect() }
     })
 }
 

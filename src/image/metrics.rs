@@ -31,11 +31,7 @@ pub fn agreement(
     var_b: &Image,
     alpha: f64,
 ) -> Result<Agreement, String> {
-    for (name, img) in [
-        ("variance", var_a),
-        ("reference", b),
-        ("reference variance", var_b),
-    ] {
+    for (name, img) in [("variance", var_a), ("reference", b), ("reference variance", var_b)] {
         if (img.width, img.height, img.channels) != (a.width, a.height, a.channels) {
             return Err(format!(
                 "{name} is {}x{}x{}, the render {}x{}x{}",
@@ -71,11 +67,7 @@ pub fn agreement(
     }
     let (ma, mb) = (a.channel_means(), b.channel_means());
     Ok(Agreement {
-        mean_rel_err: ma
-            .iter()
-            .zip(&mb)
-            .map(|(x, y)| (x - y) / y.abs().max(1e-30))
-            .collect(),
+        mean_rel_err: ma.iter().zip(&mb).map(|(x, y)| (x - y) / y.abs().max(1e-30)).collect(),
         pass_fraction: 1.0 - failed as f64 / tested.max(1) as f64,
         alpha_sidak,
         z_critical,

@@ -16,12 +16,7 @@ pub struct Image {
 
 impl Image {
     pub fn new(width: u32, height: u32, channels: u32) -> Image {
-        Image {
-            width,
-            height,
-            channels,
-            data: vec![0.0; (width * height * channels) as usize],
-        }
+        Image { width, height, channels, data: vec![0.0; (width * height * channels) as usize] }
     }
 
     pub fn pixel(&self, x: u32, y: u32) -> &[f32] {

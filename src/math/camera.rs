@@ -39,13 +39,7 @@ pub struct Distortion {
 
 impl Distortion {
     pub fn from_array(c: [f64; 5]) -> Self {
-        Distortion {
-            k1: c[0],
-            k2: c[1],
-            p1: c[2],
-            p2: c[3],
-            k3: c[4],
-        }
+        Distortion { k1: c[0], k2: c[1], p1: c[2], p2: c[3], k3: c[4] }
     }
 
     pub fn to_array(&self) -> [f64; 5] {
@@ -95,10 +89,8 @@ impl Distortion {
             if !(det > 1e-12) {
                 return None;
             }
-            let step = DVec2::new(
-                (j[1][1] * r.x - j[0][1] * r.y) / det,
-                (-j[1][0] * r.x + j[0][0] * r.y) / det,
-            );
+            let step =
+                DVec2::new((j[1][1] * r.x - j[0][1] * r.y) / det, (-j[1][0] * r.x + j[0][0] * r.y) / det);
             p -= step;
             if !p.is_finite() {
                 return None;
@@ -166,24 +158,18 @@ impl CameraModel {
 
     /// Unit ray direction in the camera frame through pixel `px` (OpenCV pixel coordinates).
     pub fn pixel_ray(&self, px: DVec2) -> Option<DVec3> {
-        self.undistort_pixel(px)
-            .map(|n| DVec3::new(n.x, n.y, 1.0).normalize())
+        self.undistort_pixel(px).map(|n| DVec3::new(n.x, n.y, 1.0).normalize())
     }
 
     /// Checks that the numbers describe a usable camera; names the first bad field.
     pub fn validate(&self) -> Result<(), String> {
         let k = &self.intrinsics;
         if self.width == 0 || self.height == 0 {
-            return Err(format!(
-                "image size {}x{} must be positive",
-                self.width, self.height
-            ));
+            return Err(format!("image size {}x{} must be positive", self.width, self.height));
         }
         for (name, v) in [("fx", k.fx), ("fy", k.fy)] {
             if !(v.is_finite() && v > 0.0) {
-                return Err(format!(
-                    "{name} = {v} must be a positive finite number of pixels"
-                ));
+                return Err(format!("{name} = {v} must be a positive finite number of pixels"));
             }
         }
         for (name, v) in [("cx", k.cx), ("cy", k.cy)] {
@@ -207,13 +193,7 @@ mod tests {
 
     #[test]
     fn jacobian_matches_finite_differences() {
-        let d = Distortion {
-            k1: -0.3,
-            k2: 0.12,
-            p1: 0.001,
-            p2: -0.002,
-            k3: -0.02,
-        };
+        let d = Distortion { k1: -0.3, k2: 0.12, p1: 0.001, p2: -0.002, k3: -0.02 };
         let p = DVec2::new(0.31, -0.22);
         let (_, j) = d.distort_with_jacobian(p);
         let h = 1e-7;

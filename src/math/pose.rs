@@ -10,10 +10,7 @@ pub struct Pose {
 }
 
 impl Pose {
-    pub const IDENTITY: Pose = Pose {
-        rotation: DMat3::IDENTITY,
-        translation: DVec3::ZERO,
-    };
+    pub const IDENTITY: Pose = Pose { rotation: DMat3::IDENTITY, translation: DVec3::ZERO };
 
     pub fn transform_point(&self, p: DVec3) -> DVec3 {
         self.rotation * p + self.translation
@@ -25,10 +22,7 @@ impl Pose {
 
     pub fn inverse(&self) -> Pose {
         let rt = self.rotation.transpose();
-        Pose {
-            rotation: rt,
-            translation: -(rt * self.translation),
-        }
+        Pose { rotation: rt, translation: -(rt * self.translation) }
     }
 
     /// `self ∘ other`: first `other`, then `self`.
@@ -48,10 +42,7 @@ impl Pose {
             return None;
         }
         let y = z.cross(x);
-        Some(Pose {
-            rotation: DMat3::from_cols(x, y, z),
-            translation: origin,
-        })
+        Some(Pose { rotation: DMat3::from_cols(x, y, z), translation: origin })
     }
 
     /// Rotation from a Rodrigues vector (axis × angle in radians), as OpenCV's `Rodrigues`.
@@ -66,10 +57,7 @@ impl Pose {
     /// Largest deviation of RᵀR from the identity and det(R) from 1.
     pub fn orthonormality_error(r: &DMat3) -> f64 {
         let d = r.transpose() * *r - DMat3::IDENTITY;
-        let m = d
-            .to_cols_array()
-            .iter()
-            .fold(0.0f64, |a, &b| a.max(b.abs()));
+        let m = d.to_cols_array().iter().fold(0.0f64, |a, &b| a.max(b.abs()));
         m.max((r.determinant() - 1.0).abs())
     }
 }
@@ -86,10 +74,7 @@ mod tests {
         };
         let q = p.compose(&p.inverse());
         assert!(Pose::orthonormality_error(&q.rotation) < 1e-12);
-        assert!((q.rotation - DMat3::IDENTITY)
-            .to_cols_array()
-            .iter()
-            .all(|v| v.abs() < 1e-12));
+        assert!((q.rotation - DMat3::IDENTITY).to_cols_array().iter().all(|v| v.abs() < 1e-12));
         assert!(q.translation.length() < 1e-12);
         let x = DVec3::new(0.2, 0.7, -1.1);
         assert!((p.inverse().transform_point(p.transform_point(x)) - x).length() < 1e-12);

@@ -35,12 +35,7 @@ pub enum Error {
     #[error("{path}: {message}")]
     Parse { path: PathBuf, message: String },
     #[error("{path}: stage {stage} ({case}): {message}")]
-    Stage {
-        path: PathBuf,
-        stage: usize,
-        case: String,
-        message: String,
-    },
+    Stage { path: PathBuf, stage: usize, case: String, message: String },
     #[error("cannot write {path}: {message}")]
     Write { path: PathBuf, message: String },
 }
@@ -94,34 +89,26 @@ impl StageSpec {
 pub struct RunOptions {
     pub threads: Option<usize>,
     pub progress: bool,
+    /// The output folder, where stages save images they are asked to keep.
+    pub out_dir: PathBuf,
 }
 
 pub fn load(path: &Path) -> Result<PipelineFile, Error> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::Io {
-        path: path.into(),
-        message: e.to_string(),
-    })?;
-    let file: PipelineFile = toml::from_str(&text).map_err(|e| Error::Parse {
-        path: path.into(),
-        message: e.to_string(),
-    })?;
+    let text =
+        std::fs::read_to_string(path).map_err(|e| Error::Io { path: path.into(), message: e.to_string() })?;
+    let file: PipelineFile =
+        toml::from_str(&text).map_err(|e| Error::Parse { path: path.into(), message: e.to_string() })?;
     if file.stages.is_empty() {
-        return Err(Error::Parse {
-            path: path.into(),
-            message: "`stages` is empty: nothing to run".into(),
-        });
+        return Err(Error::Parse { path: path.into(), message: "`stages` is empty: nothing to run".into() });
     }
     Ok(file)
 }
 
 /// The name a pipeline's outputs go under: `name`, or the file's stem.
 pub fn pipeline_name(file: &PipelineFile, path: &Path) -> String {
-    file.name.clone().unwrap_or_else(|| {
-        path.file_stem()
-            .and_then(|s| s.to_str())
-            .unwrap_or("pipeline")
-            .to_string()
-    })
+    file.name
+        .clone()
+        .unwrap_or_else(|| path.file_stem().and_then(|s| s.to_str()).unwrap_or("pipeline").to_string())
 }
 
 /// Runs every stage of a pipeline file and returns the report (not yet written).

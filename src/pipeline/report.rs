@@ -125,10 +125,7 @@ impl Report {
                 "a metric missed its bound"
             }
         );
-        let _ = writeln!(
-            s,
-            "| stage | case | mode | time (s) | metrics met |\n|---|---|---|---:|---|"
-        );
+        let _ = writeln!(s, "| stage | case | mode | time (s) | metrics met |\n|---|---|---|---:|---|");
         for st in &self.stages {
             let bounded = st.metrics.iter().filter(|m| m.bound.is_some()).count();
             let met = st.metrics.iter().filter(|m| m.pass == Some(true)).count();
@@ -143,10 +140,7 @@ impl Report {
         }
         for st in &self.stages {
             let _ = writeln!(s, "\n## {} — {}\n", st.stage, st.case);
-            let _ = writeln!(
-                s,
-                "| metric | value | unit | bound | verdict |\n|---|---:|---|---:|---|"
-            );
+            let _ = writeln!(s, "| metric | value | unit | bound | verdict |\n|---|---:|---|---:|---|");
             for m in &st.metrics {
                 let bound = match (m.bound, m.better) {
                     (Some(b), Better::Lower) => format!("≤ {}", fmt_value(b)),
@@ -159,19 +153,10 @@ impl Report {
                     (Some(false), None) => "**MISS**".to_string(),
                     (None, _) => "—".to_string(),
                 };
-                let _ = writeln!(
-                    s,
-                    "| {} | {} | {} | {bound} | {verdict} |",
-                    m.name,
-                    fmt_value(m.value),
-                    m.unit
-                );
+                let _ =
+                    writeln!(s, "| {} | {} | {} | {bound} | {verdict} |", m.name, fmt_value(m.value), m.unit);
             }
-            let times: Vec<String> = st
-                .timings_s
-                .iter()
-                .map(|(k, v)| format!("{k} {v:.3} s"))
-                .collect();
+            let times: Vec<String> = st.timings_s.iter().map(|(k, v)| format!("{k} {v:.3} s")).collect();
             let _ = writeln!(s, "\nTimings: {}.", times.join(", "));
             for n in &st.notes {
                 let _ = writeln!(s, "\n- {n}");
@@ -182,19 +167,14 @@ impl Report {
 
     /// Writes `report.json` and `report.md` into `dir`, each atomically.
     pub fn write(&self, dir: &Path) -> Result<(), super::Error> {
-        let json = serde_json::to_string_pretty(self).map_err(|e| super::Error::Write {
-            path: dir.join("report.json"),
-            message: e.to_string(),
-        })?;
+        let json = serde_json::to_string_pretty(self)
+            .map_err(|e| super::Error::Write { path: dir.join("report.json"), message: e.to_string() })?;
         for (name, text) in [("report.json", json), ("report.md", self.to_markdown())] {
             let path = dir.join(name);
             crate::image::io::write_atomically(&path, |tmp| {
                 std::fs::write(tmp, &text).map_err(|e| e.to_string())
             })
-            .map_err(|e| super::Error::Write {
-                path: path.clone(),
-                message: e.to_string(),
-            })?;
+            .map_err(|e| super::Error::Write { path: path.clone(), message: e.to_string() })?;
         }
         Ok(())
     }

@@ -54,16 +54,11 @@ pub struct RenderStage {
     pub reference_variance: Option<String>,
     /// Closed-form radiance every pixel must have (linear RGB).
     pub expect_uniform: Option<[f64; 3]>,
-    /// Where to write the rendered image (EXR), relative to the output folder.
+    /// File name (.exr or .png) to save the rendered image under, in the output folder.
     pub save: Option<String>,
 }
 
-pub fn run(
-    s: &RenderStage,
-    dir: &Path,
-    seed: u64,
-    opts: &RunOptions,
-) -> Result<StageOutput, String> {
+pub fn run(s: &RenderStage, dir: &Path, seed: u64, opts: &RunOptions) -> Result<StageOutput, String> {
     let scene = render::load(&dir.join(&s.scene)).map_err(|e| e.to_string())?;
     let mut settings = render::Settings::from_scene(&scene);
     settings.seed = seed;
@@ -83,12 +78,7 @@ pub fn run(
     timings.insert("render".into(), secs);
     let paths = film.mean.width as f64 * film.mean.height as f64 * settings.spp as f64;
     let mut m = vec![
-        Metric::new(
-            "nonfinite_samples",
-            film.dropped_samples as f64,
-            "samples",
-            Better::Lower,
-        ),
+        Metric::new("nonfinite_samples", film.dropped_samples as f64, "samples", Better::Lower),
         Metric::new("mpaths_per_s", paths / secs / 1e6, "M/s", Better::Higher),
     ];
     notes.push(format!(
@@ -113,22 +103,18 @@ pub fn run(
                         Better::Lower,
                     ));
                 }
-                m.push(Metric::new(
-                    "z_test_pass_fraction",
-                    a.pass_fraction,
-                    "",
-                    Better::Higher,
-                ));
+                m.push(Metric::new("z_test_pass_fraction", a.pass_fraction, "", Better::Higher));
                 notes.push(format!(
                     "z-test against {}: {} of {} pixel channels beyond |z| = {:.2} (Šidák α = {:.2e}).",
-                    rp.display(), a.failed, a.tested, a.z_critical, a.alpha_sidak
+                    rp.display(),
+                    a.failed,
+                    a.tested,
+                    a.z_critical,
+                    a.alpha_sidak
                 ));
                 timings.insert("compare".into(), t.elapsed().as_secs_f64());
             } else {
-                notes.push(format!(
-                    "reference {} not found: comparison skipped.",
-                    rp.display()
-                ));
+                notes.push(format!("reference {} not found: comparison skipped.", rp.display()));
             }
         }
         (None, None) => {}
@@ -145,16 +131,12 @@ pub fn run(
             }
         }
         m.push(Metric::new("max_rel_err", max_rel, "", Better::Lower));
-        m.push(Metric::new(
-            "mean_rel_err",
-            sum_rel / film.mean.data.len().max(1) as f64,
-            "",
-            Better::Lower,
-        ));
+        m.push(Metric::new("mean_rel_err", sum_rel / film.mean.data.len().max(1) as f64, "", Better::Lower));
     }
-    Ok(StageOutput {
-        metrics: m,
-        timings_s: timings,
-        notes,
-    })
+    if let Some(name) = &s.save {
+        let path = opts.out_dir.join(name);
+        io::write(&path, &film.mean).map_err(|e| e.to_string())?;
+        notes.push(format!("image saved as {}.", path.display()));
+    }
+    Ok(StageOutput { metrics: m, timings_s: timings, notes })
 }

@@ -41,10 +41,7 @@ struct Aabb {
 }
 
 impl Aabb {
-    const EMPTY: Aabb = Aabb {
-        lo: Vec3A::splat(f32::INFINITY),
-        hi: Vec3A::splat(f32::NEG_INFINITY),
-    };
+    const EMPTY: Aabb = Aabb { lo: Vec3A::splat(f32::INFINITY), hi: Vec3A::splat(f32::NEG_INFINITY) };
     fn grow(&mut self, lo: Vec3A, hi: Vec3A) {
         self.lo = self.lo.min(lo);
         self.hi = self.hi.max(hi);
@@ -69,12 +66,7 @@ impl Bvh {
             .enumerate()
             .map(|(i, p)| {
                 let (lo, hi) = p.bounds();
-                BuildPrim {
-                    lo,
-                    hi,
-                    centroid: (lo + hi) * 0.5,
-                    index: i as u32,
-                }
+                BuildPrim { lo, hi, centroid: (lo + hi) * 0.5, index: i as u32 }
             })
             .collect();
         let mut nodes = Vec::with_capacity(2 * prims.len().max(1));
@@ -82,11 +74,7 @@ impl Bvh {
             build_node(&mut items, 0, &mut nodes);
         }
         let order: Vec<u32> = items.iter().map(|b| b.index).collect();
-        Bvh {
-            nodes,
-            prims: order.iter().map(|&i| prims[i as usize]).collect(),
-            order,
-        }
+        Bvh { nodes, prims: order.iter().map(|&i| prims[i as usize]).collect(), order }
     }
 
     /// Closest hit within (t_min, t_max). `Hit::prim` indexes `self.prims` (leaf order).
@@ -113,12 +101,7 @@ impl Bvh {
                 for (k, prim) in self.prims[first..first + count as usize].iter().enumerate() {
                     if let Some((t, b1, b2)) = prim.intersect(ray, t_min, t_max) {
                         t_max = t;
-                        best = Some(Hit {
-                            t,
-                            prim: (first + k) as u32,
-                            b1,
-                            b2,
-                        });
+                        best = Some(Hit { t, prim: (first + k) as u32, b1, b2 });
                     }
                 }
             } else {
@@ -231,11 +214,7 @@ impl Query {
     #[inline(always)]
     fn new(ray: &Ray, t_min: f32) -> Query {
         let inv = ray.dir.recip();
-        Query {
-            inv,
-            origin_inv: ray.origin * inv,
-            t_min,
-        }
+        Query { inv, origin_inv: ray.origin * inv, t_min }
     }
 
     /// Entry distance into the node's box if the ray meets it within (t_min, t_max).
@@ -301,8 +280,7 @@ fn build_node(items: &mut [BuildPrim], first: usize, nodes: &mut Vec<Node>) -> u
             if n == 0 || rn == 0 {
                 continue;
             }
-            let cost = 0.125
-                + (acc.half_area() * n as f32 + ra * rn as f32) / bounds.half_area().max(1e-30);
+            let cost = 0.125 + (acc.half_area() * n as f32 + ra * rn as f32) / bounds.half_area().max(1e-30);
             if best.is_none_or(|b| cost < b.0) {
                 best = Some((cost, axis, lo + (i + 1) as f32 / scale));
             }
@@ -351,31 +329,19 @@ mod tests {
         for i in 0..500 {
             let v0 = r() * 4.0 - 2.0;
             if i % 7 == 0 {
-                prims.push(Prim::Sphere {
-                    center: v0,
-                    radius: 0.05 + 0.1 * r().x,
-                });
+                prims.push(Prim::Sphere { center: v0, radius: 0.05 + 0.1 * r().x });
             } else {
-                prims.push(Prim::Triangle {
-                    v0,
-                    e1: (r() - 0.5) * 0.5,
-                    e2: (r() - 0.5) * 0.5,
-                });
+                prims.push(Prim::Triangle { v0, e1: (r() - 0.5) * 0.5, e2: (r() - 0.5) * 0.5 });
             }
         }
         let bvh = Bvh::build(&prims);
         for _ in 0..2000 {
-            let ray = Ray {
-                origin: r() * 6.0 - 3.0,
-                dir: (r() - 0.5).normalize(),
-            };
+            let ray = Ray { origin: r() * 6.0 - 3.0, dir: (r() - 0.5).normalize() };
             let brute = prims
                 .iter()
                 .filter_map(|p| p.intersect(&ray, 1e-4, f32::INFINITY).map(|h| h.0))
                 .fold(f32::INFINITY, f32::min);
-            let got = bvh
-                .intersect(&ray, 1e-4, f32::INFINITY)
-                .map_or(f32::INFINITY, |h| h.t);
+            let got = bvh.intersect(&ray, 1e-4, f32::INFINITY).map_or(f32::INFINITY, |h| h.t);
             assert_eq!(brute, got);
             assert_eq!(brute.is_finite(), bvh.occluded(&ray, 1e-4, f32::INFINITY));
         }

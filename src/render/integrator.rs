@@ -74,10 +74,7 @@ fn basis(n: Vec3A) -> (Vec3A, Vec3A) {
     let s = if n.z >= 0.0 { 1.0 } else { -1.0 };
     let a = -1.0 / (s + n.z);
     let b = n.x * n.y * a;
-    (
-        Vec3A::new(1.0 + s * n.x * n.x * a, s * b, -s * n.x),
-        Vec3A::new(b, s + n.y * n.y * a, -n.y),
-    )
+    (Vec3A::new(1.0 + s * n.x * n.x * a, s * b, -s * n.x), Vec3A::new(b, s + n.y * n.y * a, -n.y))
 }
 
 /// Cosine-weighted direction around `n` (Malley's method).
@@ -115,19 +112,10 @@ impl Scene {
             }
             Prim::Sphere { center, .. } => {
                 let d = (p - *center).normalize();
-                Vec2::new(
-                    0.5 + d.z.atan2(d.x) / (2.0 * PI),
-                    d.y.clamp(-1.0, 1.0).acos() / PI,
-                )
+                Vec2::new(0.5 + d.z.atan2(d.x) / (2.0 * PI), d.y.clamp(-1.0, 1.0).acos() / PI)
             }
         };
-        Surface {
-            p,
-            n,
-            uv,
-            material: info.material,
-            object_id: info.object_id,
-        }
+        Surface { p, n, uv, material: info.material, object_id: info.object_id }
     }
 
     /// Radiance along a camera ray.
@@ -152,11 +140,7 @@ impl Scene {
                 break;
             }
             // Two-sided diffuse: shade with the normal on the side the path arrived from.
-            let n = if surf.n.dot(wo) < 0.0 {
-                -surf.n
-            } else {
-                surf.n
-            };
+            let n = if surf.n.dot(wo) < 0.0 { -surf.n } else { surf.n };
             let albedo = mat.albedo.eval(surf.uv);
             let origin = surf.p + n * epsilon(surf.p);
 
@@ -187,10 +171,7 @@ impl Scene {
             if beta == Vec3A::ZERO {
                 break;
             }
-            ray = Ray {
-                origin,
-                dir: cosine_hemisphere(n, u1, u2),
-            };
+            ray = Ray { origin, dir: cosine_hemisphere(n, u1, u2) };
         }
         l
     }
@@ -198,32 +179,19 @@ impl Scene {
     /// One light sample seen from `p`: (incident radiance divided by every pdf, unit direction
     /// towards the light, distance). `None` when the sample carries nothing.
     #[inline]
-    pub fn sample_light(
-        &self,
-        u_pick: f32,
-        u: (f32, f32),
-        p: Vec3A,
-    ) -> Option<(Vec3A, Vec3A, f32)> {
+    pub fn sample_light(&self, u_pick: f32, u: (f32, f32), p: Vec3A) -> Option<(Vec3A, Vec3A, f32)> {
         let (i, p_pick) = self.pick_light(u_pick)?;
         match self.lights[i] {
-            Light::Point {
-                position,
-                intensity,
-            } => {
+            Light::Point { position, intensity } => {
                 let d = position - p;
                 let r2 = d.length_squared();
                 let r = r2.sqrt();
                 Some((intensity / (r2 * p_pick), d / r, r))
             }
-            Light::Directional {
-                to_light,
-                irradiance,
-            } => Some((irradiance / p_pick, to_light, f32::INFINITY)),
-            Light::Area {
-                prim,
-                radiance,
-                area,
-            } => {
+            Light::Directional { to_light, irradiance } => {
+                Some((irradiance / p_pick, to_light, f32::INFINITY))
+            }
+            Light::Area { prim, radiance, area } => {
                 let (y, mut ny) = self.bvh.prims[prim as usize].sample_area(u.0, u.1);
                 if self.info[prim as usize].reverse {
                     ny = -ny;
@@ -274,22 +242,12 @@ pub fn render(scene: &Scene, settings: &Settings) -> Film {
                 bar.inc(1);
             })
     };
-    match settings.threads.and_then(|n| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n.max(1))
-            .build()
-            .ok()
-    }) {
+    match settings.threads.and_then(|n| rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build().ok()) {
         Some(pool) => pool.install(work),
         None => work(),
     }
     bar.finish_and_clear();
-    Film {
-        mean,
-        variance,
-        origin: [x0, y0],
-        dropped_samples: dropped.into_inner(),
-    }
+    Film { mean, variance, origin: [x0, y0], dropped_samples: dropped.into_inner() }
 }
 
 /// Mean and variance of the mean of one pixel, and the number of non-finite samples dropped.
@@ -327,11 +285,7 @@ fn render_pixel(scene: &Scene, settings: &Settings, x: u32, y: u32) -> ([f32; 3]
     for c in 0..3 {
         let m = sum[c] / n;
         mean[c] = m as f32;
-        var[c] = if n > 1.0 {
-            ((sum2[c] - n * m * m).max(0.0) / (n - 1.0) / n) as f32
-        } else {
-            0.0
-        };
+        var[c] = if n > 1.0 { ((sum2[c] - n * m * m).max(0.0) / (n - 1.0) / n) as f32 } else { 0.0 };
     }
     (mean, var, dropped)
 }

@@ -27,11 +27,7 @@ pub enum Error {
     #[error("{path}: {message}")]
     Parse { path: PathBuf, message: String },
     #[error("{path}: `{field}` {message}")]
-    Invalid {
-        path: PathBuf,
-        field: String,
-        message: String,
-    },
+    Invalid { path: PathBuf, field: String, message: String },
     #[error(transparent)]
     Obj(#[from] obj::ObjError),
     #[error("{path}: the mesh has no faces")]

@@ -51,21 +51,14 @@ pub fn parse(text: &str, name: &str) -> Result<ObjMesh, ObjError> {
     let mut material: Option<u32> = None;
     for (ln, raw) in text.lines().enumerate() {
         let line_no = ln + 1;
-        let err = |message: String| ObjError {
-            path: name.to_string(),
-            line: line_no,
-            message,
-        };
+        let err = |message: String| ObjError { path: name.to_string(), line: line_no, message };
         let line = raw.split('#').next().unwrap_or("").trim();
         let mut words = line.split_whitespace();
         let Some(tag) = words.next() else { continue };
         let rest: Vec<&str> = words.collect();
         let numbers = |n: usize| -> Result<Vec<f64>, ObjError> {
             if rest.len() < n {
-                return Err(err(format!(
-                    "'{tag}' needs {n} numbers, found {}",
-                    rest.len()
-                )));
+                return Err(err(format!("'{tag}' needs {n} numbers, found {}", rest.len())));
             }
             rest[..n]
                 .iter()
@@ -86,11 +79,7 @@ pub fn parse(text: &str, name: &str) -> Result<ObjMesh, ObjError> {
             }
             "o" | "g" => {
                 let nm = rest.join(" ");
-                m.objects.push(if nm.is_empty() {
-                    format!("object{}", m.objects.len())
-                } else {
-                    nm
-                });
+                m.objects.push(if nm.is_empty() { format!("object{}", m.objects.len()) } else { nm });
                 object = Some(m.objects.len() as u32 - 1);
             }
             "usemtl" => {
@@ -106,21 +95,13 @@ pub fn parse(text: &str, name: &str) -> Result<ObjMesh, ObjError> {
             }
             "f" => {
                 if rest.len() < 3 {
-                    return Err(err(format!(
-                        "a face needs at least 3 vertices, found {}",
-                        rest.len()
-                    )));
+                    return Err(err(format!("a face needs at least 3 vertices, found {}", rest.len())));
                 }
                 let mut vs = Vec::with_capacity(rest.len());
                 let mut vts = Vec::with_capacity(rest.len());
                 for w in &rest {
                     let mut parts = w.split('/');
-                    let v = resolve(
-                        parts.next().unwrap_or(""),
-                        m.positions.len(),
-                        "vertex",
-                        &err,
-                    )?;
+                    let v = resolve(parts.next().unwrap_or(""), m.positions.len(), "vertex", &err)?;
                     vs.push(v);
                     match parts.next() {
                         Some(t) if !t.is_empty() => {
@@ -154,20 +135,11 @@ pub fn parse(text: &str, name: &str) -> Result<ObjMesh, ObjError> {
 }
 
 /// Resolves a 1-based (or negative, relative) OBJ index against `count` items so far.
-fn resolve(
-    word: &str,
-    count: usize,
-    what: &str,
-    err: &dyn Fn(String) -> ObjError,
-) -> Result<u32, ObjError> {
-    let i: i64 = word
-        .parse()
-        .map_err(|_| err(format!("'{word}' is not a {what} index")))?;
+fn resolve(word: &str, count: usize, what: &str, err: &dyn Fn(String) -> ObjError) -> Result<u32, ObjError> {
+    let i: i64 = word.parse().map_err(|_| err(format!("'{word}' is not a {what} index")))?;
     let idx = if i > 0 { i - 1 } else { count as i64 + i };
     if i == 0 || idx < 0 || idx >= count as i64 {
-        return Err(err(format!(
-            "{what} index {i} is out of range (1..={count} defined so far)"
-        )));
+        return Err(err(format!("{what} index {i} is out of range (1..={count} defined so far)")));
     }
     Ok(idx as u32)
 }
@@ -178,11 +150,7 @@ mod tests {
 
     #[test]
     fn quads_fan_and_negative_indices() {
-        let m = parse(
-            "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\no quad\nf -4 -3 -2 -1\n",
-            "t.obj",
-        )
-        .unwrap();
+        let m = parse("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\no quad\nf -4 -3 -2 -1\n", "t.obj").unwrap();
         assert_eq!(m.triangles.len(), 2);
         assert_eq!(m.triangles[1].v, [0, 2, 3]);
         assert_eq!(m.objects, vec!["quad".to_string()]);

@@ -23,19 +23,13 @@ pub struct Sampler {
 
 impl Sampler {
     pub fn new(seed: u64, pixel: u64, sample: u64) -> Sampler {
-        Sampler {
-            key: mix64(seed ^ mix64(pixel ^ mix64(sample.wrapping_add(0x5851_f42d)))),
-            dim: 0,
-        }
+        Sampler { key: mix64(seed ^ mix64(pixel ^ mix64(sample.wrapping_add(0x5851_f42d)))), dim: 0 }
     }
 
     /// A uniform number in [0, 1).
     #[inline]
     pub fn next(&mut self) -> f32 {
-        let h = mix64(
-            self.key
-                .wrapping_add(self.dim.wrapping_mul(0x9e37_79b9_7f4a_7c15)),
-        );
+        let h = mix64(self.key.wrapping_add(self.dim.wrapping_mul(0x9e37_79b9_7f4a_7c15)));
         self.dim += 1;
         (h >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
     }

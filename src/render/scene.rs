@@ -107,11 +107,7 @@ fn default_seed() -> u64 {
 
 impl Default for RenderSpec {
     fn default() -> Self {
-        RenderSpec {
-            spp: default_spp(),
-            max_depth: default_depth(),
-            seed: default_seed(),
-        }
+        RenderSpec { spp: default_spp(), max_depth: default_depth(), seed: default_seed() }
     }
 }
 
@@ -186,17 +182,10 @@ pub enum ShapeSpec {
 #[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
 pub enum LightSpec {
     /// Isotropic point light: `intensity` (W/sr) or `power` (W, = 4π·intensity).
-    Point {
-        position: [f64; 3],
-        intensity: Option<[f64; 3]>,
-        power: Option<[f64; 3]>,
-    },
+    Point { position: [f64; 3], intensity: Option<[f64; 3]>, power: Option<[f64; 3]> },
     /// Distant light from direction `to_light` (towards the light), `irradiance` in W/m² on a
     /// surface facing it.
-    Directional {
-        to_light: [f64; 3],
-        irradiance: [f64; 3],
-    },
+    Directional { to_light: [f64; 3], irradiance: [f64; 3] },
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -247,33 +236,21 @@ pub struct Scene {
 }
 
 fn field_err(path: &Path, field: &str, message: impl Into<String>) -> Error {
-    Error::Invalid {
-        path: path.to_path_buf(),
-        field: field.to_string(),
-        message: message.into(),
-    }
+    Error::Invalid { path: path.to_path_buf(), field: field.to_string(), message: message.into() }
 }
 
 fn finite3(path: &Path, field: &str, v: [f64; 3]) -> Result<DVec3, Error> {
     if v.iter().all(|c| c.is_finite()) {
         Ok(DVec3::from_array(v))
     } else {
-        Err(field_err(
-            path,
-            field,
-            format!("{v:?} must be finite numbers"),
-        ))
+        Err(field_err(path, field, format!("{v:?} must be finite numbers")))
     }
 }
 
 fn non_negative3(path: &Path, field: &str, v: [f64; 3]) -> Result<Vec3A, Error> {
     let d = finite3(path, field, v)?;
     if d.min_element() < 0.0 {
-        return Err(field_err(
-            path,
-            field,
-            format!("{v:?} must not be negative"),
-        ));
+        return Err(field_err(path, field, format!("{v:?} must not be negative")));
     }
     Ok(d.as_vec3().into())
 }
@@ -283,11 +260,7 @@ impl TransformSpec {
     fn build(&self, path: &Path, field: &str) -> Result<(DMat3, DVec3, DVec3), Error> {
         let rotation = match (&self.rotation, &self.rvec) {
             (Some(_), Some(_)) => {
-                return Err(field_err(
-                    path,
-                    field,
-                    "give either `rotation` or `rvec`, not both",
-                ))
+                return Err(field_err(path, field, "give either `rotation` or `rvec`, not both"))
             }
             (Some(rows), None) => {
                 for (i, r) in rows.iter().enumerate() {
@@ -307,9 +280,7 @@ impl TransformSpec {
                 }
                 m
             }
-            (None, Some(r)) => {
-                Pose::rotation_from_rvec(finite3(path, &format!("{field}.rvec"), *r)?)
-            }
+            (None, Some(r)) => Pose::rotation_from_rvec(finite3(path, &format!("{field}.rvec"), *r)?),
             (None, None) => DMat3::IDENTITY,
         };
         let translation = finite3(path, &format!("{field}.translation"), self.translation)?;
@@ -318,10 +289,7 @@ impl TransformSpec {
             Some(Scale::Uniform(s)) => DVec3::splat(s),
             Some(Scale::PerAxis(s)) => DVec3::from_array(s),
         };
-        if !scale.is_finite()
-            || scale.min_element().abs() == 0.0
-            || scale.abs().min_element() == 0.0
-        {
+        if !scale.is_finite() || scale.min_element().abs() == 0.0 || scale.abs().min_element() == 0.0 {
             return Err(field_err(
                 path,
                 &format!("{field}.scale"),
@@ -334,14 +302,10 @@ impl TransformSpec {
 
 /// Reads a scene file.
 pub fn load(path: &Path) -> Result<Scene, Error> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::Io {
-        path: path.to_path_buf(),
-        message: e.to_string(),
-    })?;
-    let file: SceneFile = toml::from_str(&text).map_err(|e| Error::Parse {
-        path: path.to_path_buf(),
-        message: e.to_string(),
-    })?;
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| Error::Io { path: path.to_path_buf(), message: e.to_string() })?;
+    let file: SceneFile = toml::from_str(&text)
+        .map_err(|e| Error::Parse { path: path.to_path_buf(), message: e.to_string() })?;
     build(&file, path)
 }
 
@@ -366,42 +330,21 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
             return Err(field_err(
                 path,
                 &format!("{field}.type"),
-                format!(
-                    "'{}' is not a known material (expected \"lambertian\")",
-                    m.kind
-                ),
+                format!("'{}' is not a known material (expected \"lambertian\")", m.kind),
             ));
         }
         if materials.iter().any(|x: &Material| x.name == m.name) {
-            return Err(field_err(
-                path,
-                &format!("{field}.name"),
-                "is used by an earlier material",
-            ));
+            return Err(field_err(path, &format!("{field}.name"), "is used by an earlier material"));
         }
         let albedo = Texture::build(&m.albedo, &dir, path, &format!("{field}.albedo"))?;
-        let emission = m
-            .emission
-            .map(|e| non_negative3(path, &format!("{field}.emission"), e))
-            .transpose()?;
-        materials.push(Material {
-            name: m.name.clone(),
-            albedo,
-            emission,
-        });
+        let emission =
+            m.emission.map(|e| non_negative3(path, &format!("{field}.emission"), e)).transpose()?;
+        materials.push(Material { name: m.name.clone(), albedo, emission });
     }
     let material_index = |name: &str, field: &str| -> Result<u32, Error> {
-        materials
-            .iter()
-            .position(|m| m.name == name)
-            .map(|i| i as u32)
-            .ok_or_else(|| {
-                field_err(
-                    path,
-                    field,
-                    format!("names material '{name}', which the scene does not define"),
-                )
-            })
+        materials.iter().position(|m| m.name == name).map(|i| i as u32).ok_or_else(|| {
+            field_err(path, field, format!("names material '{name}', which the scene does not define"))
+        })
     };
 
     let mut prims = Vec::new();
@@ -410,13 +353,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
     for (i, shape) in file.shapes.iter().enumerate() {
         let field = format!("shapes[{i}]");
         match shape {
-            ShapeSpec::Mesh {
-                file: f,
-                material,
-                object_materials,
-                transform,
-                reverse_orientation,
-            } => {
+            ShapeSpec::Mesh { file: f, material, object_materials, transform, reverse_orientation } => {
                 let mesh_path = dir.join(f);
                 let mesh = obj::read(&mesh_path)?;
                 if mesh.triangles.is_empty() {
@@ -439,11 +376,8 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                 }
                 let first_id = object_names.len() as u32;
                 object_names.extend(mesh.objects.iter().cloned());
-                let positions: Vec<Vec3A> = mesh
-                    .positions
-                    .iter()
-                    .map(|&p| (r * (s * p) + t).as_vec3().into())
-                    .collect();
+                let positions: Vec<Vec3A> =
+                    mesh.positions.iter().map(|&p| (r * (s * p) + t).as_vec3().into()).collect();
                 // A negative determinant mirrors the mesh and so flips its winding.
                 let mirrored = s.x * s.y * s.z < 0.0;
                 for tri in &mesh.triangles {
@@ -453,10 +387,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                     } else {
                         let by_usemtl = tri.material.and_then(|m| {
                             let n = &mesh.materials[m as usize];
-                            materials
-                                .iter()
-                                .position(|x| &x.name == n)
-                                .map(|i| i as u32)
+                            materials.iter().position(|x| &x.name == n).map(|i| i as u32)
                         });
                         match by_usemtl.or(default) {
                             Some(m) => m,
@@ -465,7 +396,13 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                                     .material
                                     .map(|m| mesh.materials[m as usize].clone())
                                     .unwrap_or_else(|| "(none)".into());
-                                return Err(field_err(path, &format!("{field}.material"), format!("is not set, and the OBJ's usemtl {what} names no scene material")));
+                                return Err(field_err(
+                                    path,
+                                    &format!("{field}.material"),
+                                    format!(
+                                        "is not set, and the OBJ's usemtl {what} names no scene material"
+                                    ),
+                                ));
                             }
                         }
                     };
@@ -487,12 +424,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                     });
                 }
             }
-            ShapeSpec::Sphere {
-                center,
-                radius,
-                material,
-                reverse_orientation,
-            } => {
+            ShapeSpec::Sphere { center, radius, material, reverse_orientation } => {
                 let c = finite3(path, &format!("{field}.center"), *center)?;
                 if !(radius.is_finite() && *radius > 0.0) {
                     return Err(field_err(
@@ -503,10 +435,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                 }
                 let mtl = material_index(material, &format!("{field}.material"))?;
                 object_names.push(format!("sphere{i}"));
-                prims.push(Prim::Sphere {
-                    center: c.as_vec3().into(),
-                    radius: *radius as f32,
-                });
+                prims.push(Prim::Sphere { center: c.as_vec3().into(), radius: *radius as f32 });
                 info.push(PrimInfo {
                     material: mtl,
                     object_id: object_names.len() as u32 - 1,
@@ -514,13 +443,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                     uv: [Vec2::ZERO; 3],
                 });
             }
-            ShapeSpec::Quad {
-                corner,
-                edge_u,
-                edge_v,
-                material,
-                reverse_orientation,
-            } => {
+            ShapeSpec::Quad { corner, edge_u, edge_v, material, reverse_orientation } => {
                 let o = finite3(path, &format!("{field}.corner"), *corner)?;
                 let u = finite3(path, &format!("{field}.edge_u"), *edge_u)?;
                 let v = finite3(path, &format!("{field}.edge_v"), *edge_v)?;
@@ -540,12 +463,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                     (o, u + v, v, [Vec2::ZERO, Vec2::ONE, Vec2::Y]),
                 ] {
                     prims.push(Prim::Triangle { v0: a, e1, e2 });
-                    info.push(PrimInfo {
-                        material: mtl,
-                        object_id: id,
-                        reverse: *reverse_orientation,
-                        uv,
-                    });
+                    info.push(PrimInfo { material: mtl, object_id: id, reverse: *reverse_orientation, uv });
                 }
             }
         }
@@ -559,16 +477,11 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
     for (i, l) in file.lights.iter().enumerate() {
         let field = format!("lights[{i}]");
         lights.push(match l {
-            LightSpec::Point {
-                position,
-                intensity,
-                power,
-            } => {
+            LightSpec::Point { position, intensity, power } => {
                 let intensity = match (intensity, power) {
                     (Some(i), None) => non_negative3(path, &format!("{field}.intensity"), *i)?,
                     (None, Some(p)) => {
-                        non_negative3(path, &format!("{field}.power"), *p)?
-                            / (4.0 * std::f32::consts::PI)
+                        non_negative3(path, &format!("{field}.power"), *p)? / (4.0 * std::f32::consts::PI)
                     }
                     _ => {
                         return Err(field_err(
@@ -579,23 +492,14 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                     }
                 };
                 Light::Point {
-                    position: finite3(path, &format!("{field}.position"), *position)?
-                        .as_vec3()
-                        .into(),
+                    position: finite3(path, &format!("{field}.position"), *position)?.as_vec3().into(),
                     intensity,
                 }
             }
-            LightSpec::Directional {
-                to_light,
-                irradiance,
-            } => {
+            LightSpec::Directional { to_light, irradiance } => {
                 let d = finite3(path, &format!("{field}.to_light"), *to_light)?;
                 if d.length() == 0.0 {
-                    return Err(field_err(
-                        path,
-                        &format!("{field}.to_light"),
-                        "must not be the zero vector",
-                    ));
+                    return Err(field_err(path, &format!("{field}.to_light"), "must not be the zero vector"));
                 }
                 Light::Directional {
                     to_light: d.normalize().as_vec3().into(),
@@ -607,11 +511,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
     for (k, (p, inf)) in bvh.prims.iter().zip(&info).enumerate() {
         if let Some(e) = materials[inf.material as usize].emission {
             if e.max_element() > 0.0 {
-                lights.push(Light::Area {
-                    prim: k as u32,
-                    radiance: e,
-                    area: p.area(),
-                });
+                lights.push(Light::Area { prim: k as u32, radiance: e, area: p.area() });
             }
         }
     }
@@ -637,11 +537,7 @@ fn build_camera(c: &CameraSpec, path: &Path) -> Result<(CameraModel, Pose), Erro
     let mut camera = match (c.fov_deg, c.fx, c.fy, c.cx, c.cy) {
         (Some(fov), None, None, None, None) => {
             if !(fov > 0.0 && fov < 180.0) {
-                return Err(field_err(
-                    path,
-                    "camera.fov_deg",
-                    format!("{fov} must be in (0, 180) degrees"),
-                ));
+                return Err(field_err(path, "camera.fov_deg", format!("{fov} must be in (0, 180) degrees")));
             }
             CameraModel::from_fov(c.width, c.height, fov)
         }
@@ -651,20 +547,12 @@ fn build_camera(c: &CameraSpec, path: &Path) -> Result<(CameraModel, Pose), Erro
             intrinsics: Intrinsics { fx, fy, cx, cy },
             distortion: Distortion::default(),
         },
-        _ => {
-            return Err(field_err(
-                path,
-                "camera",
-                "give either `fov_deg` or all of `fx`, `fy`, `cx`, `cy`",
-            ))
-        }
+        _ => return Err(field_err(path, "camera", "give either `fov_deg` or all of `fx`, `fy`, `cx`, `cy`")),
     };
     if let Some(d) = c.distortion {
         camera.distortion = Distortion::from_array(d);
     }
-    camera
-        .validate()
-        .map_err(|m| field_err(path, "camera", m))?;
+    camera.validate().map_err(|m| field_err(path, "camera", m))?;
     let pose = match (&c.look_at, &c.t_world_cam) {
         (Some(l), None) => {
             let o = finite3(path, "camera.look_at.origin", l.origin)?;
@@ -680,25 +568,12 @@ fn build_camera(c: &CameraSpec, path: &Path) -> Result<(CameraModel, Pose), Erro
         }
         (None, Some(t)) => {
             if t.scale.is_some() {
-                return Err(field_err(
-                    path,
-                    "camera.t_world_cam.scale",
-                    "a camera pose is rigid: no scale",
-                ));
+                return Err(field_err(path, "camera.t_world_cam.scale", "a camera pose is rigid: no scale"));
             }
             let (r, tr, _) = t.build(path, "camera.t_world_cam")?;
-            Pose {
-                rotation: r,
-                translation: tr,
-            }
+            Pose { rotation: r, translation: tr }
         }
-        _ => {
-            return Err(field_err(
-                path,
-                "camera",
-                "give exactly one of `look_at` or `t_world_cam`",
-            ))
-        }
+        _ => return Err(field_err(path, "camera", "give exactly one of `look_at` or `t_world_cam`")),
     };
     Ok((camera, pose))
 }
@@ -720,28 +595,19 @@ pub fn light_power(l: &Light, scene_radius: f32) -> f32 {
     let mean = |v: Vec3A| (v.x + v.y + v.z) / 3.0;
     match *l {
         Light::Point { intensity, .. } => 4.0 * pi * mean(intensity),
-        Light::Directional { irradiance, .. } => {
-            pi * scene_radius * scene_radius * mean(irradiance)
-        }
+        Light::Directional { irradiance, .. } => pi * scene_radius * scene_radius * mean(irradiance),
         Light::Area { radiance, area, .. } => pi * area * mean(radiance),
     }
 }
 
 fn light_cdf(lights: &[Light], scene_radius: f32) -> Vec<f32> {
-    let powers: Vec<f64> = lights
-        .iter()
-        .map(|l| light_power(l, scene_radius) as f64)
-        .collect();
+    let powers: Vec<f64> = lights.iter().map(|l| light_power(l, scene_radius) as f64).collect();
     let total: f64 = powers.iter().sum();
     let mut acc = 0.0;
     powers
         .iter()
         .map(|p| {
-            acc += if total > 0.0 {
-                p / total
-            } else {
-                1.0 / lights.len() as f64
-            };
+            acc += if total > 0.0 { p / total } else { 1.0 / lights.len() as f64 };
             acc as f32
         })
         .collect()
@@ -769,9 +635,6 @@ impl Scene {
 
     /// Resolves a path named in a scene file.
     pub fn resolve(scene_path: &Path, name: &str) -> PathBuf {
-        scene_path
-            .parent()
-            .map(|d| d.join(name))
-            .unwrap_or_else(|| PathBuf::from(name))
+        scene_path.parent().map(|d| d.join(name)).unwrap_or_else(|| PathBuf::from(name))
     }
 }

@@ -48,13 +48,7 @@ fn eight() -> u8 {
 
 impl Default for Sensor {
     fn default() -> Self {
-        Sensor {
-            exposure: 1.0,
-            full_well: full_well(),
-            photon_noise: true,
-            read_noise: 0.0,
-            bits: 8,
-        }
+        Sensor { exposure: 1.0, full_well: full_well(), photon_noise: true, read_noise: 0.0, bits: 8 }
     }
 }
 
@@ -64,16 +58,10 @@ impl Sensor {
             return Err(format!("exposure = {} must be positive", self.exposure));
         }
         if !(self.full_well.is_finite() && self.full_well >= 1.0) {
-            return Err(format!(
-                "full_well = {} must be at least 1 electron",
-                self.full_well
-            ));
+            return Err(format!("full_well = {} must be at least 1 electron", self.full_well));
         }
         if !(self.read_noise.is_finite() && self.read_noise >= 0.0) {
-            return Err(format!(
-                "read_noise = {} must be non-negative",
-                self.read_noise
-            ));
+            return Err(format!("read_noise = {} must be non-negative", self.read_noise));
         }
         if self.bits != 8 && self.bits != 16 {
             return Err(format!("bits = {} must be 8 or 16", self.bits));
@@ -95,16 +83,13 @@ impl Sensor {
             .chunks_exact(c)
             .enumerate()
             .flat_map(|(pixel, px)| {
-                let key =
-                    super::sampler::mix64(seed ^ 0x5e45_0a11 ^ super::sampler::mix64(pixel as u64));
+                let key = super::sampler::mix64(seed ^ 0x5e45_0a11 ^ super::sampler::mix64(pixel as u64));
                 let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(key);
                 px.iter()
                     .map(|&l| {
                         let mean_e = (l.max(0.0) as f64) * self.exposure * self.full_well;
                         let mut e = if self.photon_noise && mean_e > 0.0 {
-                            Poisson::new(mean_e)
-                                .map(|p| p.sample(&mut rng))
-                                .unwrap_or(mean_e)
+                            Poisson::new(mean_e).map(|p| p.sample(&mut rng)).unwrap_or(mean_e)
                         } else {
                             mean_e
                         };
@@ -116,5 +101,35 @@ impl Sensor {
                     .collect::<Vec<_>>()
             })
             .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Photon noise has variance = mean in electrons; read noise adds in quadrature; values
+    /// above full scale clip.
+    #[test]
+    fn noise_statistics_and_clipping() {
+        let mut img = Image::new(200, 100, 3);
+        img.data.iter_mut().for_each(|v| *v = 0.5);
+        let s = Sensor { exposure: 1.0, full_well: 10_000.0, photon_noise: true, read_noise: 30.0, bits: 16 };
+        let codes = s.expose(&img, 3);
+        let n = codes.len() as f64;
+        let mean = codes.iter().map(|&c| c as f64).sum::<f64>() / n;
+        let var = codes.iter().map(|&c| (c as f64 - mean).powi(2)).sum::<f64>() / (n - 1.0);
+        let dn_per_e = 65535.0 / 10_000.0;
+        let expected_sd = (5000.0f64 + 900.0).sqrt() * dn_per_e;
+        assert!((mean / (0.5 * 65535.0) - 1.0).abs() < 1e-3, "mean {mean}");
+        // The sample SD of 60000 draws is within 2 % of the truth with overwhelming odds.
+        assert!((var.sqrt() / expected_sd - 1.0).abs() < 0.02, "sd {} vs {expected_sd}", var.sqrt());
+        img.data.iter_mut().for_each(|v| *v = 3.0);
+        let s8 = Sensor { bits: 8, ..s };
+        assert!(s8.expose(&img, 3).iter().all(|&c| c == 255));
+        // Same seed, same noise; another seed, other noise.
+        img.data.iter_mut().for_each(|v| *v = 0.5);
+        assert_eq!(s.expose(&img, 3), codes);
+        assert_ne!(s.expose(&img, 4), codes);
     }
 }

@@ -7,16 +7,8 @@ use std::path::Path;
 
 pub enum Texture {
     Constant(Vec3A),
-    Image {
-        width: u32,
-        height: u32,
-        texels: Vec<Vec3A>,
-    },
-    Checker {
-        squares: [u32; 2],
-        even: Vec3A,
-        odd: Vec3A,
-    },
+    Image { width: u32, height: u32, texels: Vec<Vec3A> },
+    Checker { squares: [u32; 2], even: Vec3A, odd: Vec3A },
 }
 
 /// An albedo above 1 would create energy; each value must lie in [0, 1].
@@ -33,12 +25,7 @@ fn albedo3(v: [f64; 3], path: &Path, field: &str) -> Result<Vec3A, Error> {
 }
 
 impl Texture {
-    pub fn build(
-        spec: &TextureSpec,
-        dir: &Path,
-        path: &Path,
-        field: &str,
-    ) -> Result<Texture, Error> {
+    pub fn build(spec: &TextureSpec, dir: &Path, path: &Path, field: &str) -> Result<Texture, Error> {
         Ok(match spec {
             TextureSpec::Constant(v) => Texture::Constant(albedo3(*v, path, field)?),
             TextureSpec::Checker { checker } => {
@@ -64,26 +51,12 @@ impl Texture {
                     .data
                     .chunks_exact(c)
                     .map(|p| {
-                        let rgb = if c >= 3 {
-                            [p[0], p[1], p[2]]
-                        } else {
-                            [p[0]; 3]
-                        };
-                        let lin = rgb.map(|v| {
-                            if eight_bit {
-                                crate::image::srgb_decode(v)
-                            } else {
-                                v
-                            }
-                        });
+                        let rgb = if c >= 3 { [p[0], p[1], p[2]] } else { [p[0]; 3] };
+                        let lin = rgb.map(|v| if eight_bit { crate::image::srgb_decode(v) } else { v });
                         Vec3A::from(lin).clamp(Vec3A::ZERO, Vec3A::ONE)
                     })
                     .collect();
-                Texture::Image {
-                    width: img.width,
-                    height: img.height,
-                    texels,
-                }
+                Texture::Image { width: img.width, height: img.height, texels }
             }
         })
     }
@@ -94,19 +67,14 @@ impl Texture {
         match self {
             Texture::Constant(c) => *c,
             Texture::Checker { squares, even, odd } => {
-                let i = (uv.x * squares[0] as f32).floor() as i64
-                    + (uv.y * squares[1] as f32).floor() as i64;
+                let i = (uv.x * squares[0] as f32).floor() as i64 + (uv.y * squares[1] as f32).floor() as i64;
                 if i.rem_euclid(2) == 0 {
                     *even
                 } else {
                     *odd
                 }
             }
-            Texture::Image {
-                width,
-                height,
-                texels,
-            } => {
+            Texture::Image { width, height, texels } => {
                 let (w, h) = (*width as i64, *height as i64);
                 let x = uv.x * w as f32 - 0.5;
                 let y = (1.0 - uv.y) * h as f32 - 0.5;
@@ -123,11 +91,7 @@ impl Texture {
 
 /// 8-bit images hold sRGB-encoded values; 16-bit and float ones are taken as linear.
 fn is_eight_bit(path: &Path) -> bool {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     if ext == "exr" {
         return false;
     }

@@ -15,14 +15,7 @@ use super::scene::Scene;
 use crate::image::Image;
 use glam::{DVec2, DVec3, Vec3A};
 
-pub const AOV_NAMES: [&str; 6] = [
-    "depth",
-    "normal",
-    "normal_camera",
-    "albedo",
-    "position",
-    "id",
-];
+pub const AOV_NAMES: [&str; 6] = ["depth", "normal", "normal_camera", "albedo", "position", "id"];
 
 pub struct Truth {
     pub depth: Image,
@@ -68,10 +61,7 @@ pub fn truth(scene: &Scene, crop: Option<[u32; 4]>) -> Truth {
             let Some((o, d)) = scene.camera_ray(px) else {
                 continue;
             };
-            let ray = Ray {
-                origin: Vec3A::from(o.as_vec3()),
-                dir: Vec3A::from(d.as_vec3()),
-            };
+            let ray = Ray { origin: Vec3A::from(o.as_vec3()), dir: Vec3A::from(d.as_vec3()) };
             let Some(hit) = scene.bvh.intersect(&ray, 0.0, f32::INFINITY) else {
                 continue;
             };
@@ -84,9 +74,7 @@ pub fn truth(scene: &Scene, crop: Option<[u32; 4]>) -> Truth {
             let albedo = scene.materials[s.material as usize].albedo.eval(s.uv);
             t.depth.pixel_mut(i, j)[0] = p_cam.z as f32;
             t.normal.pixel_mut(i, j).copy_from_slice(&n.to_array());
-            t.normal_camera
-                .pixel_mut(i, j)
-                .copy_from_slice(&n_cam.as_vec3().to_array());
+            t.normal_camera.pixel_mut(i, j).copy_from_slice(&n_cam.as_vec3().to_array());
             t.albedo.pixel_mut(i, j).copy_from_slice(&albedo.to_array());
             t.position.pixel_mut(i, j).copy_from_slice(&s.p.to_array());
             t.id.pixel_mut(i, j)[0] = s.object_id as f32;

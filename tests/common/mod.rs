@@ -22,10 +22,7 @@ pub fn shared_data() -> Option<PathBuf> {
     if p.is_dir() {
         Some(p)
     } else {
-        eprintln!(
-            "skipped: {} is absent (the reference data lives beside the project)",
-            p.display()
-        );
+        eprintln!("skipped: {} is absent (the reference data lives beside the project)", p.display());
         None
     }
 }

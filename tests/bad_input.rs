@@ -1,0 +1,191 @@
+//! Bad input gets a clear error naming the file, field or value — never a panic, never a
+//! half-written output.
+
+mod common;
+
+use lumen::render;
+use std::process::Command;
+
+const CAMERA: &str = r#"
+[camera]
+width = 8
+height = 8
+fov_deg = 40.0
+look_at = { origin = [0.0, 0.0, 3.0], target = [0.0, 0.0, 0.0], up = [0.0, 1.0, 0.0] }
+[[materials]]
+name = "white"
+type = "lambertian"
+albedo = [0.5, 0.5, 0.5]
+"#;
+
+fn scene_error(extra: &str, files: &[(&str, &str)]) -> String {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, text) in files {
+        std::fs::write(dir.path().join(name), text).unwrap();
+    }
+    match common::scene(&format!("{CAMERA}{extra}"), dir.path()) {
+        Ok(_) => panic!("scene was accepted:\n{extra}"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn missing_scene_file() {
+    let e = render::load(std::path::Path::new("/nonexistent/scene.toml")).err().unwrap().to_string();
+    assert!(e.contains("/nonexistent/scene.toml"), "{e}");
+}
+
+#[test]
+fn missing_mesh_file() {
+    let e = scene_error("[[shapes]]\ntype = \"mesh\"\nfile = \"nope.obj\"\nmaterial = \"white\"\n", &[]);
+    assert!(e.contains("nope.obj") && e.contains("cannot read"), "{e}");
+}
+
+#[test]
+fn unknown_key_names_key_and_line() {
+    let e = scene_error("[[shapes]]\ntype = \"sphere\"\ncenter = [0.0, 0.0, 0.0]\nradius = 1.0\nmaterial = \"white\"\ncolour = 3\n", &[]);
+    assert!(e.contains("colour") && e.contains("line"), "{e}");
+    let e = scene_error("[render]\nsamples = 4\n", &[]);
+    assert!(e.contains("samples") && e.contains("line 12"), "{e}");
+}
+
+#[test]
+fn nan_in_transform() {
+    let e = scene_error(
+        "[[shapes]]\ntype = \"mesh\"\nfile = \"t.obj\"\nmaterial = \"white\"\ntransform = { translation = [nan, 0.0, 0.0] }\n",
+        &[("t.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")],
+    );
+    assert!(e.contains("shapes[0].transform.translation") && e.contains("finite"), "{e}");
+    let e = scene_error(
+        "[[shapes]]\ntype = \"sphere\"\ncenter = [0.0, inf, 0.0]\nradius = 1.0\nmaterial = \"white\"\n",
+        &[],
+    );
+    assert!(e.contains("shapes[0].center"), "{e}");
+}
+
+#[test]
+fn not_a_rotation() {
+    let e = scene_error(
+        "[[shapes]]\ntype = \"mesh\"\nfile = \"t.obj\"\nmaterial = \"white\"\ntransform = { rotation = [[1.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 1.0]] }\n",
+        &[("t.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")],
+    );
+    assert!(e.contains("rotation") && e.contains("not a rotation"), "{e}");
+}
+
+#[test]
+fn empty_mesh() {
+    let e = scene_error(
+        "[[shapes]]\ntype = \"mesh\"\nfile = \"e.obj\"\nmaterial = \"white\"\n",
+        &[("e.obj", "# nothing\nv 0 0 0\n")],
+    );
+    assert!(e.contains("e.obj") && e.contains("no faces"), "{e}");
+}
+
+#[test]
+fn obj_with_bad_index() {
+    let e = scene_error(
+        "[[shapes]]\ntype = \"mesh\"\nfile = \"b.obj\"\nmaterial = \"white\"\n",
+        &[("b.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n")],
+    );
+    assert!(e.contains("b.obj:4") && e.contains("index 4 is out of range"), "{e}");
+    let e = scene_error(
+        "[[shapes]]\ntype = \"mesh\"\nfile = \"c.obj\"\nmaterial = \"white\"\n",
+        &[("c.obj", "v 0 0 x\n")],
+    );
+    assert!(e.contains("c.obj:1") && e.contains("'x'"), "{e}");
+}
+
+#[test]
+fn bad_values() {
+    let e =
+        scene_error("[[materials]]\nname = \"hot\"\ntype = \"lambertian\"\nalbedo = [1.5, 0.0, 0.0]\n", &[]);
+    assert!(e.contains("materials[1] (hot).albedo") && e.contains("[0, 1]"), "{e}");
+    let e = scene_error(
+        "[[shapes]]\ntype = \"sphere\"\ncenter = [0.0, 0.0, 0.0]\nradius = -1.0\nmaterial = \"white\"\n",
+        &[],
+    );
+    assert!(e.contains("radius"), "{e}");
+    let e = scene_error(
+        "[[shapes]]\ntype = \"sphere\"\ncenter = [0.0, 0.0, 0.0]\nradius = 1.0\nmaterial = \"gold\"\n",
+        &[],
+    );
+    assert!(e.contains("gold"), "{e}");
+    let e = scene_error("[[lights]]\ntype = \"point\"\nposition = [0.0, 0.0, 0.0]\n", &[]);
+    assert!(e.contains("lights[0]") && e.contains("intensity"), "{e}");
+    let e = scene_error("[[shapes]]\ntype = \"torus\"\n", &[]);
+    assert!(e.contains("torus"), "{e}");
+    let e = scene_error(
+        "[[materials]]\nname = \"m\"\ntype = \"lambertian\"\nalbedo = { texture = \"missing.png\" }\n",
+        &[],
+    );
+    assert!(e.contains("missing.png"), "{e}");
+    let e = scene_error("[sensor]\nbits = 12\n", &[]);
+    assert!(e.contains("sensor") && e.contains("bits"), "{e}");
+}
+
+#[test]
+fn bad_camera() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = "[camera]\nwidth = 8\nheight = 8\nfx = -1.0\nfy = 1.0\ncx = 0.0\ncy = 0.0\nt_world_cam = { translation = [0.0, 0.0, 0.0] }\n";
+    let e = common::scene(text, dir.path()).err().unwrap().to_string();
+    assert!(e.contains("fx"), "{e}");
+    let text = "[camera]\nwidth = 8\nheight = 8\nfov_deg = 40.0\nlook_at = { origin = [0.0, 0.0, 0.0], target = [0.0, 0.0, 0.0], up = [0.0, 1.0, 0.0] }\n";
+    let e = common::scene(text, dir.path()).err().unwrap().to_string();
+    assert!(e.contains("look_at"), "{e}");
+}
+
+fn lumen(args: &[&str]) -> (i32, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_lumen")).args(args).output().expect("runs");
+    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+#[test]
+fn cli_render_errors_leave_no_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.exr");
+    let (code, err) = lumen(&["render", "/nonexistent/s.toml", "--out", out.to_str().unwrap()]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("/nonexistent/s.toml"), "{err}");
+    assert!(!out.exists());
+    let scene = common::root().join("pipelines/scenes/furnace.toml");
+    let (code, err) =
+        lumen(&["render", scene.to_str().unwrap(), "--out", dir.path().join("x.txt").to_str().unwrap()]);
+    assert_eq!(code, 1);
+    assert!(err.contains("x.txt") && err.contains(".exr"), "{err}");
+    let (code, err) =
+        lumen(&["render", scene.to_str().unwrap(), "--out", out.to_str().unwrap(), "--aov", "velocity"]);
+    assert_eq!(code, 1);
+    assert!(err.contains("velocity"), "{err}");
+    let (code, err) =
+        lumen(&["render", scene.to_str().unwrap(), "--out", out.to_str().unwrap(), "--spp", "zero"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(!out.exists());
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "something was written");
+}
+
+#[test]
+fn cli_pipeline_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("p.toml");
+    let scene = common::root().join("pipelines/scenes/furnace.toml");
+    let out = dir.path().join("out");
+    let run = |text: &str| {
+        std::fs::write(&p, text).unwrap();
+        lumen(&["run", p.to_str().unwrap(), "--out", out.to_str().unwrap()])
+    };
+    let head = format!(
+        "seed = 1\n[[stages]]\nstage = \"render\"\ncase = \"f\"\nscene = \"{}\"\nspp = 2\n",
+        scene.display()
+    );
+    let (code, err) = run(&format!("{head}spf = 3\n"));
+    assert_eq!(code, 1);
+    assert!(err.contains("spf") && err.contains("line"), "{err}");
+    let (code, err) =
+        run(&format!("{head}bounds = {{ max_rel_eror = 0.1 }}\nexpect_uniform = [1.0, 1.0, 1.0]\n"));
+    assert_eq!(code, 1);
+    assert!(err.contains("max_rel_eror"), "{err}");
+    let (code, err) = run("seed = 1\n[[stages]]\nstage = \"teleport\"\ncase = \"x\"\n");
+    assert_eq!(code, 1);
+    assert!(err.contains("teleport"), "{err}");
+    assert!(!out.exists(), "a failed pipeline wrote output");
+}
