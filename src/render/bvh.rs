@@ -9,7 +9,7 @@
 //! is made when that is not cheaper than intersecting every primitive (or there are ≤ 2).
 
 use super::geometry::{Hit, Prim, Ray};
-use glam::Vec3A;
+use glam::{Vec3A, Vec4};
 
 /// 32 bytes. An interior node's left child follows it directly; `offset` is the right child.
 /// A leaf has `count > 0` primitives starting at `offset`.
@@ -25,9 +25,14 @@ struct Node {
 const AXIS_SHIFT: u32 = 30;
 const COUNT_MASK: u32 = (1 << AXIS_SHIFT) - 1;
 const BINS: usize = 16;
+/// Deepest level of the binary tree; deeper subtrees become (large) leaves.
+const MAX_DEPTH: u32 = 60;
 
 pub struct Bvh {
+    /// The binary SAH tree (kept for its statistics and as the reference traversal in tests).
     nodes: Vec<Node>,
+    /// The same tree collapsed to 4 children per node, which traversal uses.
+    wide: Vec<Node4>,
     /// Primitives in leaf order.
     pub prims: Vec<Prim>,
     /// `order[i]` is the index, in the caller's list, of `prims[i]`.
@@ -61,6 +66,11 @@ struct BuildPrim {
 
 impl Bvh {
     pub fn build(prims: &[Prim]) -> Bvh {
+        Bvh::build_capped(prims, MAX_DEPTH)
+    }
+
+    /// Builds with the binary tree at most `max_depth` (≤ MAX_DEPTH) levels below the root.
+    fn build_capped(prims: &[Prim], max_depth: u32) -> Bvh {
         let mut items: Vec<BuildPrim> = prims
             .iter()
             .enumerate()
@@ -71,15 +81,19 @@ impl Bvh {
             .collect();
         let mut nodes = Vec::with_capacity(2 * prims.len().max(1));
         if !items.is_empty() {
-            build_node(&mut items, 0, &mut nodes);
+            build_node(&mut items, 0, max_depth.min(MAX_DEPTH), &mut nodes);
         }
         let order: Vec<u32> = items.iter().map(|b| b.index).collect();
-        Bvh { nodes, prims: order.iter().map(|&i| prims[i as usize]).collect(), order }
+        let mut wide = Vec::with_capacity(nodes.len() / 2 + 1);
+        if !nodes.is_empty() {
+            collapse(&nodes, 0, &mut wide);
+        }
+        Bvh { nodes, wide, prims: order.iter().map(|&i| prims[i as usize]).collect(), order }
     }
 
     /// Closest hit within (t_min, t_max). `Hit::prim` indexes `self.prims` (leaf order).
     #[inline]
-    pub fn intersect(&self, ray: &Ray, t_min: f32, mut t_max: f32) -> Option<Hit> {
+    pub fn intersect_binary(&self, ray: &Ray, t_min: f32, mut t_max: f32) -> Option<Hit> {
         let q = Query::new(ray, t_min);
         let mut best: Option<Hit> = None;
         let Some(root) = self.nodes.first() else {
@@ -90,7 +104,7 @@ impl Bvh {
         }
         // Stack of (node, entry distance): a far child is skipped when popped if a closer hit
         // was found meanwhile.
-        let mut stack = [(0u32, 0.0f32); 64];
+        let mut stack = [(0u32, 0.0f32); 2 * MAX_DEPTH as usize];
         let mut sp = 0usize;
         let mut index = 0u32;
         loop {
@@ -143,7 +157,7 @@ impl Bvh {
 
     /// Whether anything lies within (t_min, t_max): the shadow-ray query.
     #[inline]
-    pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+    pub fn occluded_binary(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
         let q = Query::new(ray, t_min);
         let Some(root) = self.nodes.first() else {
             return false;
@@ -151,7 +165,7 @@ impl Bvh {
         if q.enter(root, t_max).is_none() {
             return false;
         }
-        let mut stack = [0u32; 64];
+        let mut stack = [0u32; 2 * MAX_DEPTH as usize];
         let mut sp = 0usize;
         let mut index = 0u32;
         loop {
@@ -203,33 +217,246 @@ impl Bvh {
     }
 }
 
-/// A ray prepared for box tests: t = (bound − origin)·inv = bound·inv − origin·inv.
+/// Reciprocal direction with infinities clamped to ±1e30, so that (bound − origin)·inv is never
+/// ∞·0 = NaN for a ray travelling inside a box's face plane.
+#[inline(always)]
+fn safe_recip(dir: Vec3A) -> Vec3A {
+    dir.recip().clamp(Vec3A::splat(-1e30), Vec3A::splat(1e30))
+}
+
+/// A ray prepared for box tests: t = (bound − origin)·inv.
 struct Query {
     inv: Vec3A,
-    origin_inv: Vec3A,
+    origin: Vec3A,
     t_min: f32,
 }
 
 impl Query {
     #[inline(always)]
     fn new(ray: &Ray, t_min: f32) -> Query {
-        let inv = ray.dir.recip();
-        Query { inv, origin_inv: ray.origin * inv, t_min }
+        Query { inv: safe_recip(ray.dir), origin: ray.origin, t_min }
     }
 
     /// Entry distance into the node's box if the ray meets it within (t_min, t_max).
     #[inline(always)]
     fn enter(&self, node: &Node, t_max: f32) -> Option<f32> {
-        let t0 = Vec3A::from(node.lo) * self.inv - self.origin_inv;
-        let t1 = Vec3A::from(node.hi) * self.inv - self.origin_inv;
+        let t0 = (Vec3A::from(node.lo) - self.origin) * self.inv;
+        let t1 = (Vec3A::from(node.hi) - self.origin) * self.inv;
         let near = t0.min(t1).max_element().max(self.t_min);
         let far = t0.max(t1).min_element().min(t_max);
         (near <= far).then_some(near)
     }
 }
 
+/// A node of the 4-wide tree: the boxes of up to four children as structure-of-arrays lanes,
+/// so one SIMD slab test checks all four.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(16))]
+struct Node4 {
+    lo: [Vec4; 3],
+    hi: [Vec4; 3],
+    /// Interior child: index into `wide`. Leaf child: first primitive.
+    child: [u32; 4],
+    /// Leaf child: primitive count (> 0). Interior child: 0.
+    count: [u32; 4],
+    /// Bit mask of the lanes in use.
+    lanes: u32,
+}
+
+/// Collapses the binary subtree at `i` (an interior node, or the root) into 4-wide nodes by
+/// repeatedly opening the largest interior child, and returns the new node's index.
+fn collapse(nodes: &[Node], i: usize, wide: &mut Vec<Node4>) -> u32 {
+    let is_leaf = |k: usize| nodes[k].count_axis & COUNT_MASK > 0;
+    let area = |k: usize| {
+        let n = &nodes[k];
+        Aabb { lo: n.lo.into(), hi: n.hi.into() }.half_area()
+    };
+    let mut kids: Vec<usize> = if is_leaf(i) { vec![i] } else { vec![i + 1, nodes[i].offset as usize] };
+    while kids.len() < 4 {
+        let open = kids
+            .iter()
+            .enumerate()
+            .filter(|(_, &k)| !is_leaf(k))
+            .max_by(|a, b| area(*a.1).total_cmp(&area(*b.1)));
+        let Some((slot, &k)) = open else { break };
+        kids.swap_remove(slot);
+        kids.push(k + 1);
+        kids.push(nodes[k].offset as usize);
+    }
+    let index = wide.len();
+    let inf = Vec4::splat(f32::INFINITY);
+    wide.push(Node4 {
+        lo: [inf; 3],
+        hi: [-inf; 3],
+        child: [0; 4],
+        count: [0; 4],
+        lanes: (1 << kids.len()) - 1,
+    });
+    for (lane, &k) in kids.iter().enumerate() {
+        let n = nodes[k];
+        let (child, count) =
+            if is_leaf(k) { (n.offset, n.count_axis & COUNT_MASK) } else { (collapse(nodes, k, wide), 0) };
+        let w = &mut wide[index];
+        for axis in 0..3 {
+            w.lo[axis][lane] = n.lo[axis];
+            w.hi[axis][lane] = n.hi[axis];
+        }
+        w.child[lane] = child;
+        w.count[lane] = count;
+    }
+    index as u32
+}
+
+/// The traversal stack. Left uninitialised: zeroing a few hundred bytes per ray costs more
+/// than a shadow ray's whole box tests in small scenes. The binary tree is at most MAX_DEPTH
+/// deep, so its 4-wide collapse pushes at most 3 entries for each of ≤ MAX_DEPTH levels.
+struct Stack<T: Copy> {
+    items: [std::mem::MaybeUninit<T>; 3 * MAX_DEPTH as usize],
+    len: usize,
+}
+
+impl<T: Copy> Stack<T> {
+    #[inline(always)]
+    fn new() -> Self {
+        Stack { items: [std::mem::MaybeUninit::uninit(); 3 * MAX_DEPTH as usize], len: 0 }
+    }
+
+    #[inline(always)]
+    fn push(&mut self, v: T) {
+        self.items[self.len] = std::mem::MaybeUninit::new(v);
+        self.len += 1;
+    }
+
+    #[inline(always)]
+    fn pop(&mut self) -> Option<T> {
+        if self.len == 0 {
+            return None;
+        }
+        self.len -= 1;
+        // SAFETY: every slot below `len` was written by `push`.
+        Some(unsafe { self.items[self.len].assume_init() })
+    }
+}
+
+/// A ray splatted across four lanes for the 4-wide box test.
+struct Query4 {
+    origin: [Vec4; 3],
+    inv: [Vec4; 3],
+}
+
+impl Query4 {
+    #[inline(always)]
+    fn new(ray: &Ray) -> Query4 {
+        let inv = safe_recip(ray.dir);
+        let o = ray.origin;
+        Query4 {
+            origin: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
+            inv: [Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z)],
+        }
+    }
+
+    /// Entry distances of the four child boxes and the mask of those met within the range.
+    #[inline(always)]
+    fn enter(&self, n: &Node4, t_min: f32, t_max: f32) -> (Vec4, u32) {
+        let mut near = Vec4::splat(t_min);
+        let mut far = Vec4::splat(t_max);
+        for a in 0..3 {
+            let t0 = (n.lo[a] - self.origin[a]) * self.inv[a];
+            let t1 = (n.hi[a] - self.origin[a]) * self.inv[a];
+            near = near.max(t0.min(t1));
+            far = far.min(t0.max(t1));
+        }
+        (near, near.cmple(far).bitmask() & n.lanes)
+    }
+}
+
+impl Bvh {
+    /// Closest hit within (t_min, t_max). `Hit::prim` indexes `self.prims` (leaf order).
+    #[inline]
+    pub fn intersect(&self, ray: &Ray, t_min: f32, mut t_max: f32) -> Option<Hit> {
+        if self.wide.is_empty() {
+            return None;
+        }
+        let q = Query4::new(ray);
+        let mut best: Option<Hit> = None;
+        // (node, entry distance): popped nodes farther than the best hit so far are skipped.
+        let mut stack = Stack::<(u32, f32)>::new();
+        stack.push((0, t_min));
+        while let Some((index, t_enter)) = stack.pop() {
+            if t_enter > t_max {
+                continue;
+            }
+            let node = &self.wide[index as usize];
+            let (near, mut mask) = q.enter(node, t_min, t_max);
+            // Interior children are pushed farthest first, so the nearest is popped next.
+            let mut pending = [(0u32, 0.0f32); 4];
+            let mut np = 0;
+            while mask != 0 {
+                let lane = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                let count = node.count[lane];
+                if count > 0 {
+                    let first = node.child[lane] as usize;
+                    for (k, prim) in self.prims[first..first + count as usize].iter().enumerate() {
+                        if let Some((t, b1, b2)) = prim.intersect(ray, t_min, t_max) {
+                            t_max = t;
+                            best = Some(Hit { t, prim: (first + k) as u32, b1, b2 });
+                        }
+                    }
+                } else {
+                    let entry = (node.child[lane], near[lane]);
+                    let mut j = np;
+                    while j > 0 && pending[j - 1].1 < entry.1 {
+                        pending[j] = pending[j - 1];
+                        j -= 1;
+                    }
+                    pending[j] = entry;
+                    np += 1;
+                }
+            }
+            for &e in &pending[..np] {
+                stack.push(e);
+            }
+        }
+        best
+    }
+
+    /// Whether anything lies within (t_min, t_max): the shadow-ray query.
+    #[inline]
+    pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
+        if self.wide.is_empty() {
+            return false;
+        }
+        let q = Query4::new(ray);
+        let mut stack = Stack::<u32>::new();
+        stack.push(0);
+        while let Some(index) = stack.pop() {
+            let node = &self.wide[index as usize];
+            let (_, mut mask) = q.enter(node, t_min, t_max);
+            while mask != 0 {
+                let lane = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                let count = node.count[lane];
+                if count > 0 {
+                    let first = node.child[lane] as usize;
+                    if self.prims[first..first + count as usize]
+                        .iter()
+                        .any(|p| p.intersect(ray, t_min, t_max).is_some())
+                    {
+                        return true;
+                    }
+                } else {
+                    stack.push(node.child[lane]);
+                }
+            }
+        }
+        false
+    }
+}
+
 /// Builds the subtree for `items` (which it reorders) and returns its node index.
-fn build_node(items: &mut [BuildPrim], first: usize, nodes: &mut Vec<Node>) -> u32 {
+/// `levels` is how many more levels may be split below this node.
+fn build_node(items: &mut [BuildPrim], first: usize, levels: u32, nodes: &mut Vec<Node>) -> u32 {
     let mut bounds = Aabb::EMPTY;
     let mut cbounds = Aabb::EMPTY;
     for it in items.iter() {
@@ -243,8 +470,8 @@ fn build_node(items: &mut [BuildPrim], first: usize, nodes: &mut Vec<Node>) -> u
         hi: bounds.hi.into(),
         count_axis: items.len() as u32,
     });
-    // The 64-entry traversal stack bounds the depth; a leaf is forced well before that.
-    if items.len() <= 2 || nodes.len() > 1 << 29 {
+    // Traversal stacks are sized for depth ≤ 64: a leaf is forced before that.
+    if items.len() <= 2 || levels == 0 {
         return index;
     }
     let leaf_cost = items.len() as f32;
@@ -297,8 +524,8 @@ fn build_node(items: &mut [BuildPrim], first: usize, nodes: &mut Vec<Node>) -> u
         mid = items.len() / 2; // all centroids fell in one bin by rounding: split by count
     }
     let (left, right) = items.split_at_mut(mid);
-    build_node(left, first, nodes);
-    let right_index = build_node(right, first + mid, nodes);
+    build_node(left, first, levels - 1, nodes);
+    let right_index = build_node(right, first + mid, levels - 1, nodes);
     nodes[index as usize].offset = right_index;
     nodes[index as usize].count_axis = (axis as u32) << AXIS_SHIFT;
     index
@@ -319,6 +546,35 @@ fn partition<T>(items: &mut [T], pred: impl Fn(&T) -> bool) -> usize {
 mod tests {
     use super::*;
     use crate::render::sampler::Sampler;
+
+    /// Spheres at 4^i drive a binned SAH build deep (each split peels off the largest few); a
+    /// depth cap must hold, and traversal must still find every hit in the large leaves it
+    /// leaves behind.
+    #[test]
+    fn depth_is_capped() {
+        let prims: Vec<Prim> = (0..64)
+            .map(|i| Prim::Sphere { center: Vec3A::new(4f32.powi(i), 0.0, 0.0), radius: 1e-3 * 4f32.powi(i) })
+            .collect();
+        assert!(Bvh::build(&prims).depth() > 20, "the case is not deep enough to test the cap");
+        let bvh = Bvh::build_capped(&prims, 8);
+        assert_eq!(bvh.depth(), 9);
+        // Up to 4^27, where r² still fits in an f32.
+        for i in 0..28 {
+            let x = 4f32.powi(i);
+            // Axis-aligned rays: the reciprocal direction has infinite components.
+            let ray = Ray { origin: Vec3A::new(x, -0.01 * x, 0.0), dir: Vec3A::Y };
+            assert!(bvh.intersect(&ray, 0.0, f32::INFINITY).is_some(), "missed sphere {i}");
+            assert!(bvh.occluded(&ray, 0.0, f32::INFINITY));
+            assert!(bvh.intersect_binary(&ray, 0.0, f32::INFINITY).is_some(), "binary missed sphere {i}");
+        }
+        // A ray running inside the plane of a box face (0 · ∞ in the slab test).
+        let tri = [Prim::Triangle { v0: Vec3A::ZERO, e1: Vec3A::X, e2: Vec3A::Y }];
+        let flat = Bvh::build(&tri);
+        let ray = Ray { origin: Vec3A::new(0.2, -1.0, 0.0), dir: Vec3A::Y };
+        assert!(flat.intersect(&ray, 0.0, f32::INFINITY).is_none()); // parallel: no hit, no NaN trap
+        let ray = Ray { origin: Vec3A::new(0.2, 0.2, 1.0), dir: -Vec3A::Z };
+        assert!(flat.intersect(&ray, 0.0, f32::INFINITY).is_some());
+    }
 
     /// The BVH must find exactly the hits a brute-force loop finds.
     #[test]
@@ -342,8 +598,11 @@ mod tests {
                 .filter_map(|p| p.intersect(&ray, 1e-4, f32::INFINITY).map(|h| h.0))
                 .fold(f32::INFINITY, f32::min);
             let got = bvh.intersect(&ray, 1e-4, f32::INFINITY).map_or(f32::INFINITY, |h| h.t);
+            let binary = bvh.intersect_binary(&ray, 1e-4, f32::INFINITY).map_or(f32::INFINITY, |h| h.t);
             assert_eq!(brute, got);
+            assert_eq!(brute, binary);
             assert_eq!(brute.is_finite(), bvh.occluded(&ray, 1e-4, f32::INFINITY));
+            assert_eq!(brute.is_finite(), bvh.occluded_binary(&ray, 1e-4, f32::INFINITY));
         }
     }
 }

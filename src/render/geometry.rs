@@ -33,6 +33,8 @@ pub struct PrimInfo {
     pub reverse: bool,
     /// Texture coordinates of the three vertices (triangles only).
     pub uv: [Vec2; 3],
+    /// Unit geometric normal, reversal applied (triangles only; spheres compute theirs).
+    pub normal: Vec3A,
 }
 
 /// Closest hit: distance and the primitive's own surface parameters (barycentrics b1, b2).

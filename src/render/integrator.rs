@@ -19,6 +19,7 @@
 use super::geometry::{Hit, Prim, Ray};
 use super::sampler::Sampler;
 use super::scene::{Light, Scene};
+use super::texture::Texture;
 use crate::image::Image;
 use glam::{DVec2, Vec2, Vec3A};
 use rayon::prelude::*;
@@ -92,7 +93,6 @@ pub struct Surface {
     pub p: Vec3A,
     /// Geometric normal, flipped for reversed shapes: the side emitters emit from.
     pub n: Vec3A,
-    pub uv: Vec2,
     pub material: u32,
     pub object_id: u32,
 }
@@ -100,22 +100,43 @@ pub struct Surface {
 impl Scene {
     pub fn surface(&self, ray: &Ray, hit: &Hit) -> Surface {
         let info = &self.info[hit.prim as usize];
-        let prim = &self.bvh.prims[hit.prim as usize];
         let p = ray.origin + ray.dir * hit.t;
-        let mut n = prim.normal(p);
-        if info.reverse {
-            n = -n;
-        }
-        let uv = match prim {
+        let n = match self.bvh.prims[hit.prim as usize] {
+            Prim::Triangle { .. } => info.normal,
+            Prim::Sphere { center, .. } => {
+                let n = (p - center).normalize();
+                if info.reverse {
+                    -n
+                } else {
+                    n
+                }
+            }
+        };
+        Surface { p, n, material: info.material, object_id: info.object_id }
+    }
+
+    /// Texture coordinates at a hit: interpolated for triangles, (longitude, colatitude) / (2π,
+    /// π) for spheres.
+    pub fn uv(&self, hit: &Hit, p: Vec3A) -> Vec2 {
+        let info = &self.info[hit.prim as usize];
+        match self.bvh.prims[hit.prim as usize] {
             Prim::Triangle { .. } => {
                 info.uv[0] * (1.0 - hit.b1 - hit.b2) + info.uv[1] * hit.b1 + info.uv[2] * hit.b2
             }
             Prim::Sphere { center, .. } => {
-                let d = (p - *center).normalize();
+                let d = (p - center).normalize();
                 Vec2::new(0.5 + d.z.atan2(d.x) / (2.0 * PI), d.y.clamp(-1.0, 1.0).acos() / PI)
             }
-        };
-        Surface { p, n, uv, material: info.material, object_id: info.object_id }
+        }
+    }
+
+    /// Diffuse albedo of a material at a hit (texture coordinates only when textured).
+    #[inline]
+    pub fn albedo(&self, material: u32, hit: &Hit, p: Vec3A) -> Vec3A {
+        match &self.materials[material as usize].albedo {
+            Texture::Constant(c) => *c,
+            t => t.eval(self.uv(hit, p)),
+        }
     }
 
     /// Radiance along a camera ray.
@@ -141,7 +162,7 @@ impl Scene {
             }
             // Two-sided diffuse: shade with the normal on the side the path arrived from.
             let n = if surf.n.dot(wo) < 0.0 { -surf.n } else { surf.n };
-            let albedo = mat.albedo.eval(surf.uv);
+            let albedo = self.albedo(surf.material, &hit, surf.p);
             let origin = surf.p + n * epsilon(surf.p);
 
             let (u_pick, u_light) = (s.next(), s.next2());

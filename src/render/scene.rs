@@ -421,6 +421,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                         object_id: first_id + tri.object,
                         reverse: *reverse_orientation ^ mirrored,
                         uv,
+                        normal: Vec3A::ZERO,
                     });
                 }
             }
@@ -441,6 +442,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                     object_id: object_names.len() as u32 - 1,
                     reverse: *reverse_orientation,
                     uv: [Vec2::ZERO; 3],
+                    normal: Vec3A::ZERO,
                 });
             }
             ShapeSpec::Quad { corner, edge_u, edge_v, material, reverse_orientation } => {
@@ -463,14 +465,30 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                     (o, u + v, v, [Vec2::ZERO, Vec2::ONE, Vec2::Y]),
                 ] {
                     prims.push(Prim::Triangle { v0: a, e1, e2 });
-                    info.push(PrimInfo { material: mtl, object_id: id, reverse: *reverse_orientation, uv });
+                    info.push(PrimInfo {
+                        material: mtl,
+                        object_id: id,
+                        reverse: *reverse_orientation,
+                        uv,
+                        normal: Vec3A::ZERO,
+                    });
                 }
             }
         }
     }
 
     let bvh = Bvh::build(&prims);
-    let info: Vec<PrimInfo> = bvh.order.iter().map(|&i| info[i as usize]).collect();
+    let info: Vec<PrimInfo> = bvh
+        .order
+        .iter()
+        .zip(&bvh.prims)
+        .map(|(&i, prim)| {
+            let mut inf = info[i as usize];
+            let n = prim.normal(prim.centroid());
+            inf.normal = if inf.reverse { -n } else { n };
+            inf
+        })
+        .collect();
     let (bounds_center, bounds_radius) = bounding_sphere(&bvh.prims, t_world_cam.translation);
 
     let mut lights = Vec::new();

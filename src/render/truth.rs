@@ -71,7 +71,7 @@ pub fn truth(scene: &Scene, crop: Option<[u32; 4]>) -> Truth {
             let p_cam = cam_from_world.transform_point(p_world);
             let n_world = DVec3::from(n.to_array().map(f64::from));
             let n_cam = cam_from_world.transform_vector(n_world);
-            let albedo = scene.materials[s.material as usize].albedo.eval(s.uv);
+            let albedo = scene.albedo(s.material, &hit, s.p);
             t.depth.pixel_mut(i, j)[0] = p_cam.z as f32;
             t.normal.pixel_mut(i, j).copy_from_slice(&n.to_array());
             t.normal_camera.pixel_mut(i, j).copy_from_slice(&n_cam.as_vec3().to_array());
