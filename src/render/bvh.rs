@@ -1,12 +1,27 @@
-//! Bounding volume hierarchy with a binned surface-area-heuristic build (Wald 2007).
-//!
-//! Written here rather than taken from a crate so that leaves hold our own primitive enum
-//! (triangles and spheres) in place, reordered for locality, and traversal is one tight loop
-//! over 32-byte nodes with front-to-back child order and an any-hit mode for shadow rays.
+//! Bounding volume hierarchy: a binned surface-area-heuristic build (Wald 2007), collapsed to
+//! four children per node for traversal.
 //!
 //! Build: at each node, primitive centroids are binned into 16 buckets along each axis and the
 //! split with the lowest SAH cost C = C_trav + Σ (A_child / A_node)·N_child is taken, or a leaf
-//! is made when that is not cheaper than intersecting every primitive (or there are ≤ 2).
+//! is made when that is not cheaper than intersecting every primitive (or there are ≤ 2). The
+//! binary tree is then collapsed to a 4-wide one by repeatedly opening the largest interior
+//! child, so one SIMD slab test checks four child boxes; children are visited nearest first
+//! and a popped node farther than the best hit is skipped.
+//!
+//! Written here rather than taken from a crate so that leaves hold lumen's own primitive enum
+//! (triangles and spheres) in place, and shadow rays get an any-hit traversal. Measured against
+//! obvhs 0.4 (a PLOC-built, compressed 8-wide BVH; `cargo run --release --example
+//! bvh_vs_obvhs`: same triangles, 2 M incoherent rays, one thread, closest hit, both agreeing
+//! on 99.9998 % of hits) on the 2-core development machine:
+//!
+//! | scene                          | triangles | lumen (M rays/s) | obvhs CWBVH (M rays/s) |
+//! |--------------------------------|----------:|-----------------:|-----------------------:|
+//! | Cornell box                    |        36 |             5.19 |                   4.54 |
+//! | icosphere, subdivided 6 times  |    81 920 |             0.92 |                   1.09 |
+//!
+//! lumen's is faster on the small scenes every stage renders; obvhs is about 18 % faster on
+//! large meshes, where its compressed nodes use the cache better. Should large meshes come to
+//! dominate, obvhs can replace the traversal behind `intersect` and `occluded`.
 
 use super::geometry::{Hit, Prim, Ray};
 use glam::{Vec3A, Vec4};
