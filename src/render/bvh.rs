@@ -3,25 +3,29 @@
 //!
 //! Build: at each node, primitive centroids are binned into 16 buckets along each axis and the
 //! split with the lowest SAH cost C = C_trav + Σ (A_child / A_node)·N_child is taken, or a leaf
-//! is made when that is not cheaper than intersecting every primitive (or there are ≤ 2). The
+//! is made when that is not cheaper than intersecting every primitive (or there are ≤ 4). The
 //! binary tree is then collapsed to a 4-wide one by repeatedly opening the largest interior
 //! child, so one SIMD slab test checks four child boxes; children are visited nearest first
 //! and a popped node farther than the best hit is skipped.
+//!
+//! Leaves hold up to four primitives; a leaf of triangles is stored again as a structure-of-
+//! arrays block and tested by one 4-wide Möller–Trumbore. Leaves with spheres are tested one
+//! primitive at a time.
 //!
 //! Written here rather than taken from a crate so that leaves hold lumen's own primitive enum
 //! (triangles and spheres) in place, and shadow rays get an any-hit traversal. Measured against
 //! obvhs 0.4 (a PLOC-built, compressed 8-wide BVH; `cargo run --release --example
 //! bvh_vs_obvhs`: same triangles, 2 M incoherent rays, one thread, closest hit, both agreeing
-//! on 99.9998 % of hits) on the 2-core development machine:
+//! on 99.9998 % of hits), in one run on the 2-core development machine:
 //!
 //! | scene                          | triangles | lumen (M rays/s) | obvhs CWBVH (M rays/s) |
 //! |--------------------------------|----------:|-----------------:|-----------------------:|
-//! | Cornell box                    |        36 |             5.19 |                   4.54 |
-//! | icosphere, subdivided 6 times  |    81 920 |             0.92 |                   1.09 |
+//! | Cornell box                    |        36 |             8.38 |                   6.89 |
+//! | icosphere, subdivided 6 times  |    81 920 |             1.25 |                   1.19 |
 //!
-//! lumen's is faster on the small scenes every stage renders; obvhs is about 18 % faster on
-//! large meshes, where its compressed nodes use the cache better. Should large meshes come to
-//! dominate, obvhs can replace the traversal behind `intersect` and `occluded`.
+//! lumen's is the faster of the two on both, by 22 % on the small scenes every stage renders
+//! and by 5 % on a large mesh; so obvhs is not used. (Machine noise moves both figures by up
+//! to ±30 % between runs; the two columns come from the same run.)
 
 use super::geometry::{Hit, Prim, Ray};
 use glam::{Vec3A, Vec4};
@@ -48,6 +52,8 @@ pub struct Bvh {
     nodes: Vec<Node>,
     /// The same tree collapsed to 4 children per node, which traversal uses.
     wide: Vec<Node4>,
+    /// Leaf triangles in blocks of four, for the 4-wide triangle test.
+    blocks: Vec<Tri4>,
     /// Primitives in leaf order.
     pub prims: Vec<Prim>,
     /// `order[i]` is the index, in the caller's list, of `prims[i]`.
@@ -99,11 +105,13 @@ impl Bvh {
             build_node(&mut items, 0, max_depth.min(MAX_DEPTH), &mut nodes);
         }
         let order: Vec<u32> = items.iter().map(|b| b.index).collect();
+        let prims: Vec<Prim> = order.iter().map(|&i| prims[i as usize]).collect();
         let mut wide = Vec::with_capacity(nodes.len() / 2 + 1);
+        let mut blocks = Vec::new();
         if !nodes.is_empty() {
-            collapse(&nodes, 0, &mut wide);
+            collapse(&nodes, 0, &prims, &mut wide, &mut blocks);
         }
-        Bvh { nodes, wide, prims: order.iter().map(|&i| prims[i as usize]).collect(), order }
+        Bvh { nodes, wide, blocks, prims, order }
     }
 
     /// Closest hit within (t_min, t_max). `Hit::prim` indexes `self.prims` (leaf order).
@@ -274,13 +282,78 @@ struct Node4 {
     child: [u32; 4],
     /// Leaf child: primitive count (> 0). Interior child: 0.
     count: [u32; 4],
+    /// Leaf child of triangles only: its first block in `Bvh::blocks` (⌈count/4⌉ blocks);
+    /// `NO_BLOCK` where the leaf holds a sphere and is tested one primitive at a time.
+    block: [u32; 4],
     /// Bit mask of the lanes in use.
     lanes: u32,
 }
 
+const NO_BLOCK: u32 = u32::MAX;
+
+/// Four triangles as structure-of-arrays lanes (vertex 0 and the two edges). Unused lanes
+/// have zero edges, so their determinant is 0 and they never hit.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(16))]
+struct Tri4 {
+    v0: [Vec4; 3],
+    e1: [Vec4; 3],
+    e2: [Vec4; 3],
+}
+
+impl Tri4 {
+    fn new(tris: &[Prim]) -> Option<Tri4> {
+        let mut b = Tri4 { v0: [Vec4::ZERO; 3], e1: [Vec4::ZERO; 3], e2: [Vec4::ZERO; 3] };
+        for (lane, p) in tris.iter().enumerate() {
+            let Prim::Triangle { v0, e1, e2 } = *p else { return None };
+            for a in 0..3 {
+                b.v0[a][lane] = v0[a];
+                b.e1[a][lane] = e1[a];
+                b.e2[a][lane] = e2[a];
+            }
+        }
+        Some(b)
+    }
+
+    /// Möller–Trumbore on four triangles at once: the nearest hit within (t_min, t_max) as
+    /// (lane, t, b1, b2).
+    #[inline(always)]
+    fn intersect(&self, q: &Query4, t_min: f32, t_max: f32) -> Option<(usize, f32, f32, f32)> {
+        let [dx, dy, dz] = q.dir;
+        let [e1x, e1y, e1z] = self.e1;
+        let [e2x, e2y, e2z] = self.e2;
+        // p = d × e2, det = e1 · p
+        let (px, py, pz) = (dy * e2z - dz * e2y, dz * e2x - dx * e2z, dx * e2y - dy * e2x);
+        let det = e1x * px + e1y * py + e1z * pz;
+        let inv = Vec4::ONE / det;
+        let (sx, sy, sz) = (q.origin[0] - self.v0[0], q.origin[1] - self.v0[1], q.origin[2] - self.v0[2]);
+        let b1 = (sx * px + sy * py + sz * pz) * inv;
+        // q = s × e1
+        let (qx, qy, qz) = (sy * e1z - sz * e1y, sz * e1x - sx * e1z, sx * e1y - sy * e1x);
+        let b2 = (dx * qx + dy * qy + dz * qz) * inv;
+        let t = (e2x * qx + e2y * qy + e2z * qz) * inv;
+        let ok = det.abs().cmpge(Vec4::splat(1e-12))
+            & b1.cmpge(Vec4::ZERO)
+            & b2.cmpge(Vec4::ZERO)
+            & (b1 + b2).cmple(Vec4::ONE)
+            & t.cmpgt(Vec4::splat(t_min))
+            & t.cmplt(Vec4::splat(t_max));
+        let mut mask = ok.bitmask();
+        let mut best: Option<(usize, f32, f32, f32)> = None;
+        while mask != 0 {
+            let lane = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            if best.is_none_or(|b| t[lane] < b.1) {
+                best = Some((lane, t[lane], b1[lane], b2[lane]));
+            }
+        }
+        best
+    }
+}
+
 /// Collapses the binary subtree at `i` (an interior node, or the root) into 4-wide nodes by
 /// repeatedly opening the largest interior child, and returns the new node's index.
-fn collapse(nodes: &[Node], i: usize, wide: &mut Vec<Node4>) -> u32 {
+fn collapse(nodes: &[Node], i: usize, prims: &[Prim], wide: &mut Vec<Node4>, blocks: &mut Vec<Tri4>) -> u32 {
     let is_leaf = |k: usize| nodes[k].count_axis & COUNT_MASK > 0;
     let area = |k: usize| {
         let n = &nodes[k];
@@ -305,12 +378,24 @@ fn collapse(nodes: &[Node], i: usize, wide: &mut Vec<Node4>) -> u32 {
         hi: [-inf; 3],
         child: [0; 4],
         count: [0; 4],
+        block: [NO_BLOCK; 4],
         lanes: (1 << kids.len()) - 1,
     });
     for (lane, &k) in kids.iter().enumerate() {
         let n = nodes[k];
-        let (child, count) =
-            if is_leaf(k) { (n.offset, n.count_axis & COUNT_MASK) } else { (collapse(nodes, k, wide), 0) };
+        let (child, count) = if is_leaf(k) {
+            (n.offset, n.count_axis & COUNT_MASK)
+        } else {
+            (collapse(nodes, k, prims, wide, blocks), 0)
+        };
+        if count > 0 {
+            let leaf = &prims[child as usize..(child + count) as usize];
+            let made: Option<Vec<Tri4>> = leaf.chunks(4).map(Tri4::new).collect();
+            if let Some(made) = made {
+                wide[index].block[lane] = blocks.len() as u32;
+                blocks.extend(made);
+            }
+        }
         let w = &mut wide[index];
         for axis in 0..3 {
             w.lo[axis][lane] = n.lo[axis];
@@ -353,10 +438,11 @@ impl<T: Copy> Stack<T> {
     }
 }
 
-/// A ray splatted across four lanes for the 4-wide box test.
+/// A ray splatted across four lanes for the 4-wide box and triangle tests.
 struct Query4 {
     origin: [Vec4; 3],
     inv: [Vec4; 3],
+    dir: [Vec4; 3],
 }
 
 impl Query4 {
@@ -364,8 +450,10 @@ impl Query4 {
     fn new(ray: &Ray) -> Query4 {
         let inv = safe_recip(ray.dir);
         let o = ray.origin;
+        let d = ray.dir;
         Query4 {
             origin: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
+            dir: [Vec4::splat(d.x), Vec4::splat(d.y), Vec4::splat(d.z)],
             inv: [Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z)],
         }
     }
@@ -412,10 +500,21 @@ impl Bvh {
                 let count = node.count[lane];
                 if count > 0 {
                     let first = node.child[lane] as usize;
-                    for (k, prim) in self.prims[first..first + count as usize].iter().enumerate() {
-                        if let Some((t, b1, b2)) = prim.intersect(ray, t_min, t_max) {
-                            t_max = t;
-                            best = Some(Hit { t, prim: (first + k) as u32, b1, b2 });
+                    let block = node.block[lane];
+                    if block != NO_BLOCK {
+                        let nb = count.div_ceil(4);
+                        for (k, b) in self.blocks[block as usize..(block + nb) as usize].iter().enumerate() {
+                            if let Some((l, t, b1, b2)) = b.intersect(&q, t_min, t_max) {
+                                t_max = t;
+                                best = Some(Hit { t, prim: (first + 4 * k + l) as u32, b1, b2 });
+                            }
+                        }
+                    } else {
+                        for (k, prim) in self.prims[first..first + count as usize].iter().enumerate() {
+                            if let Some((t, b1, b2)) = prim.intersect(ray, t_min, t_max) {
+                                t_max = t;
+                                best = Some(Hit { t, prim: (first + k) as u32, b1, b2 });
+                            }
                         }
                     }
                 } else {
@@ -454,10 +553,18 @@ impl Bvh {
                 let count = node.count[lane];
                 if count > 0 {
                     let first = node.child[lane] as usize;
-                    if self.prims[first..first + count as usize]
-                        .iter()
-                        .any(|p| p.intersect(ray, t_min, t_max).is_some())
-                    {
+                    let block = node.block[lane];
+                    let hit = if block != NO_BLOCK {
+                        let nb = count.div_ceil(4);
+                        self.blocks[block as usize..(block + nb) as usize]
+                            .iter()
+                            .any(|b| b.intersect(&q, t_min, t_max).is_some())
+                    } else {
+                        self.prims[first..first + count as usize]
+                            .iter()
+                            .any(|p| p.intersect(ray, t_min, t_max).is_some())
+                    };
+                    if hit {
                         return true;
                     }
                 } else {
@@ -486,7 +593,7 @@ fn build_node(items: &mut [BuildPrim], first: usize, levels: u32, nodes: &mut Ve
         count_axis: items.len() as u32,
     });
     // Traversal stacks are sized for depth ≤ 64: a leaf is forced before that.
-    if items.len() <= 2 || levels == 0 {
+    if items.len() <= 4 || levels == 0 {
         return index;
     }
     let leaf_cost = items.len() as f32;
