@@ -126,3 +126,35 @@ fn render_command_writes_exr_png_and_truth() {
     assert!(o.status.success());
     assert_eq!(image::open(&png).unwrap().width(), 16);
 }
+
+/// A scene with a [sensor] renders to a PNG of raw code values at its bit depth.
+#[test]
+fn sensor_png_has_raw_codes() {
+    let dir = tempfile::tempdir().unwrap();
+    let furnace = std::fs::read_to_string(common::root().join("pipelines/scenes/furnace.toml")).unwrap();
+    // Radiance 1 at exposure 0.5 is half of full scale: code ≈ 32767 of 65535, with photon noise.
+    let text =
+        furnace.replace("[render]", "[sensor]\nexposure = 0.5\nfull_well = 40000.0\nbits = 16\n\n[render]");
+    let scene = dir.path().join("s.toml");
+    std::fs::write(&scene, text).unwrap();
+    let png = dir.path().join("s.png");
+    let o = Command::new(env!("CARGO_BIN_EXE_lumen"))
+        .args(["render", scene.to_str().unwrap(), "--spp", "256", "--out", png.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let img = image::open(&png).unwrap().into_rgb16();
+    let mean = img.iter().map(|&v| v as f64).sum::<f64>() / img.len() as f64;
+    // Photon noise alone: σ = √20000 e⁻ ≈ 232 codes per sample; the mean of 768 is within ±30.
+    assert!((mean - 32767.5).abs() < 60.0, "mean code {mean}");
+}
+
+#[test]
+fn bench_names_a_missing_scene() {
+    let o = Command::new(env!("CARGO_BIN_EXE_lumen"))
+        .args(["bench", "render", "--scene", "/nonexistent/b.toml"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("/nonexistent/b.toml"));
+}

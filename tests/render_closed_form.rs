@@ -377,3 +377,44 @@ irradiance = [3.0, 3.0, 3.0]
         assert!((got - rho * e).abs() < 1e-5 * e, "pixel ({i}, {j}): {got} vs {}", rho * e);
     }
 }
+
+/// An image texture: an 8-bit PNG is sRGB-decoded, and texture coordinate v = 0 is the image's
+/// bottom row, as in OBJ.
+#[test]
+fn image_texture_is_decoded_and_oriented() {
+    let dir = tempfile::tempdir().unwrap();
+    // 2×2 texture: top row red (255, 0, 0) and grey 128; bottom row black and white.
+    let px: Vec<u8> = vec![255, 0, 0, 128, 128, 128, 0, 0, 0, 255, 255, 255];
+    image::save_buffer(dir.path().join("t.png"), &px, 2, 2, image::ExtendedColorType::Rgb8).unwrap();
+    let text = r#"
+[camera]
+width = 2
+height = 2
+fx = 2.0
+fy = 2.0
+cx = 0.5
+cy = 0.5
+look_at = { origin = [0.5, 0.5, 1.0], target = [0.5, 0.5, 0.0], up = [0.0, 1.0, 0.0] }
+[[materials]]
+name = "tex"
+type = "lambertian"
+albedo = { texture = "t.png" }
+[[shapes]]
+type = "quad"
+corner = [0.0, 0.0, 0.0]
+edge_u = [1.0, 0.0, 0.0]
+edge_v = [0.0, 1.0, 0.0]
+material = "tex"
+"#;
+    let scene = common::scene(text, dir.path()).unwrap();
+    let t = render::truth(&scene, None);
+    // Pixel centres land on texel centres: (0, 0) top-left is red, (1, 1) bottom-right white.
+    let grey = lumen::image::srgb_decode(128.0 / 255.0);
+    for (i, j, want) in [(0, 0, [1.0, 0.0, 0.0]), (1, 0, [grey; 3]), (0, 1, [0.0; 3]), (1, 1, [1.0; 3])] {
+        let got = t.albedo.pixel(i, j);
+        assert!(
+            got.iter().zip(want).all(|(g, w)| (g - w).abs() < 1e-6),
+            "pixel ({i}, {j}): {got:?} vs {want:?}"
+        );
+    }
+}
