@@ -19,6 +19,7 @@
 //! - **Determinism.** Every random number is a hash of (seed, pixel, sample, dimension), so
 //!   results do not depend on the thread count.
 
+pub mod calib;
 pub mod image;
 pub mod math;
 pub mod pipeline;

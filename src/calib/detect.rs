@@ -1,0 +1,437 @@
+//! Chessboard detection: find the inner corners of a board with `cols × rows` inner corners,
+//! order them consistently, refine them to sub-pixel accuracy.
+//!
+//! 1. **Candidates**: saddle points of the blurred image (σ = 1.5 px), where the Hessian's
+//!    determinant is negative: R = I_xy² − I_xx·I_yy > 0, local maxima over 7×7.
+//! 2. **X-junction check**: on a circle around the candidate the intensity must alternate
+//!    dark/light exactly four times, at angles that come in opposite pairs (two straight edges
+//!    crossing); this rejects the T- and L-shaped corners at a board's rim and texture that
+//!    merely curves.
+//! 3. **Grid growing**: from a seed and its nearest neighbours, each next corner is predicted by
+//!    extrapolating its row or column (which follows perspective) and adopted when a candidate
+//!    lies within 30 % of a square of the prediction. Growth can run onto the board's rim, so
+//!    the board is the fully populated `cols × rows` window of the grid whose surrounding
+//!    squares continue its checker pattern best (at least 75 % of them); without one the view is skipped
+//!    with the size of grid found.
+//! 4. **Order**: rows of `cols` corners; the first row runs to the right of the first column
+//!    (image y down), and corner 0 is the one diagonally next to the board's darker corner
+//!    square. For boards whose two diagonal corner squares differ in colour (`cols + rows` odd,
+//!    such as 9×6) this is unambiguous and never flips between views — unlike OpenCV's classic
+//!    detector, which starts at either end.
+//! 5. **Sub-pixel**: the corner p minimises Σ w(q)·(∇I(q)·(q − p))² over a window (the
+//!    gradient at every q on an edge through p is orthogonal to q − p), the equation OpenCV's
+//!    `cornerSubPix` solves, iterated to 1e-4 px.
+
+use crate::image::filter::Grey;
+use glam::DVec2;
+use std::collections::HashMap;
+
+/// Inner-corner counts: `cols` along a row, `rows` rows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct BoardSize {
+    pub cols: usize,
+    pub rows: usize,
+}
+
+/// Detector settings.
+#[derive(Clone, Debug)]
+pub struct DetectOptions {
+    /// Half-size of the sub-pixel window in pixels; `None` picks 3/10 of the local square
+    /// size, between 2 and 8 px.
+    pub subpix_half_window: Option<usize>,
+}
+
+impl Default for DetectOptions {
+    fn default() -> Self {
+        DetectOptions { subpix_half_window: None }
+    }
+}
+
+/// Detects the board; `Err` says why the view has no complete board.
+pub fn detect(img: &Grey, board: BoardSize, opts: &DetectOptions) -> Result<Vec<DVec2>, String> {
+    if board.cols < 2 || board.rows < 2 {
+        return Err(format!("a board needs at least 2×2 inner corners, not {}×{}", board.cols, board.rows));
+    }
+    let sampler = img.blur(1.0);
+    let points = corner_candidates(img, &sampler);
+    if points.len() < board.cols * board.rows {
+        return Err(format!(
+            "found {} chessboard-like corners, fewer than the {} of a {}×{} board",
+            points.len(),
+            board.cols * board.rows,
+            board.cols,
+            board.rows
+        ));
+    }
+    let grid = find_grid(&points, board, &sampler)?;
+    let ordered = order(&grid, board, &sampler);
+    Ok(refine(img, &ordered, board, opts))
+}
+
+/// Saddle points that pass the X-junction check (steps 1 and 2).
+pub fn corner_candidates(img: &Grey, sampler: &Grey) -> Vec<DVec2> {
+    let blurred = img.blur(1.5);
+    saddle_candidates(&blurred).into_iter().filter(|p| is_x_junction(sampler, *p, 4.5)).collect()
+}
+
+/// Saddle points: local maxima of R = I_xy² − I_xx·I_yy above 1 % of the strongest, strongest
+/// first.
+fn saddle_candidates(b: &Grey) -> Vec<DVec2> {
+    let (w, h) = (b.width, b.height);
+    let mut r = vec![0.0f32; w * h];
+    let mut max = 0.0f32;
+    for y in 2..h.saturating_sub(2) {
+        for x in 2..w.saturating_sub(2) {
+            let c = b.at(x, y);
+            let ixx = b.at(x + 1, y) - 2.0 * c + b.at(x - 1, y);
+            let iyy = b.at(x, y + 1) - 2.0 * c + b.at(x, y - 1);
+            let ixy = 0.25 * (b.at(x + 1, y + 1) - b.at(x + 1, y - 1) - b.at(x - 1, y + 1) + b.at(x - 1, y - 1));
+            let v = ixy * ixy - ixx * iyy;
+            r[y * w + x] = v;
+            max = max.max(v);
+        }
+    }
+    let mut out: Vec<(f32, DVec2)> = Vec::new();
+    if max <= 0.0 {
+        return Vec::new();
+    }
+    let rad = 3isize;
+    for y in 4..h.saturating_sub(4) {
+        for x in 4..w.saturating_sub(4) {
+            let v = r[y * w + x];
+            if v < 0.01 * max {
+                continue;
+            }
+            let mut is_max = true;
+            'nb: for dy in -rad..=rad {
+                for dx in -rad..=rad {
+                    if dx == 0 && dy == 0 {
+                        continue;
+                    }
+                    let u = r[(y as isize + dy) as usize * w + (x as isize + dx) as usize];
+                    // Ties are broken towards the earlier pixel so a plateau yields one point.
+                    if u > v || (u == v && (dy < 0 || (dy == 0 && dx < 0))) {
+                        is_max = false;
+                        break 'nb;
+                    }
+                }
+            }
+            if is_max {
+                out.push((v, DVec2::new(x as f64, y as f64)));
+            }
+        }
+    }
+    out.sort_by(|a, b| b.0.total_cmp(&a.0));
+    out.truncate(2000);
+    out.into_iter().map(|(_, p)| p).collect()
+}
+
+/// Four alternating dark/light sectors on a circle of `radius` around `p`.
+fn is_x_junction(img: &Grey, p: DVec2, radius: f64) -> bool {
+    const N: usize = 48;
+    let v: Vec<f64> = (0..N)
+        .map(|k| {
+            let a = 2.0 * std::f64::consts::PI * k as f64 / N as f64;
+            img.sample(p.x + radius * a.cos(), p.y + radius * a.sin())
+        })
+        .collect();
+    let (lo, hi) = v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+    if hi - lo < 0.03 {
+        return false;
+    }
+    let mid = 0.5 * (lo + hi);
+    let band = 0.15 * (hi - lo);
+    // Hysteresis: a sample only changes the state when clearly above or below the middle.
+    let state = |x: f64, prev: Option<bool>| {
+        if x > mid + band {
+            Some(true)
+        } else if x < mid - band {
+            Some(false)
+        } else {
+            prev
+        }
+    };
+    // The state of every sample, after one lap to settle the hysteresis.
+    let mut cur = None;
+    for &x in &v {
+        cur = state(x, cur);
+    }
+    let Some(mut cur) = cur else { return false };
+    let mut changes = Vec::new();
+    for (k, &x) in v.iter().enumerate() {
+        let next = state(x, Some(cur)).unwrap_or(cur);
+        if next != cur {
+            changes.push(k);
+            cur = next;
+        }
+    }
+    if changes.len() != 4 {
+        return false;
+    }
+    // Each sector must span a few samples (cyclic distances between changes), and the two
+    // edges must be straight lines through the corner, so that each change has its opposite
+    // half a turn away (within 1/8 of a turn): T- and L-junctions at a board's rim fail this.
+    let gap = |a: usize, b: usize| (changes[b % 4] + N - changes[a]) % N;
+    (0..4).all(|k| gap(k, k + 1) >= 3) && (0..2).all(|k| gap(k, k + 2).abs_diff(N / 2) <= N / 8)
+}
+
+/// Grows grids from seeds; returns grid coordinates → point for the first grid of the board's
+/// size.
+fn find_grid(points: &[DVec2], board: BoardSize, img: &Grey) -> Result<HashMap<(i32, i32), DVec2>, String> {
+    let nearest = |p: DVec2, exclude: &dyn Fn(usize) -> bool| -> Option<(usize, f64)> {
+        points
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !exclude(*i))
+            .map(|(i, q)| (i, q.distance(p)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+    };
+    let mut largest = (0usize, 0i32, 0i32);
+    for seed in 0..points.len().min(60) {
+        let s = points[seed];
+        let Some((n1, d)) = nearest(s, &|i| i == seed) else { continue };
+        let u = points[n1] - s;
+        // The second axis: the nearest candidate well away from the first axis.
+        let v = points
+            .iter()
+            .enumerate()
+            .filter(|&(i, q)| {
+                let w = *q - s;
+                i != seed && i != n1 && (w.dot(u) / (w.length() * u.length())).abs() < 0.7 && w.length() < 2.0 * d
+            })
+            .min_by(|a, b| a.1.distance(s).total_cmp(&b.1.distance(s)));
+        let Some((n2, _)) = v else { continue };
+        let grid = grow(points, seed, n1, n2);
+        let (imin, imax, jmin, jmax) = extent(&grid);
+        let (ni, nj) = (imax - imin + 1, jmax - jmin + 1);
+        if grid.len() > largest.0 {
+            largest = (grid.len(), ni, nj);
+        }
+        // Every fully populated window of the board's size, in either orientation; the one
+        // whose surrounding squares best continue the checker pattern is the board.
+        let mut best: Option<(f64, i32, i32, i32, i32)> = None;
+        for (wi, wj) in [(board.cols as i32, board.rows as i32), (board.rows as i32, board.cols as i32)] {
+            for i0 in imin..=imax - wi + 1 {
+                for j0 in jmin..=jmax - wj + 1 {
+                    let full = (i0..i0 + wi).all(|i| (j0..j0 + wj).all(|j| grid.contains_key(&(i, j))));
+                    if !full {
+                        continue;
+                    }
+                    let at = |i: i32, j: i32| points[grid[&(i, j)]];
+                    let score = ring_score(&at, i0, j0, wi, wj, img);
+                    if best.is_none_or(|b| score > b.0) {
+                        best = Some((score, i0, j0, wi, wj));
+                    }
+                }
+            }
+        }
+        if let Some((score, i0, j0, wi, wj)) = best {
+            if std::env::var("LUMEN_DEBUG_DETECT").is_ok() {
+                eprintln!("seed {seed}: grid {ni}x{nj} ({}), best window at ({i0},{j0}) {wi}x{wj} score {score:.3}", grid.len());
+            }
+            if score >= 0.75 {
+                return Ok((i0..i0 + wi)
+                    .flat_map(|i| (j0..j0 + wj).map(move |j| (i, j)))
+                    .map(|(i, j)| ((i - i0, j - j0), points[grid[&(i, j)]]))
+                    .collect());
+            }
+        }
+    }
+    Err(format!(
+        "the largest grid of corners found is {}×{} ({} corners), not the {}×{} board: is the whole board visible?",
+        largest.1, largest.2, largest.0, board.cols, board.rows
+    ))
+}
+
+/// Fraction of the squares around a window of corners whose brightness continues the checker
+/// pattern of the squares inside it (1 for a whole board, about ½ for a window shifted onto
+/// the board's margin).
+fn ring_score(at: &dyn Fn(i32, i32) -> DVec2, i0: i32, j0: i32, wi: i32, wj: i32, img: &Grey) -> f64 {
+    let centre = |a: DVec2, b: DVec2, c: DVec2, d: DVec2| (a + b + c + d) * 0.25;
+    let value = |p: DVec2| img.sample(p.x, p.y);
+    // Inside: parity 0 and parity 1 squares.
+    let (mut s0, mut n0, mut s1, mut n1) = (0.0, 0, 0.0, 0);
+    for i in i0..i0 + wi - 1 {
+        for j in j0..j0 + wj - 1 {
+            let v = value(centre(at(i, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1)));
+            if (i + j) % 2 == 0 {
+                s0 += v;
+                n0 += 1;
+            } else {
+                s1 += v;
+                n1 += 1;
+            }
+        }
+    }
+    if n0 == 0 || n1 == 0 {
+        return 0.0;
+    }
+    let (m0, m1) = (s0 / n0 as f64, s1 / n1 as f64);
+    let mid = 0.5 * (m0 + m1);
+    let even_is_light = m0 > m1;
+    // Outside: extrapolate each border square half a row outwards; parity continues.
+    let (mut ok, mut total) = (0, 0);
+    let mut check = |p: DVec2, parity: i32| {
+        let light = value(p) > mid;
+        total += 1;
+        if light == ((parity.rem_euclid(2) == 0) == even_is_light) {
+            ok += 1;
+        }
+    };
+    for i in i0..i0 + wi - 1 {
+        for (j, jn, jo) in [(j0, j0 + 1, j0 - 1), (j0 + wj - 1, j0 + wj - 2, j0 + wj - 1)] {
+            let edge = (at(i, j) + at(i + 1, j)) * 0.5;
+            let inner = (at(i, jn) + at(i + 1, jn)) * 0.5;
+            check(edge + (edge - inner) * 0.5, i + jo);
+        }
+    }
+    for j in j0..j0 + wj - 1 {
+        for (i, inn, io) in [(i0, i0 + 1, i0 - 1), (i0 + wi - 1, i0 + wi - 2, i0 + wi - 1)] {
+            let edge = (at(i, j) + at(i, j + 1)) * 0.5;
+            let inner = (at(inn, j) + at(inn, j + 1)) * 0.5;
+            check(edge + (edge - inner) * 0.5, io + j);
+        }
+    }
+    ok as f64 / total.max(1) as f64
+}
+
+fn extent<T>(grid: &HashMap<(i32, i32), T>) -> (i32, i32, i32, i32) {
+    let mut e = (i32::MAX, i32::MIN, i32::MAX, i32::MIN);
+    for &(i, j) in grid.keys() {
+        e = (e.0.min(i), e.1.max(i), e.2.min(j), e.3.max(j));
+    }
+    e
+}
+
+/// Breadth-first growth of a grid from a seed and its two axis neighbours.
+fn grow(points: &[DVec2], seed: usize, n1: usize, n2: usize) -> HashMap<(i32, i32), usize> {
+    let mut grid: HashMap<(i32, i32), usize> = HashMap::new();
+    let mut used = vec![false; points.len()];
+    for (cell, k) in [((0, 0), seed), ((1, 0), n1), ((0, 1), n2)] {
+        grid.insert(cell, k);
+        used[k] = true;
+    }
+    let global = [points[n1] - points[seed], points[n2] - points[seed]];
+    let mut queue: std::collections::VecDeque<(i32, i32)> = [(0, 0), (1, 0), (0, 1)].into_iter().collect();
+    while let Some((i, j)) = queue.pop_front() {
+        let p = points[grid[&(i, j)]];
+        for (di, dj) in [(1, 0), (-1, 0), (0, 1), (0, -1)] {
+            let cell = (i + di, j + dj);
+            if grid.contains_key(&cell) {
+                continue;
+            }
+            let at = |c: (i32, i32)| grid.get(&c).map(|&k| points[k]);
+            // Step along (di, dj): from the opposite neighbour, else from a parallel row or
+            // column, else the seed's axes.
+            let step = if let Some(q) = at((i - di, j - dj)) {
+                p - q
+            } else if let (Some(a), Some(b)) = (at((i + di + dj, j + dj + di)), at((i + dj, j + di))) {
+                a - b
+            } else if let (Some(a), Some(b)) = (at((i + di - dj, j + dj - di)), at((i - dj, j - di))) {
+                a - b
+            } else {
+                let axis = if di != 0 { global[0] } else { global[1] };
+                axis * (di + dj) as f64
+            };
+            let predicted = p + step;
+            let tol = 0.3 * step.length();
+            let found = points
+                .iter()
+                .enumerate()
+                .filter(|(k, q)| !used[*k] && q.distance(predicted) < tol)
+                .min_by(|a, b| a.1.distance(predicted).total_cmp(&b.1.distance(predicted)));
+            if let Some((k, _)) = found {
+                grid.insert(cell, k);
+                used[k] = true;
+                queue.push_back(cell);
+            }
+        }
+    }
+    grid
+}
+
+/// Orders grid points into rows of `cols` (see the module docs for the rule).
+fn order(grid: &HashMap<(i32, i32), DVec2>, board: BoardSize, img: &Grey) -> Vec<DVec2> {
+    let imax = grid.keys().map(|&(i, _)| i).max().unwrap_or(0);
+    let transpose = (imax as usize + 1) != board.cols;
+    let (c, r) = (board.cols as i32, board.rows as i32);
+    let get = |i: i32, j: i32| if transpose { grid[&(j, i)] } else { grid[&(i, j)] };
+    let mut pts: Vec<DVec2> = (0..r).flat_map(|j| (0..c).map(move |i| (i, j))).map(|(i, j)| get(i, j)).collect();
+    let at = |pts: &Vec<DVec2>, i: i32, j: i32| pts[(j * c + i) as usize];
+    // Handedness: the first row runs to the right of the first column (image y is down).
+    let a = at(&pts, c - 1, 0) - at(&pts, 0, 0);
+    let b = at(&pts, 0, r - 1) - at(&pts, 0, 0);
+    if a.x * b.y - a.y * b.x < 0.0 {
+        pts = (0..r).flat_map(|j| (0..c).map(move |i| (i, r - 1 - j))).map(|(i, j)| at(&pts, i, j)).collect();
+    }
+    // Colour: corner 0 sits diagonally next to the darker of the two diagonal corner squares.
+    let outside = |pts: &Vec<DVec2>, i: i32, j: i32, di: i32, dj: i32| {
+        let p = at(pts, i, j);
+        let q = p + (p - at(pts, i + di, j + dj)) * 0.5;
+        img.sample(q.x, q.y)
+    };
+    if outside(&pts, 0, 0, 1, 1) > outside(&pts, c - 1, r - 1, -1, -1) {
+        pts.reverse(); // a 180° turn of the board
+    }
+    pts
+}
+
+/// Sub-pixel refinement of every corner (module docs, step 5).
+fn refine(img: &Grey, pts: &[DVec2], board: BoardSize, opts: &DetectOptions) -> Vec<DVec2> {
+    let g = img.blur(0.7);
+    let (w, h) = (g.width, g.height);
+    let mut gx = Grey { width: w, height: h, data: vec![0.0; w * h] };
+    let mut gy = gx.clone();
+    for y in 0..h {
+        for x in 0..w {
+            let (xi, yi) = (x as isize, y as isize);
+            gx.data[y * w + x] = 0.5 * (g.at_clamped(xi + 1, yi) - g.at_clamped(xi - 1, yi));
+            gy.data[y * w + x] = 0.5 * (g.at_clamped(xi, yi + 1) - g.at_clamped(xi, yi - 1));
+        }
+    }
+    let c = board.cols;
+    pts.iter()
+        .enumerate()
+        .map(|(k, &p0)| {
+            // Local square size: distance to the nearest grid neighbour.
+            let (i, j) = (k % c, k / c);
+            let mut spacing = f64::INFINITY;
+            for (ni, nj) in [(i.wrapping_sub(1), j), (i + 1, j), (i, j.wrapping_sub(1)), (i, j + 1)] {
+                if ni < c && nj < board.rows {
+                    spacing = spacing.min(pts[nj * c + ni].distance(p0));
+                }
+            }
+            let hw = opts.subpix_half_window.unwrap_or_else(|| (0.3 * spacing).round().clamp(2.0, 8.0) as usize) as i32;
+            let sigma = hw as f64;
+            let mut p = p0;
+            for _ in 0..50 {
+                let (mut a00, mut a01, mut a11, mut b0, mut b1) = (0.0, 0.0, 0.0, 0.0, 0.0);
+                for dy in -hw..=hw {
+                    for dx in -hw..=hw {
+                        let q = p + DVec2::new(dx as f64, dy as f64);
+                        let wgt = (-((dx * dx + dy * dy) as f64) / (2.0 * sigma * sigma)).exp();
+                        let (ex, ey) = (gx.sample(q.x, q.y), gy.sample(q.x, q.y));
+                        let (xx, xy, yy) = (wgt * ex * ex, wgt * ex * ey, wgt * ey * ey);
+                        a00 += xx;
+                        a01 += xy;
+                        a11 += yy;
+                        b0 += xx * q.x + xy * q.y;
+                        b1 += xy * q.x + yy * q.y;
+                    }
+                }
+                let det = a00 * a11 - a01 * a01;
+                if !(det.abs() > 1e-12) {
+                    break;
+                }
+                let next = DVec2::new((a11 * b0 - a01 * b1) / det, (a00 * b1 - a01 * b0) / det);
+                let moved = next.distance(p);
+                p = next;
+                if moved < 1e-4 {
+                    break;
+                }
+            }
+            // A corner that wandered off its window was not a clean corner: keep the pixel one.
+            if p.is_finite() && p.distance(p0) <= hw as f64 { p } else { p0 }
+        })
+        .collect()
+}

@@ -1,0 +1,3 @@
+//! Camera calibration from chessboard images.
+
+pub mod detect;
