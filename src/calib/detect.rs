@@ -85,7 +85,8 @@ fn saddle_candidates(b: &Grey) -> Vec<DVec2> {
             let c = b.at(x, y);
             let ixx = b.at(x + 1, y) - 2.0 * c + b.at(x - 1, y);
             let iyy = b.at(x, y + 1) - 2.0 * c + b.at(x, y - 1);
-            let ixy = 0.25 * (b.at(x + 1, y + 1) - b.at(x + 1, y - 1) - b.at(x - 1, y + 1) + b.at(x - 1, y - 1));
+            let ixy =
+                0.25 * (b.at(x + 1, y + 1) - b.at(x + 1, y - 1) - b.at(x - 1, y + 1) + b.at(x - 1, y - 1));
             let v = ixy * ixy - ixx * iyy;
             r[y * w + x] = v;
             max = max.max(v);
@@ -197,7 +198,10 @@ fn find_grid(points: &[DVec2], board: BoardSize, img: &Grey) -> Result<HashMap<(
             .enumerate()
             .filter(|&(i, q)| {
                 let w = *q - s;
-                i != seed && i != n1 && (w.dot(u) / (w.length() * u.length())).abs() < 0.7 && w.length() < 2.0 * d
+                i != seed
+                    && i != n1
+                    && (w.dot(u) / (w.length() * u.length())).abs() < 0.7
+                    && w.length() < 2.0 * d
             })
             .min_by(|a, b| a.1.distance(s).total_cmp(&b.1.distance(s)));
         let Some((n2, _)) = v else { continue };
@@ -227,7 +231,10 @@ fn find_grid(points: &[DVec2], board: BoardSize, img: &Grey) -> Result<HashMap<(
         }
         if let Some((score, i0, j0, wi, wj)) = best {
             if std::env::var("LUMEN_DEBUG_DETECT").is_ok() {
-                eprintln!("seed {seed}: grid {ni}x{nj} ({}), best window at ({i0},{j0}) {wi}x{wj} score {score:.3}", grid.len());
+                eprintln!(
+                    "seed {seed}: grid {ni}x{nj} ({}), best window at ({i0},{j0}) {wi}x{wj} score {score:.3}",
+                    grid.len()
+                );
             }
             if score >= 0.75 {
                 return Ok((i0..i0 + wi)
@@ -356,7 +363,8 @@ fn order(grid: &HashMap<(i32, i32), DVec2>, board: BoardSize, img: &Grey) -> Vec
     let transpose = (imax as usize + 1) != board.cols;
     let (c, r) = (board.cols as i32, board.rows as i32);
     let get = |i: i32, j: i32| if transpose { grid[&(j, i)] } else { grid[&(i, j)] };
-    let mut pts: Vec<DVec2> = (0..r).flat_map(|j| (0..c).map(move |i| (i, j))).map(|(i, j)| get(i, j)).collect();
+    let mut pts: Vec<DVec2> =
+        (0..r).flat_map(|j| (0..c).map(move |i| (i, j))).map(|(i, j)| get(i, j)).collect();
     let at = |pts: &Vec<DVec2>, i: i32, j: i32| pts[(j * c + i) as usize];
     // Handedness: the first row runs to the right of the first column (image y is down).
     let a = at(&pts, c - 1, 0) - at(&pts, 0, 0);
@@ -401,7 +409,9 @@ fn refine(img: &Grey, pts: &[DVec2], board: BoardSize, opts: &DetectOptions) -> 
                     spacing = spacing.min(pts[nj * c + ni].distance(p0));
                 }
             }
-            let hw = opts.subpix_half_window.unwrap_or_else(|| (0.3 * spacing).round().clamp(2.0, 8.0) as usize) as i32;
+            let hw =
+                opts.subpix_half_window.unwrap_or_else(|| (0.3 * spacing).round().clamp(2.0, 8.0) as usize)
+                    as i32;
             let sigma = hw as f64;
             let mut p = p0;
             for _ in 0..50 {
@@ -431,7 +441,11 @@ fn refine(img: &Grey, pts: &[DVec2], board: BoardSize, opts: &DetectOptions) -> 
                 }
             }
             // A corner that wandered off its window was not a clean corner: keep the pixel one.
-            if p.is_finite() && p.distance(p0) <= hw as f64 { p } else { p0 }
+            if p.is_finite() && p.distance(p0) <= hw as f64 {
+                p
+            } else {
+                p0
+            }
         })
         .collect()
 }

@@ -1,3 +1,289 @@
-//! Camera calibration from chessboard images.
+//! Camera calibration from chessboard images: detection (`detect`), Zhang's closed form
+//! (`zhang`), joint refinement (`refine`), and the calibration file (`file`).
+//!
+//! `run` is the stage function the CLI and the pipeline call: it detects the board in every
+//! view (skipping, with the reason, views without a whole board), then calibrates.
 
 pub mod detect;
+pub mod file;
+pub mod refine;
+pub mod zhang;
+
+use crate::image::filter::Grey;
+use detect::{BoardSize, DetectOptions};
+use glam::{DVec2, DVec3};
+use refine::Flags;
+use serde::{Deserialize, Serialize};
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("{0}")]
+    BadInput(String),
+    #[error("calibration failed: {0}")]
+    Numerical(String),
+    #[error("{path}: {message}")]
+    File { path: std::path::PathBuf, message: String },
+}
+
+/// What to calibrate with.
+#[derive(Clone, Debug)]
+pub struct Config {
+    pub board: BoardSize,
+    /// Side of a square in the user's unit (translations come out in it).
+    pub square: f64,
+    pub flags: Flags,
+    pub detect: DetectOptions,
+    /// Levenberg–Marquardt iteration limit (default 100).
+    pub max_iterations: usize,
+}
+
+/// One view's outcome.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ViewResult {
+    pub name: String,
+    /// Rodrigues rotation (radians) and translation (square units) of the board in the camera.
+    pub rvec: [f64; 3],
+    pub tvec: [f64; 3],
+    pub rms_px: f64,
+    /// Standard deviations of rvec and tvec.
+    pub std_rvec: [f64; 3],
+    pub std_tvec: [f64; 3],
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct StdDev {
+    pub fx: f64,
+    pub fy: f64,
+    pub cx: f64,
+    pub cy: f64,
+    /// k1, k2, p1, p2, k3.
+    pub distortion: [f64; 5],
+}
+
+/// A calibration: what `--out` writes and what is read back wherever a camera is expected.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Calibration {
+    pub image_width: u32,
+    pub image_height: u32,
+    /// 3×3, row-major, OpenCV pixel convention.
+    pub camera_matrix: [[f64; 3]; 3],
+    /// k1, k2, p1, p2, k3.
+    pub distortion_coefficients: [f64; 5],
+    /// √(Σ‖r‖² / corners), as OpenCV's `calibrateCamera` returns.
+    pub rms_px: f64,
+    pub per_view_rms_px: Vec<f64>,
+    pub std_dev: StdDev,
+    pub views: Vec<ViewResult>,
+    /// Views left out, each with the reason.
+    #[serde(default)]
+    pub skipped: Vec<Skipped>,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Skipped {
+    pub name: String,
+    pub reason: String,
+}
+
+impl Calibration {
+    pub fn camera(&self) -> crate::math::CameraModel {
+        let k = &self.camera_matrix;
+        crate::math::CameraModel {
+            width: self.image_width,
+            height: self.image_height,
+            intrinsics: crate::math::Intrinsics { fx: k[0][0], fy: k[1][1], cx: k[0][2], cy: k[1][2] },
+            distortion: crate::math::Distortion::from_array(self.distortion_coefficients),
+        }
+    }
+}
+
+/// Board corners in the board frame (Z = 0), in the order `detect` returns image corners.
+pub fn board_points(board: BoardSize, square: f64) -> Vec<DVec3> {
+    (0..board.rows)
+        .flat_map(|j| (0..board.cols).map(move |i| DVec3::new(i as f64 * square, j as f64 * square, 0.0)))
+        .collect()
+}
+
+/// Detects the board in every image and calibrates from the views where it was found.
+pub fn run(images: &[(String, Grey)], config: &Config) -> Result<Calibration, Error> {
+    let Some((_, first)) = images.first() else {
+        return Err(Error::BadInput("no images to calibrate from".into()));
+    };
+    let size = (first.width as u32, first.height as u32);
+    let mut views = Vec::new();
+    let mut skipped = Vec::new();
+    for (name, img) in images {
+        if (img.width as u32, img.height as u32) != size {
+            return Err(Error::BadInput(format!(
+                "{name} is {}×{}, the first image {}×{}: all views must come from one camera mode",
+                img.width, img.height, size.0, size.1
+            )));
+        }
+        match detect::detect(img, config.board, &config.detect) {
+            Ok(corners) => views.push((name.clone(), corners)),
+            Err(reason) => skipped.push(Skipped { name: name.clone(), reason }),
+        }
+    }
+    let mut cal = calibrate(&views, size, config)?;
+    cal.skipped = skipped;
+    Ok(cal)
+}
+
+/// Calibrates from detected corners (`views`: name and corners in `detect`'s order).
+pub fn calibrate(
+    views: &[(String, Vec<DVec2>)],
+    size: (u32, u32),
+    config: &Config,
+) -> Result<Calibration, Error> {
+    if views.len() < 2 {
+        return Err(Error::BadInput(format!(
+            "the board was found in {} view(s); calibration needs at least 2 (3 or more for a reliable principal point)",
+            views.len()
+        )));
+    }
+    if !(config.square.is_finite() && config.square > 0.0) {
+        return Err(Error::BadInput(format!("square size {} must be a positive length", config.square)));
+    }
+    let board = board_points(config.board, config.square);
+    let plane: Vec<DVec2> = board.iter().map(|p| p.truncate()).collect();
+    let mut hs = Vec::new();
+    for (name, corners) in views {
+        if corners.len() != board.len() {
+            return Err(Error::BadInput(format!(
+                "{name}: {} corners, the board has {}",
+                corners.len(),
+                board.len()
+            )));
+        }
+        hs.push(
+            zhang::homography(&plane, corners)
+                .ok_or_else(|| Error::Numerical(format!("{name}: no homography")))?,
+        );
+    }
+    let k = zhang::intrinsics(&hs, size).map_err(Error::Numerical)?;
+    let mut poses = Vec::new();
+    for (h, (name, _)) in hs.iter().zip(views) {
+        poses.push(zhang::extrinsics(h, &k).ok_or_else(|| Error::Numerical(format!("{name}: no pose")))?);
+    }
+    let mut camera = crate::math::CameraModel {
+        width: size.0,
+        height: size.1,
+        intrinsics: crate::math::Intrinsics {
+            fx: k.x_axis.x,
+            fy: k.y_axis.y,
+            cx: k.z_axis.x,
+            cy: k.z_axis.y,
+        },
+        distortion: Default::default(),
+    };
+    if config.flags.fix_principal_point {
+        camera.intrinsics.cx = (size.0 as f64 - 1.0) / 2.0;
+        camera.intrinsics.cy = (size.1 as f64 - 1.0) / 2.0;
+    }
+    let (k1, k2) = linear_radial(&camera, &poses, &board, views);
+    camera.distortion.k1 = k1;
+    camera.distortion.k2 = k2;
+    let image: Vec<Vec<DVec2>> = views.iter().map(|(_, c)| c.clone()).collect();
+    let problem = refine::Problem { board: &board, image: &image };
+    let sol = refine::refine(&problem, camera, poses, config.flags, config.max_iterations)
+        .map_err(Error::Numerical)?;
+
+    let total: f64 = sol.residuals.iter().flatten().map(|r| r.length_squared()).sum();
+    let count: usize = sol.residuals.iter().map(|v| v.len()).sum();
+    let per_view: Vec<f64> = sol
+        .residuals
+        .iter()
+        .map(|v| (v.iter().map(|r| r.length_squared()).sum::<f64>() / v.len() as f64).sqrt())
+        .collect();
+    let c = sol.camera;
+    let (ki, d) = (c.intrinsics, c.distortion);
+    let s = sol.std_intrinsics;
+    let out = Calibration {
+        image_width: size.0,
+        image_height: size.1,
+        camera_matrix: [[ki.fx, 0.0, ki.cx], [0.0, ki.fy, ki.cy], [0.0, 0.0, 1.0]],
+        distortion_coefficients: d.to_array(),
+        rms_px: (total / count as f64).sqrt(),
+        per_view_rms_px: per_view.clone(),
+        std_dev: StdDev {
+            fx: s[0],
+            fy: s[1],
+            cx: s[2],
+            cy: s[3],
+            distortion: [s[4], s[5], s[6], s[7], s[8]],
+        },
+        views: views
+            .iter()
+            .zip(&sol.poses)
+            .zip(&sol.std_views)
+            .zip(&per_view)
+            .map(|((((name, _), (r, t)), sd), rms)| ViewResult {
+                name: name.clone(),
+                rvec: rvec_from_matrix(r).to_array(),
+                tvec: t.to_array(),
+                rms_px: *rms,
+                std_rvec: [sd[0], sd[1], sd[2]],
+                std_tvec: [sd[3], sd[4], sd[5]],
+            })
+            .collect(),
+        skipped: Vec::new(),
+    };
+    let finite =
+        out.camera_matrix.iter().flatten().chain(&out.distortion_coefficients).all(|v| v.is_finite());
+    if !finite || !out.rms_px.is_finite() {
+        return Err(Error::Numerical("the refinement diverged".into()));
+    }
+    Ok(out)
+}
+
+/// Zhang's linear estimate of k1, k2 from the distortion-free model's residuals:
+/// [(u−cx)r², (u−cx)r⁴; (v−cy)r², (v−cy)r⁴]·[k1, k2]ᵀ = [ŭ − u; v̆ − v].
+fn linear_radial(
+    cam: &crate::math::CameraModel,
+    poses: &[(glam::DMat3, DVec3)],
+    board: &[DVec3],
+    views: &[(String, Vec<DVec2>)],
+) -> (f64, f64) {
+    let (mut a00, mut a01, mut a11, mut b0, mut b1) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    let k = cam.intrinsics;
+    for ((r, t), (_, obs)) in poses.iter().zip(views) {
+        for (x, o) in board.iter().zip(obs) {
+            let pc = *r * *x + *t;
+            let (xn, yn) = (pc.x / pc.z, pc.y / pc.z);
+            let r2 = xn * xn + yn * yn;
+            let (u, v) = (k.fx * xn + k.cx, k.fy * yn + k.cy);
+            for (row, rhs) in [
+                ([(u - k.cx) * r2, (u - k.cx) * r2 * r2], o.x - u),
+                ([(v - k.cy) * r2, (v - k.cy) * r2 * r2], o.y - v),
+            ] {
+                a00 += row[0] * row[0];
+                a01 += row[0] * row[1];
+                a11 += row[1] * row[1];
+                b0 += row[0] * rhs;
+                b1 += row[1] * rhs;
+            }
+        }
+    }
+    let det = a00 * a11 - a01 * a01;
+    if det.abs() < 1e-300 {
+        return (0.0, 0.0);
+    }
+    let (k1, k2) = ((a11 * b0 - a01 * b1) / det, (a00 * b1 - a01 * b0) / det);
+    if k1.is_finite() && k2.is_finite() {
+        (k1, k2)
+    } else {
+        (0.0, 0.0)
+    }
+}
+
+/// Rodrigues vector of a rotation matrix (OpenCV's `Rodrigues`), stable near 0 and π.
+pub fn rvec_from_matrix(r: &glam::DMat3) -> DVec3 {
+    let q = glam::DQuat::from_mat3(r).normalize();
+    let q = if q.w < 0.0 { -q } else { q };
+    let (axis, angle) = q.to_axis_angle();
+    if angle.abs() < 1e-300 {
+        DVec3::ZERO
+    } else {
+        axis * angle
+    }
+}

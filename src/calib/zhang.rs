@@ -1,0 +1,214 @@
+//! Zhang's closed-form calibration (Z. Zhang, "A flexible new technique for camera
+//! calibration", IEEE TPAMI 2000): homographies, intrinsics from the image of the absolute
+//! conic, extrinsics, and a linear guess of radial distortion.
+//!
+//! For each view the board plane (Z = 0) maps to the image by H = λ·K·[r₁ r₂ t]. Since r₁, r₂
+//! are orthonormal, with B = K⁻ᵀK⁻¹ (symmetric, 6 unknowns b):
+//!
+//!   h₁ᵀ B h₂ = 0,   h₁ᵀ B h₁ − h₂ᵀ B h₂ = 0
+//!
+//! two linear equations per view; b is the null vector of the stacked system (≥ 3 views, or 2
+//! with zero skew added as an equation). K follows from B in closed form. Image coordinates are
+//! first scaled to about ±1 so the system is well conditioned (Hartley 1997).
+
+use glam::{DMat3, DVec2, DVec3};
+use nalgebra::{DMatrix, DVector, Matrix3, SVD};
+
+/// A 3×3 homography mapping board (X, Y, 1) to image (u, v, 1), row-major.
+pub type Homography = Matrix3<f64>;
+
+/// Points normalised to zero mean and mean distance √2: returns the 3×3 normalising transform.
+fn normaliser(pts: &[DVec2]) -> Matrix3<f64> {
+    let n = pts.len().max(1) as f64;
+    let c = pts.iter().fold(DVec2::ZERO, |a, &p| a + p) / n;
+    let d = pts.iter().map(|p| p.distance(c)).sum::<f64>() / n;
+    let s = if d > 0.0 { std::f64::consts::SQRT_2 / d } else { 1.0 };
+    Matrix3::new(s, 0.0, -s * c.x, 0.0, s, -s * c.y, 0.0, 0.0, 1.0)
+}
+
+fn apply(h: &Matrix3<f64>, p: DVec2) -> DVec2 {
+    let w = h[(2, 0)] * p.x + h[(2, 1)] * p.y + h[(2, 2)];
+    DVec2::new(
+        (h[(0, 0)] * p.x + h[(0, 1)] * p.y + h[(0, 2)]) / w,
+        (h[(1, 0)] * p.x + h[(1, 1)] * p.y + h[(1, 2)]) / w,
+    )
+}
+
+/// Homography from ≥ 4 correspondences: normalised DLT, then Levenberg–Marquardt on the
+/// reprojection error in the image.
+pub fn homography(board: &[DVec2], image: &[DVec2]) -> Option<Homography> {
+    if board.len() < 4 || board.len() != image.len() {
+        return None;
+    }
+    let (tb, ti) = (normaliser(board), normaliser(image));
+    let mut a = DMatrix::<f64>::zeros(2 * board.len(), 9);
+    for (k, (&b, &i)) in board.iter().zip(image).enumerate() {
+        let (b, i) = (apply(&tb, b), apply(&ti, i));
+        let row0 = [b.x, b.y, 1.0, 0.0, 0.0, 0.0, -i.x * b.x, -i.x * b.y, -i.x];
+        let row1 = [0.0, 0.0, 0.0, b.x, b.y, 1.0, -i.y * b.x, -i.y * b.y, -i.y];
+        for c in 0..9 {
+            a[(2 * k, c)] = row0[c];
+            a[(2 * k + 1, c)] = row1[c];
+        }
+    }
+    let h = null_vector(&a)?;
+    let hn = Matrix3::from_row_slice(h.as_slice());
+    let mut h = ti.try_inverse()? * hn * tb;
+    h /= h[(2, 2)];
+    refine_homography(&mut h, board, image);
+    h.iter().all(|v| v.is_finite()).then_some(h)
+}
+
+/// The right singular vector of the smallest singular value.
+fn null_vector(a: &DMatrix<f64>) -> Option<DVector<f64>> {
+    // AᵀA is small (≤ 9×9); its eigenvector of the smallest eigenvalue is the null vector.
+    let ata = a.transpose() * a;
+    let svd = SVD::new(ata, false, true);
+    let vt = svd.v_t?;
+    let (k, _) = svd.singular_values.iter().enumerate().min_by(|x, y| x.1.total_cmp(y.1))?;
+    Some(vt.row(k).transpose())
+}
+
+/// Gauss–Newton with Levenberg damping on the 8 free entries of H (H₃₃ = 1).
+fn refine_homography(h: &mut Homography, board: &[DVec2], image: &[DVec2]) {
+    let cost =
+        |h: &Homography| board.iter().zip(image).map(|(&b, &i)| apply(h, b).distance_squared(i)).sum::<f64>();
+    let mut mu = 1e-3;
+    let mut c = cost(h);
+    for _ in 0..50 {
+        let mut jtj = nalgebra::SMatrix::<f64, 8, 8>::zeros();
+        let mut jtr = nalgebra::SVector::<f64, 8>::zeros();
+        for (&b, &i) in board.iter().zip(image) {
+            let w = h[(2, 0)] * b.x + h[(2, 1)] * b.y + h[(2, 2)];
+            let p = apply(h, b);
+            let ju = [b.x / w, b.y / w, 1.0 / w, 0.0, 0.0, 0.0, -p.x * b.x / w, -p.x * b.y / w];
+            let jv = [0.0, 0.0, 0.0, b.x / w, b.y / w, 1.0 / w, -p.y * b.x / w, -p.y * b.y / w];
+            let (ru, rv) = (p.x - i.x, p.y - i.y);
+            for r in 0..8 {
+                jtr[r] += ju[r] * ru + jv[r] * rv;
+                for s in 0..8 {
+                    jtj[(r, s)] += ju[r] * ju[s] + jv[r] * jv[s];
+                }
+            }
+        }
+        let mut improved = false;
+        for _ in 0..10 {
+            let mut m = jtj;
+            for d in 0..8 {
+                m[(d, d)] *= 1.0 + mu;
+            }
+            let Some(step) = m.cholesky().map(|ch| ch.solve(&(-jtr))) else {
+                mu *= 10.0;
+                continue;
+            };
+            let mut hn = *h;
+            for k in 0..8 {
+                hn[(k / 3, k % 3)] += step[k];
+            }
+            let cn = cost(&hn);
+            if cn < c {
+                let done = c - cn < 1e-14 * c.max(1e-300);
+                *h = hn;
+                c = cn;
+                mu = (mu * 0.1).max(1e-12);
+                improved = !done;
+                break;
+            }
+            mu *= 10.0;
+        }
+        if !improved {
+            break;
+        }
+    }
+}
+
+/// Intrinsics (fx, fy, cx, cy; zero skew) from ≥ 2 homographies, `size` = image (w, h).
+pub fn intrinsics(hs: &[Homography], size: (u32, u32)) -> Result<DMat3, String> {
+    if hs.len() < 2 {
+        return Err(format!("{} view(s): Zhang's method needs at least 2", hs.len()));
+    }
+    // Scale image coordinates to about ±1: H' = N·H, and K = N⁻¹·K'.
+    let s = 0.5 * (size.0 + size.1) as f64;
+    let (cx, cy) = ((size.0 as f64 - 1.0) / 2.0, (size.1 as f64 - 1.0) / 2.0);
+    let n = Matrix3::new(1.0 / s, 0.0, -cx / s, 0.0, 1.0 / s, -cy / s, 0.0, 0.0, 1.0);
+    let v = |h: &Matrix3<f64>, i: usize, j: usize| {
+        [
+            h[(0, i)] * h[(0, j)],
+            h[(0, i)] * h[(1, j)] + h[(1, i)] * h[(0, j)],
+            h[(1, i)] * h[(1, j)],
+            h[(2, i)] * h[(0, j)] + h[(0, i)] * h[(2, j)],
+            h[(2, i)] * h[(1, j)] + h[(1, i)] * h[(2, j)],
+            h[(2, i)] * h[(2, j)],
+        ]
+    };
+    // Two equations per view, plus zero skew (b₁₂ = 0) weighted like one view.
+    let mut a = DMatrix::<f64>::zeros(2 * hs.len() + 1, 6);
+    for (k, h) in hs.iter().enumerate() {
+        let h = n * h;
+        let h = h / h.column(0).norm().max(h.column(1).norm());
+        let (v12, v11, v22) = (v(&h, 0, 1), v(&h, 0, 0), v(&h, 1, 1));
+        for c in 0..6 {
+            a[(2 * k, c)] = v12[c];
+            a[(2 * k + 1, c)] = v11[c] - v22[c];
+        }
+    }
+    a[(2 * hs.len(), 1)] = 1.0;
+    let b = null_vector(&a).ok_or("the homographies give no solution")?;
+    let (b11, b12, b22, b13, b23, b33) = (b[0], b[1], b[2], b[3], b[4], b[5]);
+    let den = b11 * b22 - b12 * b12;
+    let v0 = (b12 * b13 - b11 * b23) / den;
+    let lambda = b33 - (b13 * b13 + v0 * (b12 * b13 - b11 * b23)) / b11;
+    let alpha2 = lambda / b11;
+    let beta2 = lambda * b11 / den;
+    if !(alpha2 > 0.0 && beta2 > 0.0 && den.abs() > 0.0) || !alpha2.is_finite() || !beta2.is_finite() {
+        return Err(
+            "the views do not determine the focal length (the boards are nearly parallel to each other or to the image): \
+             tilt the board differently between views"
+                .into(),
+        );
+    }
+    let (alpha, beta) = (alpha2.sqrt(), beta2.sqrt());
+    let u0 = -b13 * alpha2 / lambda;
+    let kn = Matrix3::new(alpha, 0.0, u0, 0.0, beta, v0, 0.0, 0.0, 1.0);
+    let k = n.try_inverse().ok_or("singular normaliser")? * kn;
+    let k = k / k[(2, 2)];
+    Ok(DMat3::from_cols_array(&[k[(0, 0)], 0.0, 0.0, 0.0, k[(1, 1)], 0.0, k[(0, 2)], k[(1, 2)], 1.0]))
+}
+
+/// Board-to-camera pose from a homography and K: (R, t) with the board in front.
+pub fn extrinsics(h: &Homography, k: &DMat3) -> Option<(DMat3, DVec3)> {
+    let kinv = k.inverse();
+    let col = |c: usize| kinv * DVec3::new(h[(0, c)], h[(1, c)], h[(2, c)]);
+    let (h1, h2, h3) = (col(0), col(1), col(2));
+    let mut lambda = 1.0 / h1.length();
+    if (lambda * h3).z < 0.0 {
+        lambda = -lambda;
+    }
+    let r1 = h1 * lambda;
+    let r2 = h2 * lambda;
+    let r3 = r1.cross(r2);
+    let t = h3 * lambda;
+    // The nearest rotation to [r1 r2 r3] (polar decomposition by SVD).
+    let m = nalgebra::Matrix3::from_columns(&[
+        nalgebra::Vector3::new(r1.x, r1.y, r1.z),
+        nalgebra::Vector3::new(r2.x, r2.y, r2.z),
+        nalgebra::Vector3::new(r3.x, r3.y, r3.z),
+    ]);
+    let svd = SVD::new(m, true, true);
+    let mut r = svd.u? * svd.v_t?;
+    if r.determinant() < 0.0 {
+        r = -r;
+    }
+    let rot = DMat3::from_cols_array(&[
+        r[(0, 0)],
+        r[(1, 0)],
+        r[(2, 0)],
+        r[(0, 1)],
+        r[(1, 1)],
+        r[(2, 1)],
+        r[(0, 2)],
+        r[(1, 2)],
+        r[(2, 2)],
+    ]);
+    (t.is_finite() && rot.is_finite()).then_some((rot, t))
+}
