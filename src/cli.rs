@@ -50,6 +50,33 @@ enum Command {
         #[arg(long, value_delimiter = ',')]
         aov: Vec<String>,
     },
+    /// Calibrate a camera from chessboard images (Zhang's method).
+    Calibrate {
+        /// Image files: a glob pattern such as 'DIR/*.jpg' (quote it), or several paths.
+        #[arg(long, required = true, num_args = 1..)]
+        images: Vec<String>,
+        /// Inner corners as COLSxROWS, e.g. 9x6.
+        #[arg(long)]
+        board: String,
+        /// Side of a square, in the unit translations should come out in (default 1).
+        #[arg(long, default_value_t = 1.0)]
+        square: f64,
+        /// Output: .yaml/.yml (OpenCV FileStorage) or .json.
+        #[arg(long)]
+        out: PathBuf,
+        /// Keep fy/fx at its initial value (OpenCV's CALIB_FIX_ASPECT_RATIO).
+        #[arg(long)]
+        fix_aspect_ratio: bool,
+        /// Keep the principal point at the image centre.
+        #[arg(long)]
+        fix_principal_point: bool,
+        /// Set p1 = p2 = 0.
+        #[arg(long)]
+        zero_tangential: bool,
+        /// Set k3 = 0.
+        #[arg(long)]
+        fix_k3: bool,
+    },
     /// Benchmarks.
     Bench {
         #[command(subcommand)]
@@ -87,6 +114,24 @@ pub fn main() -> i32 {
         Command::Run { pipeline, out, threads } => run_pipeline(&pipeline, out, threads),
         Command::Render { scene, out, spp, max_depth, seed, threads, aov } => {
             render_cmd(&scene, &out, spp, max_depth, seed, threads, &aov).map(|_| 0)
+        }
+        Command::Calibrate {
+            images,
+            board,
+            square,
+            out,
+            fix_aspect_ratio,
+            fix_principal_point,
+            zero_tangential,
+            fix_k3,
+        } => {
+            let flags = lumen::calib::refine::Flags {
+                fix_aspect_ratio,
+                fix_principal_point,
+                zero_tangential,
+                fix_k3,
+            };
+            calibrate_cmd(&images, &board, square, &out, flags).map(|_| 0)
         }
         Command::Bench { what: Bench::Render { scene, spp, max_depth, threads, repeat } } => {
             bench_render(&scene, spp, max_depth, threads, repeat).map(|_| 0)
@@ -248,6 +293,91 @@ fn bench_render(
         settings.max_depth,
         threads.map_or_else(|| rayon::current_num_threads().to_string(), |t| t.to_string()),
         paths / best / 1e6
+    );
+    Ok(())
+}
+
+/// Parses `COLSxROWS`.
+fn parse_board(text: &str) -> Result<lumen::calib::detect::BoardSize> {
+    let parts: Vec<&str> = text.split(['x', 'X', '×']).collect();
+    match parts.as_slice() {
+        [c, r] => match (c.trim().parse::<usize>(), r.trim().parse::<usize>()) {
+            (Ok(cols), Ok(rows)) if cols >= 2 && rows >= 2 => {
+                Ok(lumen::calib::detect::BoardSize { cols, rows })
+            }
+            _ => bail!("--board {text}: expected inner-corner counts of at least 2, as COLSxROWS (e.g. 9x6)"),
+        },
+        _ => bail!("--board {text}: expected inner-corner counts as COLSxROWS (e.g. 9x6)"),
+    }
+}
+
+/// Expands glob patterns and plain paths, sorted, without duplicates.
+fn expand_images(patterns: &[String]) -> Result<Vec<PathBuf>> {
+    let mut files = Vec::new();
+    for p in patterns {
+        let matches: Vec<PathBuf> = glob::glob(p)
+            .with_context(|| format!("--images {p}: not a valid pattern"))?
+            .filter_map(|m| m.ok())
+            .filter(|m| m.is_file())
+            .collect();
+        if matches.is_empty() {
+            bail!("--images {p}: no file matches");
+        }
+        files.extend(matches);
+    }
+    files.sort();
+    files.dedup();
+    Ok(files)
+}
+
+fn calibrate_cmd(
+    patterns: &[String],
+    board: &str,
+    square: f64,
+    out: &Path,
+    flags: lumen::calib::refine::Flags,
+) -> Result<()> {
+    let board = parse_board(board)?;
+    if !(square.is_finite() && square > 0.0) {
+        bail!("--square {square}: expected a positive length");
+    }
+    let ext = out.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    if !["yaml", "yml", "json"].contains(&ext.as_str()) {
+        bail!("--out {}: expected a file name ending in .yaml, .yml or .json", out.display());
+    }
+    let files = expand_images(patterns)?;
+    let mut images = Vec::new();
+    for f in &files {
+        let img = lumen::image::io::read(f)?;
+        images.push((f.display().to_string(), lumen::image::filter::Grey::from_image(&img)));
+    }
+    let config =
+        lumen::calib::Config { board, square, flags, detect: Default::default(), max_iterations: 100 };
+    let t = std::time::Instant::now();
+    let cal = lumen::calib::run(&images, &config)?;
+    let secs = t.elapsed().as_secs_f64();
+    lumen::calib::file::write(out, &cal)?;
+    for s in &cal.skipped {
+        eprintln!("skipped {}: {}", s.name, s.reason);
+    }
+    let k = &cal.camera_matrix;
+    let d = &cal.distortion_coefficients;
+    eprintln!(
+        "{} of {} views; RMS reprojection error {:.4} px; fx {:.3} fy {:.3} cx {:.3} cy {:.3}; k1 {:.5} k2 {:.5} p1 {:.6} p2 {:.6} k3 {:.5}; {:.0} ms; wrote {}",
+        cal.views.len(),
+        files.len(),
+        cal.rms_px,
+        k[0][0],
+        k[1][1],
+        k[0][2],
+        k[1][2],
+        d[0],
+        d[1],
+        d[2],
+        d[3],
+        d[4],
+        secs * 1e3,
+        out.display()
     );
     Ok(())
 }

@@ -28,6 +28,8 @@ pub mod render;
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     #[error(transparent)]
+    Calib(#[from] calib::Error),
+    #[error(transparent)]
     Render(#[from] render::Error),
     #[error(transparent)]
     Image(#[from] image::io::Error),

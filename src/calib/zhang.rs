@@ -122,6 +122,10 @@ fn refine_homography(h: &mut Homography, board: &[DVec2], image: &[DVec2]) {
     }
 }
 
+const UNOBSERVABLE: &str =
+    "the views do not determine the intrinsics (the boards are parallel to each other \
+     or to the image plane): tilt the board differently between views";
+
 /// Intrinsics (fx, fy, cx, cy; zero skew) from ≥ 2 homographies, `size` = image (w, h).
 pub fn intrinsics(hs: &[Homography], size: (u32, u32)) -> Result<DMat3, String> {
     if hs.len() < 2 {
@@ -153,6 +157,14 @@ pub fn intrinsics(hs: &[Homography], size: (u32, u32)) -> Result<DMat3, String> 
         }
     }
     a[(2 * hs.len(), 1)] = 1.0;
+    // One null direction is expected; a second (near-)null one means the views do not
+    // constrain K (for example every board parallel to the image plane).
+    let sv = SVD::new(a.transpose() * &a, false, false).singular_values;
+    let mut sv: Vec<f64> = sv.iter().copied().collect();
+    sv.sort_by(|x, y| x.total_cmp(y));
+    if sv[1] <= 1e-10 * sv[5] {
+        return Err(UNOBSERVABLE.into());
+    }
     let b = null_vector(&a).ok_or("the homographies give no solution")?;
     let (b11, b12, b22, b13, b23, b33) = (b[0], b[1], b[2], b[3], b[4], b[5]);
     let den = b11 * b22 - b12 * b12;
@@ -161,11 +173,7 @@ pub fn intrinsics(hs: &[Homography], size: (u32, u32)) -> Result<DMat3, String> 
     let alpha2 = lambda / b11;
     let beta2 = lambda * b11 / den;
     if !(alpha2 > 0.0 && beta2 > 0.0 && den.abs() > 0.0) || !alpha2.is_finite() || !beta2.is_finite() {
-        return Err(
-            "the views do not determine the focal length (the boards are nearly parallel to each other or to the image): \
-             tilt the board differently between views"
-                .into(),
-        );
+        return Err(UNOBSERVABLE.into());
     }
     let (alpha, beta) = (alpha2.sqrt(), beta2.sqrt());
     let u0 = -b13 * alpha2 / lambda;
