@@ -77,6 +77,20 @@ enum Command {
         #[arg(long)]
         fix_k3: bool,
     },
+    /// Undistort an image with a calibration (.yaml/.yml or .json).
+    Undistort {
+        /// Calibration file written by `lumen calibrate` or OpenCV.
+        #[arg(long)]
+        camera: PathBuf,
+        /// 0 keeps only valid pixels, 1 keeps every source pixel (OpenCV's
+        /// getOptimalNewCameraMatrix); default 0.
+        #[arg(long, default_value_t = 0.0)]
+        alpha: f64,
+        /// Input image (.png, .jpg or .exr).
+        input: PathBuf,
+        /// Output image: .png (8-bit, the input's code values) or .exr (float).
+        output: PathBuf,
+    },
     /// Benchmarks.
     Bench {
         #[command(subcommand)]
@@ -132,6 +146,9 @@ pub fn main() -> i32 {
                 fix_k3,
             };
             calibrate_cmd(&images, &board, square, &out, flags).map(|_| 0)
+        }
+        Command::Undistort { camera, alpha, input, output } => {
+            undistort_cmd(&camera, alpha, &input, &output).map(|_| 0)
         }
         Command::Bench { what: Bench::Render { scene, spp, max_depth, threads, repeat } } => {
             bench_render(&scene, spp, max_depth, threads, repeat).map(|_| 0)
@@ -378,6 +395,45 @@ fn calibrate_cmd(
         d[4],
         secs * 1e3,
         out.display()
+    );
+    Ok(())
+}
+
+fn undistort_cmd(camera: &Path, alpha: f64, input: &Path, output: &Path) -> Result<()> {
+    let ext = output.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    if ext != "png" && ext != "exr" {
+        bail!("{}: expected an output file name ending in .png or .exr", output.display());
+    }
+    let cal = lumen::calib::file::read(camera)?;
+    let cam = cal.camera();
+    let img = lumen::image::io::read(input)?;
+    if (img.width, img.height) != (cam.width, cam.height) {
+        bail!(
+            "{} is {}×{}, but {} describes a {}×{} camera",
+            input.display(),
+            img.width,
+            img.height,
+            camera.display(),
+            cam.width,
+            cam.height
+        );
+    }
+    let new = lumen::calib::undistort::new_camera_matrix(&cam, alpha)
+        .map_err(|e| anyhow::anyhow!("--alpha: {e}"))?;
+    let out = lumen::calib::undistort::undistort_image(&img, &cam, &new);
+    if ext == "exr" {
+        lumen::image::io::write_exr(output, &out)?;
+    } else {
+        let codes: Vec<u16> = out.data.iter().map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u16).collect();
+        lumen::image::io::write_png_raw(output, out.width, out.height, out.channels, &codes, 8)?;
+    }
+    eprintln!(
+        "wrote {}; new camera matrix fx {:.3} fy {:.3} cx {:.3} cy {:.3}",
+        output.display(),
+        new.fx,
+        new.fy,
+        new.cx,
+        new.cy
     );
     Ok(())
 }

@@ -36,8 +36,9 @@ pub struct BoardSize {
 /// Detector settings.
 #[derive(Clone, Debug)]
 pub struct DetectOptions {
-    /// Half-size of the sub-pixel window in pixels; `None` picks 3/10 of the local square
-    /// size, between 2 and 8 px.
+    /// Half-size of the sub-pixel window in pixels; `None` picks 0.35 of the local square
+    /// size (the distance to the nearest neighbouring corner), between 2 and 8 px: on renders
+    /// of steep views, 0.25, 0.3 and 0.35 gave 0.058, 0.051 and 0.048 px RMS corner error.
     pub subpix_half_window: Option<usize>,
 }
 
@@ -230,12 +231,6 @@ fn find_grid(points: &[DVec2], board: BoardSize, img: &Grey) -> Result<HashMap<(
             }
         }
         if let Some((score, i0, j0, wi, wj)) = best {
-            if std::env::var("LUMEN_DEBUG_DETECT").is_ok() {
-                eprintln!(
-                    "seed {seed}: grid {ni}x{nj} ({}), best window at ({i0},{j0}) {wi}x{wj} score {score:.3}",
-                    grid.len()
-                );
-            }
             if score >= 0.75 {
                 return Ok((i0..i0 + wi)
                     .flat_map(|i| (j0..j0 + wj).map(move |j| (i, j)))
@@ -410,7 +405,7 @@ fn refine(img: &Grey, pts: &[DVec2], board: BoardSize, opts: &DetectOptions) -> 
                 }
             }
             let hw =
-                opts.subpix_half_window.unwrap_or_else(|| (0.3 * spacing).round().clamp(2.0, 8.0) as usize)
+                opts.subpix_half_window.unwrap_or_else(|| (0.35 * spacing).round().clamp(2.0, 8.0) as usize)
                     as i32;
             let sigma = hw as f64;
             let mut p = p0;

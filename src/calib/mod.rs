@@ -7,6 +7,7 @@
 pub mod detect;
 pub mod file;
 pub mod refine;
+pub mod undistort;
 pub mod zhang;
 
 use crate::image::filter::Grey;

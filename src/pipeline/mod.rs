@@ -21,6 +21,7 @@
 //! it consumes.
 
 pub mod report;
+pub mod stage_calibrate;
 pub mod stage_render;
 
 use report::{Metric, Report, StageReport};
@@ -57,6 +58,7 @@ fn default_seed() -> u64 {
 #[serde(tag = "stage", rename_all = "lowercase")]
 pub enum StageSpec {
     Render(stage_render::RenderStage),
+    Calibrate(stage_calibrate::CalibrateStage),
 }
 
 /// What every stage entry has besides its own settings (each stage's file struct carries
@@ -75,11 +77,13 @@ impl StageSpec {
     fn common(&self) -> Common {
         match self {
             StageSpec::Render(s) => s.common(),
+            StageSpec::Calibrate(s) => s.common(),
         }
     }
     fn name(&self) -> &'static str {
         match self {
             StageSpec::Render(_) => "render",
+            StageSpec::Calibrate(_) => "calibrate",
         }
     }
 }
@@ -127,6 +131,7 @@ pub fn run(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Report
         let t = std::time::Instant::now();
         let out = match spec {
             StageSpec::Render(s) => stage_render::run(s, &dir, seed, opts).map_err(stage_err)?,
+            StageSpec::Calibrate(s) => stage_calibrate::run(s, &dir, seed, opts).map_err(stage_err)?,
         };
         let mut timings = out.timings_s;
         timings.insert("total".into(), t.elapsed().as_secs_f64());
