@@ -48,7 +48,7 @@ const BINS: usize = 16;
 const MAX_DEPTH: u32 = 60;
 
 pub struct Bvh {
-    /// The binary SAH tree (kept for its statistics and as the reference traversal in tests).
+    /// The binary SAH tree the 4-wide one is collapsed from (kept for its statistics).
     nodes: Vec<Node>,
     /// The same tree collapsed to 4 children per node, which traversal uses.
     wide: Vec<Node4>,
@@ -114,115 +114,6 @@ impl Bvh {
         Bvh { nodes, wide, blocks, prims, order }
     }
 
-    /// Closest hit within (t_min, t_max). `Hit::prim` indexes `self.prims` (leaf order).
-    #[inline]
-    pub fn intersect_binary(&self, ray: &Ray, t_min: f32, mut t_max: f32) -> Option<Hit> {
-        let q = Query::new(ray, t_min);
-        let mut best: Option<Hit> = None;
-        let Some(root) = self.nodes.first() else {
-            return None;
-        };
-        if q.enter(root, t_max).is_none() {
-            return None;
-        }
-        // Stack of (node, entry distance): a far child is skipped when popped if a closer hit
-        // was found meanwhile.
-        let mut stack = [(0u32, 0.0f32); 2 * MAX_DEPTH as usize];
-        let mut sp = 0usize;
-        let mut index = 0u32;
-        loop {
-            let node = &self.nodes[index as usize];
-            let count = node.count_axis & COUNT_MASK;
-            if count > 0 {
-                let first = node.offset as usize;
-                for (k, prim) in self.prims[first..first + count as usize].iter().enumerate() {
-                    if let Some((t, b1, b2)) = prim.intersect(ray, t_min, t_max) {
-                        t_max = t;
-                        best = Some(Hit { t, prim: (first + k) as u32, b1, b2 });
-                    }
-                }
-            } else {
-                let (a, b) = (index + 1, node.offset);
-                let ta = q.enter(&self.nodes[a as usize], t_max);
-                let tb = q.enter(&self.nodes[b as usize], t_max);
-                match (ta, tb) {
-                    (Some(ta), Some(tb)) => {
-                        let (near, far, tfar) = if ta <= tb { (a, b, tb) } else { (b, a, ta) };
-                        stack[sp] = (far, tfar);
-                        sp += 1;
-                        index = near;
-                        continue;
-                    }
-                    (Some(_), None) => {
-                        index = a;
-                        continue;
-                    }
-                    (None, Some(_)) => {
-                        index = b;
-                        continue;
-                    }
-                    (None, None) => {}
-                }
-            }
-            loop {
-                if sp == 0 {
-                    return best;
-                }
-                sp -= 1;
-                let (next, t_enter) = stack[sp];
-                if t_enter <= t_max {
-                    index = next;
-                    break;
-                }
-            }
-        }
-    }
-
-    /// Whether anything lies within (t_min, t_max): the shadow-ray query.
-    #[inline]
-    pub fn occluded_binary(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
-        let q = Query::new(ray, t_min);
-        let Some(root) = self.nodes.first() else {
-            return false;
-        };
-        if q.enter(root, t_max).is_none() {
-            return false;
-        }
-        let mut stack = [0u32; 2 * MAX_DEPTH as usize];
-        let mut sp = 0usize;
-        let mut index = 0u32;
-        loop {
-            let node = &self.nodes[index as usize];
-            let count = node.count_axis & COUNT_MASK;
-            if count > 0 {
-                let first = node.offset as usize;
-                if self.prims[first..first + count as usize]
-                    .iter()
-                    .any(|p| p.intersect(ray, t_min, t_max).is_some())
-                {
-                    return true;
-                }
-            } else {
-                let (a, b) = (index + 1, node.offset);
-                let ha = q.enter(&self.nodes[a as usize], t_max).is_some();
-                let hb = q.enter(&self.nodes[b as usize], t_max).is_some();
-                if ha || hb {
-                    if ha && hb {
-                        stack[sp] = b;
-                        sp += 1;
-                    }
-                    index = if ha { a } else { b };
-                    continue;
-                }
-            }
-            if sp == 0 {
-                return false;
-            }
-            sp -= 1;
-            index = stack[sp];
-        }
-    }
-
     pub fn depth(&self) -> usize {
         fn walk(nodes: &[Node], i: usize) -> usize {
             let n = &nodes[i];
@@ -245,30 +136,6 @@ impl Bvh {
 #[inline(always)]
 fn safe_recip(dir: Vec3A) -> Vec3A {
     dir.recip().clamp(Vec3A::splat(-1e30), Vec3A::splat(1e30))
-}
-
-/// A ray prepared for box tests: t = (bound − origin)·inv.
-struct Query {
-    inv: Vec3A,
-    origin: Vec3A,
-    t_min: f32,
-}
-
-impl Query {
-    #[inline(always)]
-    fn new(ray: &Ray, t_min: f32) -> Query {
-        Query { inv: safe_recip(ray.dir), origin: ray.origin, t_min }
-    }
-
-    /// Entry distance into the node's box if the ray meets it within (t_min, t_max).
-    #[inline(always)]
-    fn enter(&self, node: &Node, t_max: f32) -> Option<f32> {
-        let t0 = (Vec3A::from(node.lo) - self.origin) * self.inv;
-        let t1 = (Vec3A::from(node.hi) - self.origin) * self.inv;
-        let near = t0.min(t1).max_element().max(self.t_min);
-        let far = t0.max(t1).min_element().min(t_max);
-        (near <= far).then_some(near)
-    }
 }
 
 /// A node of the 4-wide tree: the boxes of up to four children as structure-of-arrays lanes,
@@ -687,7 +554,6 @@ mod tests {
             let ray = Ray { origin: Vec3A::new(x, -0.01 * x, 0.0), dir: Vec3A::Y };
             assert!(bvh.intersect(&ray, 0.0, f32::INFINITY).is_some(), "missed sphere {i}");
             assert!(bvh.occluded(&ray, 0.0, f32::INFINITY));
-            assert!(bvh.intersect_binary(&ray, 0.0, f32::INFINITY).is_some(), "binary missed sphere {i}");
         }
         // A ray running inside the plane of a box face (0 · ∞ in the slab test).
         let tri = [Prim::Triangle { v0: Vec3A::ZERO, e1: Vec3A::X, e2: Vec3A::Y }];
@@ -720,11 +586,8 @@ mod tests {
                 .filter_map(|p| p.intersect(&ray, 1e-4, f32::INFINITY).map(|h| h.0))
                 .fold(f32::INFINITY, f32::min);
             let got = bvh.intersect(&ray, 1e-4, f32::INFINITY).map_or(f32::INFINITY, |h| h.t);
-            let binary = bvh.intersect_binary(&ray, 1e-4, f32::INFINITY).map_or(f32::INFINITY, |h| h.t);
             assert_eq!(brute, got);
-            assert_eq!(brute, binary);
             assert_eq!(brute.is_finite(), bvh.occluded(&ray, 1e-4, f32::INFINITY));
-            assert_eq!(brute.is_finite(), bvh.occluded_binary(&ray, 1e-4, f32::INFINITY));
         }
     }
 }
