@@ -132,6 +132,9 @@ fn bad_camera() {
     let text = "[camera]\nwidth = 8\nheight = 8\nfov_deg = 40.0\nlook_at = { origin = [0.0, 0.0, 0.0], target = [0.0, 0.0, 0.0], up = [0.0, 1.0, 0.0] }\n";
     let e = common::scene(text, dir.path()).err().unwrap().to_string();
     assert!(e.contains("look_at"), "{e}");
+    let text = "[camera]\nwidth = 100000\nheight = 100000\nfov_deg = 40.0\nt_world_cam = { translation = [0.0, 0.0, 0.0] }\n";
+    let e = common::scene(text, dir.path()).err().unwrap().to_string();
+    assert!(e.contains("100000×100000"), "{e}");
 }
 
 fn lumen(args: &[&str]) -> (i32, String) {

@@ -13,7 +13,7 @@ use super::{obj, Error};
 use crate::math::{CameraModel, Distortion, Intrinsics, Pose};
 use glam::{DMat3, DVec2, DVec3, Vec2, Vec3A};
 use serde::Deserialize;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 // ---------------------------------------------------------------------------------------------
 // File format
@@ -571,6 +571,13 @@ fn build_camera(c: &CameraSpec, path: &Path) -> Result<(CameraModel, Pose), Erro
         camera.distortion = Distortion::from_array(d);
     }
     camera.validate().map_err(|m| field_err(path, "camera", m))?;
+    if c.width as u64 * c.height as u64 > 1 << 28 {
+        return Err(field_err(
+            path,
+            "camera",
+            format!("{}×{} pixels is more than the 2^28 lumen renders", c.width, c.height),
+        ));
+    }
     let pose = match (&c.look_at, &c.t_world_cam) {
         (Some(l), None) => {
             let o = finite3(path, "camera.look_at.origin", l.origin)?;
@@ -649,10 +656,5 @@ impl Scene {
     pub fn camera_ray(&self, px: DVec2) -> Option<(DVec3, DVec3)> {
         let d = self.camera.pixel_ray(px)?;
         Some((self.t_world_cam.translation, self.t_world_cam.rotation * d))
-    }
-
-    /// Resolves a path named in a scene file.
-    pub fn resolve(scene_path: &Path, name: &str) -> PathBuf {
-        scene_path.parent().map(|d| d.join(name)).unwrap_or_else(|| PathBuf::from(name))
     }
 }
