@@ -105,16 +105,19 @@ pub fn board_points(board: BoardSize, square: f64) -> Vec<DVec3> {
         .collect()
 }
 
-/// Detects the board in every image and calibrates from the views where it was found.
-pub fn run(images: &[(String, Grey)], config: &Config) -> Result<Calibration, Error> {
+/// Detected views (name and corners in `detect`'s order) and the views skipped, with reasons.
+pub type Detections = (Vec<(String, Vec<DVec2>)>, Vec<Skipped>);
+
+/// Detects the board in every image; all images must have the first one's size.
+pub fn detect_views(images: &[(String, Grey)], config: &Config) -> Result<Detections, Error> {
     let Some((_, first)) = images.first() else {
         return Err(Error::BadInput("no images to calibrate from".into()));
     };
-    let size = (first.width as u32, first.height as u32);
+    let size = (first.width, first.height);
     let mut views = Vec::new();
     let mut skipped = Vec::new();
     for (name, img) in images {
-        if (img.width as u32, img.height as u32) != size {
+        if (img.width, img.height) != size {
             return Err(Error::BadInput(format!(
                 "{name} is {}×{}, the first image {}×{}: all views must come from one camera mode",
                 img.width, img.height, size.0, size.1
@@ -125,6 +128,13 @@ pub fn run(images: &[(String, Grey)], config: &Config) -> Result<Calibration, Er
             Err(reason) => skipped.push(Skipped { name: name.clone(), reason }),
         }
     }
+    Ok((views, skipped))
+}
+
+/// Detects the board in every image and calibrates from the views where it was found.
+pub fn run(images: &[(String, Grey)], config: &Config) -> Result<Calibration, Error> {
+    let (views, skipped) = detect_views(images, config)?;
+    let size = images.first().map_or((0, 0), |(_, g)| (g.width as u32, g.height as u32));
     let mut cal = calibrate(&views, size, config)?;
     cal.skipped = skipped;
     Ok(cal)

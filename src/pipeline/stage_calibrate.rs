@@ -194,8 +194,13 @@ pub fn run(s: &CalibrateStage, dir: &Path, seed: u64, opts: &RunOptions) -> Resu
         detect: Default::default(),
         max_iterations: 100,
     };
+    // The CLI's path (`calib::run`), in its two steps, so the detected corners can be compared
+    // with the truth without detecting twice.
     let t1 = std::time::Instant::now();
-    let result = calib::run(&images, &config);
+    let (views, skipped) = calib::detect_views(&images, &config).map_err(|e| e.to_string())?;
+    let mut cal = calib::calibrate(&views, (truth.width, truth.height), &config)
+        .map_err(|e| format!("calibration failed on the rendered views: {e}"))?;
+    cal.skipped = skipped;
     let calib_s = t1.elapsed().as_secs_f64();
     let mut notes = vec![format!(
         "{} views of {}×{} corners, {}x{} px, {} spp, sensor {}.",
@@ -208,27 +213,20 @@ pub fn run(s: &CalibrateStage, dir: &Path, seed: u64, opts: &RunOptions) -> Resu
         if sensor.is_some() { "on" } else { "off" }
     )];
     let mut m = Vec::new();
-    let cal = match result {
-        Ok(c) => c,
-        Err(e) => return Err(format!("calibration failed on the rendered views: {e}")),
-    };
     for sk in &cal.skipped {
         notes.push(format!("{} skipped: {}", sk.name, sk.reason));
     }
     m.push(Metric::new("views_detected", cal.views.len() as f64, "views", Better::Higher));
-    // Detected corners against truth, view by view (detection again: calib::run keeps only poses).
+    // Detected corners against the projected true corners.
     let (mut sq, mut count) = (0.0, 0usize);
     let mut covered = Vec::new();
-    for ((name, img), truth_pts) in images.iter().zip(&true_corners) {
-        if cal.skipped.iter().any(|k| &k.name == name) {
-            continue;
-        }
-        let found = calib::detect::detect(img, board, &config.detect).map_err(|e| format!("{name}: {e}"))?;
-        for (a, b) in found.iter().zip(truth_pts) {
+    for (name, found) in &views {
+        let k = images.iter().position(|(n, _)| n == name).ok_or("a detected view has no image")?;
+        for (a, b) in found.iter().zip(&true_corners[k]) {
             sq += a.distance_squared(*b);
             count += 1;
         }
-        covered.extend(found);
+        covered.extend(found.iter().copied());
     }
     m.push(Metric::new("corner_rms_px", (sq / count.max(1) as f64).sqrt(), "px", Better::Lower));
     let est = cal.camera();
