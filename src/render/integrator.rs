@@ -17,7 +17,7 @@
 //! The film keeps the mean and the variance of that mean (sample variance / n) per channel.
 
 use super::geometry::{Hit, Prim, Ray};
-use super::sampler::Sampler;
+use super::sampler::{Sampler, SamplerKind};
 use super::scene::{Light, Scene};
 use super::texture::Texture;
 use crate::image::Image;
@@ -31,6 +31,7 @@ pub struct Settings {
     pub spp: u32,
     pub max_depth: u32,
     pub seed: u64,
+    pub sampler: SamplerKind,
     /// Pixel window [x0, y0, x1, y1) to render; the whole image when `None`.
     pub crop: Option<[u32; 4]>,
     /// Worker threads; all available cores when `None`.
@@ -44,6 +45,7 @@ impl Settings {
             spp: scene.render.spp,
             max_depth: scene.render.max_depth,
             seed: scene.render.seed,
+            sampler: scene.render.sampler,
             crop: None,
             threads: None,
             progress: false,
@@ -280,7 +282,7 @@ fn render_pixel(scene: &Scene, settings: &Settings, x: u32, y: u32) -> ([f32; 3]
     let origin = Vec3A::from(scene.t_world_cam.translation.as_vec3());
     let rot = scene.t_world_cam.rotation;
     for k in 0..settings.spp {
-        let mut s = Sampler::new(settings.seed, pixel_index, k as u64);
+        let mut s = Sampler::with_kind(settings.sampler, settings.seed, pixel_index, k as u64);
         let (jx, jy) = s.next2();
         let px = DVec2::new(x as f64 + jx as f64 - 0.5, y as f64 + jy as f64 - 0.5);
         let l = match scene.camera.pixel_ray(px) {

@@ -1,10 +1,25 @@
-//! Independent random numbers keyed by (seed, pixel, sample, dimension).
+//! Sample streams keyed by (seed, pixel, sample, dimension): independent random numbers, or
+//! Owen-scrambled Sobol points.
 //!
-//! Each (seed, pixel, sample) triple owns its own stream, started from a hash of the triple and
+//! **Independent.** //! Each (seed, pixel, sample) triple owns its own stream, started from a hash of the triple and
 //! never shared with another pixel or thread; the dimension is the position in that stream. So
 //! an image does not depend on how pixels are divided among threads: one thread and many give
 //! bit-identical results. The hash is the SplitMix64 finaliser (Steele et al. 2014); the stream
 //! is PCG32 (O'Neill 2014, XSH-RR output), one multiply-add per number.
+//!
+//! **Sobol** (padded, Owen-scrambled; Burley 2020, "Practical Hash-based Owen Scrambling", as
+//! pbrt-v4's `PaddedSobolSampler`). Every request — one number or a pair — is its own
+//! "dimension" d of the path. A pair is the first two Sobol dimensions (van der Corput and its
+//! Pascal-matrix partner, together a (0, 2)-sequence in base 2) at a shuffled index, each
+//! coordinate Owen-scrambled with its own seed hashed from (seed, pixel, d); a single number is
+//! the scrambled van der Corput coordinate alone. The index shuffle is itself a nested uniform
+//! scramble, which maps the first 2^m samples onto one aligned block of 2^m, so with a
+//! power-of-two sample count the pixel's samples of every pair form a (0, m, 2)-net: each
+//! elementary interval of area 2^−m holds exactly one. Pixel-edge coverage, soft shadows and
+//! the first bounce then converge faster than N^(−½) where the integrand allows. Dimensions are
+//! scrambled independently of each other, so a path's dimensions are not jointly stratified
+//! (padding), but each is as random as an independent sample across pixels. The film's
+//! per-sample variance ignores the stratification and overestimates the error of the mean.
 
 /// SplitMix64's finaliser: a bijective 64-bit mixer.
 #[inline]
@@ -16,9 +31,61 @@ pub fn mix64(mut x: u64) -> u64 {
     x ^ (x >> 31)
 }
 
+/// Which sample stream a render draws from (scene files: `render.sampler`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SamplerKind {
+    /// Independent uniform numbers (the default; its variance estimate is exact).
+    #[default]
+    Independent,
+    /// Padded Owen-scrambled Sobol points; best with a power-of-two sample count.
+    Sobol,
+}
+
 /// The random stream of one (pixel, sample) pair; `next` walks its dimensions.
 pub struct Sampler {
     state: u64,
+    sobol: Option<Sobol>,
+}
+
+/// Where a Sobol stream stands: its sample index, the (seed, pixel) hash and the dimension.
+struct Sobol {
+    index: u32,
+    key: u64,
+    dim: u64,
+}
+
+/// Burley's nested uniform scramble of a 32-bit fraction (bit 31 is the ½ digit): every digit
+/// is flipped by a hash of the digits above it and the seed (Vegdahl's improved constants).
+#[inline]
+fn owen_scramble(v: u32, seed: u32) -> u32 {
+    let mut x = v.reverse_bits();
+    x ^= x.wrapping_mul(0x3d20_adea);
+    x = x.wrapping_add(seed);
+    x = x.wrapping_mul((seed >> 16) | 1);
+    x ^= x.wrapping_mul(0x0552_6c56);
+    x ^= x.wrapping_mul(0x53a2_2864);
+    x.reverse_bits()
+}
+
+/// The second Sobol dimension at index i: bit k of i adds column k of the Pascal matrix mod 2.
+#[inline]
+fn sobol_dim1(mut i: u32) -> u32 {
+    let mut v = 1u32 << 31;
+    let mut out = 0;
+    while i != 0 {
+        if i & 1 != 0 {
+            out ^= v;
+        }
+        i >>= 1;
+        v ^= v >> 1;
+    }
+    out
+}
+
+#[inline]
+fn to_unit(bits: u32) -> f32 {
+    (bits >> 8) as f32 * (1.0 / (1u32 << 24) as f32)
 }
 
 const PCG_MUL: u64 = 6_364_136_223_846_793_005;
@@ -26,12 +93,36 @@ const PCG_INC: u64 = 1_442_695_040_888_963_407;
 
 impl Sampler {
     pub fn new(seed: u64, pixel: u64, sample: u64) -> Sampler {
-        Sampler { state: mix64(seed ^ mix64(pixel ^ mix64(sample.wrapping_add(0x5851_f42d)))) }
+        Sampler { state: mix64(seed ^ mix64(pixel ^ mix64(sample.wrapping_add(0x5851_f42d)))), sobol: None }
+    }
+
+    /// Sample `sample` of pixel `pixel` from the chosen kind of stream.
+    pub fn with_kind(kind: SamplerKind, seed: u64, pixel: u64, sample: u64) -> Sampler {
+        match kind {
+            SamplerKind::Independent => Sampler::new(seed, pixel, sample),
+            SamplerKind::Sobol => Sampler {
+                state: 0,
+                sobol: Some(Sobol { index: sample as u32, key: mix64(seed ^ mix64(pixel)), dim: 0 }),
+            },
+        }
+    }
+
+    /// The next Sobol dimension's scramble seeds: index shuffle, x and y.
+    #[inline]
+    fn sobol_seeds(sb: &mut Sobol) -> (u32, u32, u32) {
+        let h = mix64(sb.key ^ sb.dim.wrapping_mul(0x9e37_79b9_7f4a_7c15));
+        sb.dim += 1;
+        (h as u32, (h >> 32) as u32, mix64(h) as u32)
     }
 
     /// A uniform number in [0, 1) with 24 random bits.
     #[inline]
     pub fn next(&mut self) -> f32 {
+        if let Some(sb) = &mut self.sobol {
+            let (hi, hx, _) = Self::sobol_seeds(sb);
+            let i = owen_scramble(sb.index, hi);
+            return to_unit(owen_scramble(i.reverse_bits(), hx));
+        }
         let old = self.state;
         self.state = old.wrapping_mul(PCG_MUL).wrapping_add(PCG_INC);
         let xorshifted = (((old >> 18) ^ old) >> 27) as u32;
@@ -40,6 +131,11 @@ impl Sampler {
     }
 
     pub fn next2(&mut self) -> (f32, f32) {
+        if let Some(sb) = &mut self.sobol {
+            let (hi, hx, hy) = Self::sobol_seeds(sb);
+            let i = owen_scramble(sb.index, hi);
+            return (to_unit(owen_scramble(i.reverse_bits(), hx)), to_unit(owen_scramble(sobol_dim1(i), hy)));
+        }
         (self.next(), self.next())
     }
 }
@@ -93,5 +189,99 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// With 2^m samples, every pair of a pixel is a (0, m, 2)-net: each elementary interval
+    /// [a/2^k, (a+1)/2^k) × [b/2^(m−k), (b+1)/2^(m−k)) holds exactly one sample; and every single
+    /// number is one per stratum of width 2^−m.
+    #[test]
+    fn sobol_pairs_are_nets() {
+        let m = 6u32;
+        let n = 1usize << m;
+        for pixel in [0u64, 1, 77, 123_456] {
+            let mut samplers: Vec<Sampler> =
+                (0..n as u64).map(|k| Sampler::with_kind(SamplerKind::Sobol, 9, pixel, k)).collect();
+            for dim in 0..12 {
+                let pts: Vec<(f32, f32)> = samplers
+                    .iter_mut()
+                    .map(|s| if dim % 3 == 2 { (s.next(), 0.5) } else { s.next2() })
+                    .collect();
+                let shapes = if dim % 3 == 2 { vec![m] } else { (0..=m).collect() };
+                for k in shapes {
+                    let (nx, ny) = (1usize << k, 1usize << (m - k));
+                    let mut count = vec![0; n];
+                    for &(x, y) in &pts {
+                        assert!((0.0..1.0).contains(&x) && (0.0..1.0).contains(&y));
+                        let cell = (x * nx as f32) as usize + nx * (y * ny as f32) as usize;
+                        count[cell.min(n - 1)] += 1;
+                    }
+                    assert!(
+                        count.iter().all(|&c| c == 1),
+                        "pixel {pixel}, dimension {dim}, {nx}×{ny} intervals: {count:?}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// Sobol streams of neighbouring pixels are uncorrelated in every early dimension, and the
+    /// numbers are uniform over many pixels.
+    #[test]
+    fn sobol_pixels_are_uncorrelated() {
+        let n = 20_000u64;
+        for dim in 0..8 {
+            let (mut sx, mut sy, mut sxy, mut sxx, mut syy) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
+            for i in 0..n {
+                let mut a = Sampler::with_kind(SamplerKind::Sobol, 5, i, 3);
+                let mut b = Sampler::with_kind(SamplerKind::Sobol, 5, i + 1, 3);
+                let (mut x, mut y) = (0.0, 0.0);
+                for _ in 0..=dim {
+                    x = a.next() as f64;
+                    y = b.next() as f64;
+                }
+                sx += x;
+                sy += y;
+                sxy += x * y;
+                sxx += x * x;
+                syy += y * y;
+            }
+            let nf = n as f64;
+            assert!((sx / nf - 0.5).abs() < 5.0 / (12.0 * nf).sqrt(), "dimension {dim}: mean {}", sx / nf);
+            let cov = sxy / nf - sx * sy / nf / nf;
+            let corr = cov / ((sxx / nf - (sx / nf).powi(2)) * (syy / nf - (sy / nf).powi(2))).sqrt();
+            assert!(corr.abs() < 5.0 / nf.sqrt(), "dimension {dim}: correlation {corr}");
+        }
+    }
+
+    /// RMS error, over `pixels` pixels, of the covered fraction of a pixel cut by the edge
+    /// y = 0.31 + 0.27·x (the integral of a step, as at a chessboard corner), from `spp` samples.
+    fn edge_rms(kind: SamplerKind, spp: u64, pixels: u64) -> f64 {
+        let (a, b) = (0.31f64, 0.27f64);
+        let truth = a + b / 2.0;
+        let mut err2 = 0.0;
+        for pixel in 0..pixels {
+            let mut hits = 0u64;
+            for k in 0..spp {
+                let (x, y) = Sampler::with_kind(kind, 3, pixel, k).next2();
+                hits += ((y as f64) < a + b * x as f64) as u64;
+            }
+            err2 += (hits as f64 / spp as f64 - truth).powi(2);
+        }
+        (err2 / pixels as f64).sqrt()
+    }
+
+    /// The point of the sampler: independent samples estimate an edge pixel with RMS error
+    /// √(p(1−p)/N) (0.031 at N = 256), a scrambled (0, m, 2)-net's error decays as N^(−3/4)
+    /// for a straight edge. Measured: the exponent between 64 and 1024 samples, and the gain
+    /// at 256.
+    #[test]
+    fn sobol_converges_faster_on_an_edge() {
+        let independent = edge_rms(SamplerKind::Independent, 256, 400);
+        assert!((0.025..0.037).contains(&independent), "independent RMS {independent}");
+        let sobol = edge_rms(SamplerKind::Sobol, 256, 400);
+        assert!(sobol < independent / 3.0, "Sobol RMS {sobol} vs independent {independent}");
+        let rate = (edge_rms(SamplerKind::Sobol, 64, 400) / edge_rms(SamplerKind::Sobol, 1024, 400)).ln()
+            / 16f64.ln();
+        assert!(rate > 0.65, "Sobol error decays as N^-{rate:.3}, expected N^-0.75");
     }
 }

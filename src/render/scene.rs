@@ -93,6 +93,10 @@ pub struct RenderSpec {
     /// Seed of every random stream (default 1).
     #[serde(default = "default_seed")]
     pub seed: u64,
+    /// `"independent"` (default) or `"sobol"` (padded Owen-scrambled Sobol, see
+    /// `render::sampler`; converges faster on pixel edges and soft shadows).
+    #[serde(default)]
+    pub sampler: super::sampler::SamplerKind,
 }
 
 fn default_spp() -> u32 {
@@ -107,7 +111,12 @@ fn default_seed() -> u64 {
 
 impl Default for RenderSpec {
     fn default() -> Self {
-        RenderSpec { spp: default_spp(), max_depth: default_depth(), seed: default_seed() }
+        RenderSpec {
+            spp: default_spp(),
+            max_depth: default_depth(),
+            seed: default_seed(),
+            sampler: Default::default(),
+        }
     }
 }
 
