@@ -20,7 +20,12 @@
 //!    detector, which starts at either end.
 //! 5. **Sub-pixel**: the corner p minimises Σ w(q)·(∇I(q)·(q − p))² over a window (the
 //!    gradient at every q on an edge through p is orthogonal to q − p), the equation OpenCV's
-//!    `cornerSubPix` solves, iterated to 1e-4 px.
+//!    `cornerSubPix` solves, iterated to 1e-4 px. Unlike `cornerSubPix`, the gradients are
+//!    taken at whole pixels (the window's weights centred on p) rather than interpolated at
+//!    p + offsets: bilinear interpolation at one shared sub-pixel phase biases every sample
+//!    the same way, and on renders this alone cut the corner error from 0.042 to 0.030 px RMS.
+//!    Gradients are central differences of the image blurred with σ = 1 px (0.7 px: 0.031,
+//!    1.4 px: 0.053 px).
 
 use crate::image::filter::Grey;
 use glam::DVec2;
@@ -36,9 +41,11 @@ pub struct BoardSize {
 /// Detector settings.
 #[derive(Clone, Debug)]
 pub struct DetectOptions {
-    /// Half-size of the sub-pixel window in pixels; `None` picks 0.35 of the local square
-    /// size (the distance to the nearest neighbouring corner), between 2 and 8 px: on renders
-    /// of steep views, 0.25, 0.3 and 0.35 gave 0.058, 0.051 and 0.048 px RMS corner error.
+    /// Half-size of the sub-pixel window in pixels; `None` picks 0.45 of the local square
+    /// size (the distance to the nearest neighbouring corner), between 2 and 8 px. On noiseless
+    /// renders of steep views (6 views, 64 Sobol spp, gradients at σ = 1 px) 0.35, 0.45 and
+    /// 0.55 gave 0.029, 0.023 and 0.079 px RMS corner error; on the real photographs, where the
+    /// 8 px cap decides, a 12 px cap raised the RMS reprojection error from 0.176 to 0.47 px.
     pub subpix_half_window: Option<usize>,
 }
 
@@ -66,7 +73,7 @@ pub fn detect(img: &Grey, board: BoardSize, opts: &DetectOptions) -> Result<Vec<
     }
     let grid = find_grid(&points, board, &sampler)?;
     let ordered = order(&grid, board, &sampler);
-    Ok(refine(img, &ordered, board, opts))
+    Ok(refine(&sampler, &ordered, board, opts))
 }
 
 /// Saddle points that pass the X-junction check (steps 1 and 2).
@@ -379,9 +386,9 @@ fn order(grid: &HashMap<(i32, i32), DVec2>, board: BoardSize, img: &Grey) -> Vec
     pts
 }
 
-/// Sub-pixel refinement of every corner (module docs, step 5).
-fn refine(img: &Grey, pts: &[DVec2], board: BoardSize, opts: &DetectOptions) -> Vec<DVec2> {
-    let g = img.blur(0.7);
+/// Sub-pixel refinement of every corner (module docs, step 5); `g` is the image blurred with
+/// σ = 1 px.
+fn refine(g: &Grey, pts: &[DVec2], board: BoardSize, opts: &DetectOptions) -> Vec<DVec2> {
     let (w, h) = (g.width, g.height);
     let mut gx = Grey { width: w, height: h, data: vec![0.0; w * h] };
     let mut gy = gx.clone();
@@ -405,17 +412,20 @@ fn refine(img: &Grey, pts: &[DVec2], board: BoardSize, opts: &DetectOptions) -> 
                 }
             }
             let hw =
-                opts.subpix_half_window.unwrap_or_else(|| (0.35 * spacing).round().clamp(2.0, 8.0) as usize)
+                opts.subpix_half_window.unwrap_or_else(|| (0.45 * spacing).round().clamp(2.0, 8.0) as usize)
                     as i32;
             let sigma = hw as f64;
             let mut p = p0;
             for _ in 0..50 {
                 let (mut a00, mut a01, mut a11, mut b0, mut b1) = (0.0, 0.0, 0.0, 0.0, 0.0);
+                let (px, py) = (p.x.round() as isize, p.y.round() as isize);
                 for dy in -hw..=hw {
                     for dx in -hw..=hw {
-                        let q = p + DVec2::new(dx as f64, dy as f64);
-                        let wgt = (-((dx * dx + dy * dy) as f64) / (2.0 * sigma * sigma)).exp();
-                        let (ex, ey) = (gx.sample(q.x, q.y), gy.sample(q.x, q.y));
+                        let (qx, qy) = (px + dx as isize, py + dy as isize);
+                        let q = DVec2::new(qx as f64, qy as f64);
+                        let d2 = (q - p).length_squared();
+                        let wgt = (-d2 / (2.0 * sigma * sigma)).exp();
+                        let (ex, ey) = (gx.at_clamped(qx, qy) as f64, gy.at_clamped(qx, qy) as f64);
                         let (xx, xy, yy) = (wgt * ex * ex, wgt * ex * ey, wgt * ey * ey);
                         a00 += xx;
                         a01 += xy;

@@ -6,6 +6,7 @@
 
 pub mod detect;
 pub mod file;
+pub mod overlay;
 pub mod refine;
 pub mod undistort;
 pub mod zhang;
@@ -114,16 +115,21 @@ pub fn detect_views(images: &[(String, Grey)], config: &Config) -> Result<Detect
         return Err(Error::BadInput("no images to calibrate from".into()));
     };
     let size = (first.width, first.height);
+    if let Some((name, img)) = images.iter().find(|(_, img)| (img.width, img.height) != size) {
+        return Err(Error::BadInput(format!(
+            "{name} is {}×{}, the first image {}×{}: all views must come from one camera mode",
+            img.width, img.height, size.0, size.1
+        )));
+    }
+    // Views are independent: detect them in parallel, keeping the input order.
+    let found: Vec<_> = {
+        use rayon::prelude::*;
+        images.par_iter().map(|(_, img)| detect::detect(img, config.board, &config.detect)).collect()
+    };
     let mut views = Vec::new();
     let mut skipped = Vec::new();
-    for (name, img) in images {
-        if (img.width, img.height) != size {
-            return Err(Error::BadInput(format!(
-                "{name} is {}×{}, the first image {}×{}: all views must come from one camera mode",
-                img.width, img.height, size.0, size.1
-            )));
-        }
-        match detect::detect(img, config.board, &config.detect) {
+    for ((name, _), result) in images.iter().zip(found) {
+        match result {
             Ok(corners) => views.push((name.clone(), corners)),
             Err(reason) => skipped.push(Skipped { name: name.clone(), reason }),
         }
