@@ -76,6 +76,10 @@ enum Command {
         /// Set k3 = 0.
         #[arg(long)]
         fix_k3: bool,
+        /// Write an overlay PNG per view into this folder: the detected corners, rows in
+        /// colour, or the candidate corners of a view without a whole board.
+        #[arg(long)]
+        debug: Option<PathBuf>,
     },
     /// Undistort an image with a calibration (.yaml/.yml or .json).
     Undistort {
@@ -114,6 +118,20 @@ enum Bench {
         #[arg(long, default_value_t = 3)]
         repeat: u32,
     },
+    /// Detection and calibration time on a set of photographs; with the `opencv` feature,
+    /// OpenCV's findChessboardCorners + cornerSubPix + calibrateCamera on the same images in
+    /// the same run. Images are decoded before timing.
+    Calibrate {
+        /// Image files (a quoted glob pattern or several paths).
+        #[arg(long, required = true, num_args = 1..)]
+        images: Vec<String>,
+        /// Inner corners as COLSxROWS.
+        #[arg(long, default_value = "9x6")]
+        board: String,
+        /// Repetitions; the best is reported.
+        #[arg(long, default_value_t = 5)]
+        repeat: u32,
+    },
 }
 
 pub fn main() -> i32 {
@@ -138,6 +156,7 @@ pub fn main() -> i32 {
             fix_principal_point,
             zero_tangential,
             fix_k3,
+            debug,
         } => {
             let flags = lumen::calib::refine::Flags {
                 fix_aspect_ratio,
@@ -145,13 +164,16 @@ pub fn main() -> i32 {
                 zero_tangential,
                 fix_k3,
             };
-            calibrate_cmd(&images, &board, square, &out, flags).map(|_| 0)
+            calibrate_cmd(&images, &board, square, &out, flags, debug.as_deref()).map(|_| 0)
         }
         Command::Undistort { camera, alpha, input, output } => {
             undistort_cmd(&camera, alpha, &input, &output).map(|_| 0)
         }
         Command::Bench { what: Bench::Render { scene, spp, max_depth, threads, repeat } } => {
             bench_render(&scene, spp, max_depth, threads, repeat).map(|_| 0)
+        }
+        Command::Bench { what: Bench::Calibrate { images, board, repeat } } => {
+            bench_calibrate(&images, &board, repeat).map(|_| 0)
         }
     };
     match result {
@@ -353,6 +375,7 @@ fn calibrate_cmd(
     square: f64,
     out: &Path,
     flags: lumen::calib::refine::Flags,
+    debug: Option<&Path>,
 ) -> Result<()> {
     let board = parse_board(board)?;
     if !(square.is_finite() && square > 0.0) {
@@ -371,8 +394,16 @@ fn calibrate_cmd(
     let config =
         lumen::calib::Config { board, square, flags, detect: Default::default(), max_iterations: 100 };
     let t = std::time::Instant::now();
-    let cal = lumen::calib::run(&images, &config)?;
+    let (views, skipped) = lumen::calib::detect_views(&images, &config)?;
+    let size = images.first().map_or((0, 0), |(_, g)| (g.width as u32, g.height as u32));
+    let calibrated = lumen::calib::calibrate(&views, size, &config);
     let secs = t.elapsed().as_secs_f64();
+    // Overlays first: they show why a calibration failed as much as what it used.
+    if let Some(dir) = debug {
+        write_overlays(dir, &images, &views, board)?;
+    }
+    let mut cal = calibrated?;
+    cal.skipped = skipped;
     lumen::calib::file::write(out, &cal)?;
     for s in &cal.skipped {
         eprintln!("skipped {}: {}", s.name, s.reason);
@@ -396,6 +427,102 @@ fn calibrate_cmd(
         secs * 1e3,
         out.display()
     );
+    Ok(())
+}
+
+/// One overlay PNG per image in `dir`, named after the image (made unique when two images
+/// share a name).
+fn write_overlays(
+    dir: &Path,
+    images: &[(String, lumen::image::filter::Grey)],
+    views: &[(String, Vec<glam::DVec2>)],
+    board: lumen::calib::detect::BoardSize,
+) -> Result<()> {
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("--debug {}: cannot create the folder", dir.display()))?;
+    let mut used = std::collections::HashSet::new();
+    for (k, (name, img)) in images.iter().enumerate() {
+        let corners = views.iter().find(|(n, _)| n == name).map(|(_, c)| c.as_slice());
+        let canvas = lumen::calib::overlay::draw(img, board, corners);
+        let stem = Path::new(name).file_stem().and_then(|s| s.to_str()).unwrap_or("view").to_string();
+        let file = if used.insert(stem.clone()) { format!("{stem}.png") } else { format!("{stem}-{k}.png") };
+        let values: Vec<u16> = canvas.rgb.iter().map(|&v| v as u16).collect();
+        lumen::image::io::write_png_raw(&dir.join(file), canvas.width, canvas.height, 3, &values, 8)?;
+    }
+    Ok(())
+}
+
+/// Best of `repeat` runs of `f`, in seconds, and its last result.
+fn best_of<T>(repeat: u32, mut f: impl FnMut() -> Result<T>) -> Result<(f64, T)> {
+    let mut best = f64::INFINITY;
+    let mut out = None;
+    for _ in 0..repeat.max(1) {
+        let t = std::time::Instant::now();
+        let r = f()?;
+        best = best.min(t.elapsed().as_secs_f64());
+        out = Some(r);
+    }
+    Ok((best, out.expect("at least one run")))
+}
+
+fn bench_calibrate(patterns: &[String], board: &str, repeat: u32) -> Result<()> {
+    let board = parse_board(board)?;
+    let files = expand_images(patterns)?;
+    let mut images = Vec::new();
+    for f in &files {
+        let img = lumen::image::io::read(f)?;
+        images.push((f.display().to_string(), lumen::image::filter::Grey::from_image(&img)));
+    }
+    let size = images.first().map_or((0, 0), |(_, g)| (g.width as u32, g.height as u32));
+    let config = lumen::calib::Config {
+        board,
+        square: 1.0,
+        flags: Default::default(),
+        detect: Default::default(),
+        max_iterations: 100,
+    };
+    let (detect_s, (views, _)) = best_of(repeat, || Ok(lumen::calib::detect_views(&images, &config)?))?;
+    let (calib_s, cal) = best_of(repeat, || Ok(lumen::calib::calibrate(&views, size, &config)?))?;
+    println!("| library | views | detect (ms) | calibrate (ms) | total (ms) | RMS (px) |");
+    println!("|---|---:|---:|---:|---:|---:|");
+    println!(
+        "| lumen {} ({} threads) | {} | {:.1} | {:.1} | {:.1} | {:.4} |",
+        env!("CARGO_PKG_VERSION"),
+        rayon::current_num_threads(),
+        views.len(),
+        detect_s * 1e3,
+        calib_s * 1e3,
+        (detect_s + calib_s) * 1e3,
+        cal.rms_px
+    );
+    #[cfg(feature = "opencv")]
+    {
+        use lumen::cv;
+        let mats: Vec<_> =
+            files.iter().map(|f| cv::read_grey(f)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
+        let (detect_s, found) = best_of(repeat, || {
+            let mut found = Vec::new();
+            for m in &mats {
+                if let Some(c) = cv::find_corners(m, board.cols, board.rows).map_err(anyhow::Error::msg)? {
+                    found.push(c);
+                }
+            }
+            Ok(found)
+        })?;
+        let pts = lumen::calib::board_points(board, 1.0);
+        let (calib_s, cvc) = best_of(repeat, || {
+            cv::calibrate(&pts, &found, size, 30, f64::EPSILON).map_err(anyhow::Error::msg)
+        })?;
+        println!(
+            "| OpenCV {} | {} | {:.1} | {:.1} | {:.1} | {:.4} |",
+            opencv::core::CV_VERSION,
+            found.len(),
+            detect_s * 1e3,
+            calib_s * 1e3,
+            (detect_s + calib_s) * 1e3,
+            cvc.rms_px
+        );
+    }
     Ok(())
 }
 

@@ -20,6 +20,8 @@
 //!   results do not depend on the thread count.
 
 pub mod calib;
+#[cfg(feature = "opencv")]
+pub mod cv;
 pub mod image;
 pub mod math;
 pub mod pipeline;

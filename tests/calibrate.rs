@@ -212,20 +212,47 @@ fn cli_real_photographs() {
     let Some(data) = common::shared_data() else { return };
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("cam.yaml");
+    let debug = dir.path().join("overlays");
     let pattern = format!("{}/calibration/opencv-left/*.jpg", data.display());
+    // A fourteenth view: the first photograph with its right half covered.
+    let mut hidden = image::open(data.join("calibration/opencv-left/left01.jpg")).unwrap().into_luma8();
+    for (x, _, p) in hidden.enumerate_pixels_mut() {
+        if x >= 400 {
+            p.0 = [128];
+        }
+    }
+    let hidden_path = dir.path().join("hidden.png");
+    hidden.save(&hidden_path).unwrap();
     let (code, err) = lumen(&[
         "calibrate",
         "--images",
         &pattern,
+        hidden_path.to_str().unwrap(),
         "--board",
         "9x6",
         "--square",
         "0.025",
         "--out",
         out.to_str().unwrap(),
+        "--debug",
+        debug.to_str().unwrap(),
     ]);
     assert_eq!(code, 0, "{err}");
-    assert!(err.contains("13 of 13 views"), "{err}");
+    assert!(err.contains("13 of 14 views"), "{err}");
+    assert!(err.contains("skipped") && err.contains("hidden.png"), "{err}");
     let c = calib::file::read(&out).unwrap();
     assert!(c.rms_px <= 0.19);
+    // One overlay per view: the found board's first row in red, the hidden one's candidates
+    // as red crosses, and otherwise the photograph's grey levels.
+    let red = |name: &str| {
+        let img = image::open(debug.join(name)).unwrap().into_rgb8();
+        img.pixels().filter(|p| p.0 == [255, 0, 0]).count()
+    };
+    assert_eq!(std::fs::read_dir(&debug).unwrap().count(), 14);
+    assert!(red("left01.png") > 100, "{}", red("left01.png"));
+    assert!(red("hidden.png") > 20, "{}", red("hidden.png"));
+    let photo = image::open(data.join("calibration/opencv-left/left01.jpg")).unwrap().into_luma8();
+    let overlay = image::open(debug.join("left01.png")).unwrap().into_rgb8();
+    let v = photo.get_pixel(20, 460).0[0];
+    assert_eq!(overlay.get_pixel(20, 460).0, [v, v, v]);
 }
