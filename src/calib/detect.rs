@@ -79,7 +79,13 @@ pub fn detect(img: &Grey, board: BoardSize, opts: &DetectOptions) -> Result<Vec<
 /// Saddle points that pass the X-junction check (steps 1 and 2).
 pub fn corner_candidates(img: &Grey, sampler: &Grey) -> Vec<DVec2> {
     let blurred = img.blur(1.5);
-    saddle_candidates(&blurred).into_iter().filter(|p| is_x_junction(sampler, *p, 4.5)).collect()
+    let ring: Vec<DVec2> = (0..RING)
+        .map(|k| {
+            let a = std::f64::consts::TAU * k as f64 / RING as f64;
+            4.5 * DVec2::new(a.cos(), a.sin())
+        })
+        .collect();
+    saddle_candidates(&blurred).into_iter().filter(|p| is_x_junction(sampler, *p, &ring)).collect()
 }
 
 /// Saddle points: local maxima of R = I_xy² − I_xx·I_yy above 1 % of the strongest, strongest
@@ -135,15 +141,14 @@ fn saddle_candidates(b: &Grey) -> Vec<DVec2> {
     out.into_iter().map(|(_, p)| p).collect()
 }
 
-/// Four alternating dark/light sectors on a circle of `radius` around `p`.
-fn is_x_junction(img: &Grey, p: DVec2, radius: f64) -> bool {
-    const N: usize = 48;
-    let v: Vec<f64> = (0..N)
-        .map(|k| {
-            let a = 2.0 * std::f64::consts::PI * k as f64 / N as f64;
-            img.sample(p.x + radius * a.cos(), p.y + radius * a.sin())
-        })
-        .collect();
+/// Samples on the circle of the X-junction check.
+const RING: usize = 48;
+
+/// Four alternating dark/light sectors on a circle around `p` (`ring`: the `RING` offsets of
+/// the circle's samples, 4.5 px out).
+fn is_x_junction(img: &Grey, p: DVec2, ring: &[DVec2]) -> bool {
+    const N: usize = RING;
+    let v: Vec<f64> = ring.iter().map(|o| img.sample(p.x + o.x, p.y + o.y)).collect();
     let (lo, hi) = v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
     if hi - lo < 0.03 {
         return false;
@@ -389,16 +394,9 @@ fn order(grid: &HashMap<(i32, i32), DVec2>, board: BoardSize, img: &Grey) -> Vec
 /// Sub-pixel refinement of every corner (module docs, step 5); `g` is the image blurred with
 /// σ = 1 px.
 fn refine(g: &Grey, pts: &[DVec2], board: BoardSize, opts: &DetectOptions) -> Vec<DVec2> {
-    let (w, h) = (g.width, g.height);
-    let mut gx = Grey { width: w, height: h, data: vec![0.0; w * h] };
-    let mut gy = gx.clone();
-    for y in 0..h {
-        for x in 0..w {
-            let (xi, yi) = (x as isize, y as isize);
-            gx.data[y * w + x] = 0.5 * (g.at_clamped(xi + 1, yi) - g.at_clamped(xi - 1, yi));
-            gy.data[y * w + x] = 0.5 * (g.at_clamped(xi, yi + 1) - g.at_clamped(xi, yi - 1));
-        }
-    }
+    // Central differences, taken only where a window looks.
+    let gx = |x: isize, y: isize| 0.5 * (g.at_clamped(x + 1, y) - g.at_clamped(x - 1, y)) as f64;
+    let gy = |x: isize, y: isize| 0.5 * (g.at_clamped(x, y + 1) - g.at_clamped(x, y - 1)) as f64;
     let c = board.cols;
     pts.iter()
         .enumerate()
@@ -425,7 +423,7 @@ fn refine(g: &Grey, pts: &[DVec2], board: BoardSize, opts: &DetectOptions) -> Ve
                         let q = DVec2::new(qx as f64, qy as f64);
                         let d2 = (q - p).length_squared();
                         let wgt = (-d2 / (2.0 * sigma * sigma)).exp();
-                        let (ex, ey) = (gx.at_clamped(qx, qy) as f64, gy.at_clamped(qx, qy) as f64);
+                        let (ex, ey) = (gx(qx, qy), gy(qx, qy));
                         let (xx, xy, yy) = (wgt * ex * ex, wgt * ex * ey, wgt * ey * ey);
                         a00 += xx;
                         a01 += xy;

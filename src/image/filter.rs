@@ -35,6 +35,13 @@ impl Grey {
         let (x0, y0) = (x.floor(), y.floor());
         let (fx, fy) = (x - x0, y - y0);
         let (i, j) = (x0 as isize, y0 as isize);
+        if i >= 0 && j >= 0 && (i as usize) + 1 < self.width && (j as usize) + 1 < self.height {
+            // Inside: the four neighbours without clamping (the common case).
+            let k = j as usize * self.width + i as usize;
+            let (a, b) = (self.data[k] as f64, self.data[k + 1] as f64);
+            let (c, d) = (self.data[k + self.width] as f64, self.data[k + self.width + 1] as f64);
+            return (a * (1.0 - fx) + b * fx) * (1.0 - fy) + (c * (1.0 - fx) + d * fx) * fy;
+        }
         let a = self.at_clamped(i, j) as f64;
         let b = self.at_clamped(i + 1, j) as f64;
         let c = self.at_clamped(i, j + 1) as f64;
