@@ -93,19 +93,25 @@ pub fn corner_candidates(img: &Grey, sampler: &Grey) -> Vec<DVec2> {
 fn saddle_candidates(b: &Grey) -> Vec<DVec2> {
     let (w, h) = (b.width, b.height);
     let mut r = vec![0.0f32; w * h];
-    let mut max = 0.0f32;
     for y in 2..h.saturating_sub(2) {
+        let (up, row, down) =
+            (&b.data[(y - 1) * w..y * w], &b.data[y * w..(y + 1) * w], &b.data[(y + 1) * w..(y + 2) * w]);
         for x in 2..w.saturating_sub(2) {
-            let c = b.at(x, y);
-            let ixx = b.at(x + 1, y) - 2.0 * c + b.at(x - 1, y);
-            let iyy = b.at(x, y + 1) - 2.0 * c + b.at(x, y - 1);
-            let ixy =
-                0.25 * (b.at(x + 1, y + 1) - b.at(x + 1, y - 1) - b.at(x - 1, y + 1) + b.at(x - 1, y - 1));
-            let v = ixy * ixy - ixx * iyy;
-            r[y * w + x] = v;
-            max = max.max(v);
+            let c = row[x];
+            let ixx = row[x + 1] - 2.0 * c + row[x - 1];
+            let iyy = down[x] - 2.0 * c + up[x];
+            let ixy = 0.25 * (down[x + 1] - up[x + 1] - down[x - 1] + up[x - 1]);
+            r[y * w + x] = ixy * ixy - ixx * iyy;
         }
     }
+    // The largest response, in eight lanes so the loop vectorises.
+    let lanes = r.chunks_exact(8).fold([0.0f32; 8], |mut m, c| {
+        for (a, &v) in m.iter_mut().zip(c) {
+            *a = if v > *a { v } else { *a };
+        }
+        m
+    });
+    let max = lanes.into_iter().chain(r.chunks_exact(8).remainder().iter().copied()).fold(0.0f32, f32::max);
     let mut out: Vec<(f32, DVec2)> = Vec::new();
     if max <= 0.0 {
         return Vec::new();
@@ -117,21 +123,14 @@ fn saddle_candidates(b: &Grey) -> Vec<DVec2> {
             if v < 0.01 * max {
                 continue;
             }
-            let mut is_max = true;
-            'nb: for dy in -rad..=rad {
-                for dx in -rad..=rad {
-                    if dx == 0 && dy == 0 {
-                        continue;
-                    }
-                    let u = r[(y as isize + dy) as usize * w + (x as isize + dx) as usize];
-                    // Ties are broken towards the earlier pixel so a plateau yields one point.
-                    if u > v || (u == v && (dy < 0 || (dy == 0 && dx < 0))) {
-                        is_max = false;
-                        break 'nb;
-                    }
-                }
-            }
-            if is_max {
+            // Ties are broken towards the earlier pixel so a plateau yields one point.
+            let beaten = |dx: isize, dy: isize| {
+                let u = r[(y as isize + dy) as usize * w + (x as isize + dx) as usize];
+                (dx, dy) != (0, 0) && (u > v || (u == v && (dy < 0 || (dy == 0 && dx < 0))))
+            };
+            // The 3×3 neighbours first: most pixels that are not maxima fail there.
+            let near = (-1..=1).any(|dy| (-1..=1).any(|dx| beaten(dx, dy)));
+            if !near && !(-rad..=rad).any(|dy| (-rad..=rad).any(|dx| beaten(dx, dy))) {
                 out.push((v, DVec2::new(x as f64, y as f64)));
             }
         }

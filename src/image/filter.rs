@@ -63,9 +63,10 @@ impl Grey {
         let mut tmp = vec![0.0f32; w * h];
         let mut padded = vec![0.0f32; w + 2 * r as usize];
         for (src, dst) in self.data.chunks_exact(w).zip(tmp.chunks_exact_mut(w)) {
-            for (i, p) in padded.iter_mut().enumerate() {
-                *p = src[(i as isize - r).clamp(0, w as isize - 1) as usize];
-            }
+            let r = r as usize;
+            padded[..r].fill(src[0]);
+            padded[r..r + w].copy_from_slice(src);
+            padded[r + w..].fill(src[w - 1]);
             for (t, &kv) in k.iter().enumerate() {
                 for (d, s) in dst.iter_mut().zip(&padded[t..t + w]) {
                     *d += kv * s;
