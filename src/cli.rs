@@ -118,6 +118,19 @@ enum Bench {
         #[arg(long, default_value_t = 3)]
         repeat: u32,
     },
+    /// RMSE against a reference image as the sample count grows, for the independent and
+    /// the Sobol sampler (default: the Cornell box against Mitsuba 3's 8192-spp reference).
+    Convergence {
+        #[arg(long, default_value = "pipelines/scenes/cornell-box.toml")]
+        scene: PathBuf,
+        #[arg(long, default_value = "../shared/data/scenes/cornell-box/reference.exr")]
+        reference: PathBuf,
+        /// Sample counts, comma-separated.
+        #[arg(long, default_value = "4,16,64,256")]
+        spp: String,
+        #[arg(long)]
+        threads: Option<usize>,
+    },
     /// Detection and calibration time on a set of photographs; with the `opencv` feature,
     /// OpenCV's findChessboardCorners + cornerSubPix + calibrateCamera on the same images in
     /// the same run. Images are decoded before timing.
@@ -171,6 +184,9 @@ pub fn main() -> i32 {
         }
         Command::Bench { what: Bench::Render { scene, spp, max_depth, threads, repeat } } => {
             bench_render(&scene, spp, max_depth, threads, repeat).map(|_| 0)
+        }
+        Command::Bench { what: Bench::Convergence { scene, reference, spp, threads } } => {
+            bench_convergence(&scene, &reference, &spp, threads).map(|_| 0)
         }
         Command::Bench { what: Bench::Calibrate { images, board, repeat } } => {
             bench_calibrate(&images, &board, repeat).map(|_| 0)
@@ -333,6 +349,63 @@ fn bench_render(
         threads.map_or_else(|| rayon::current_num_threads().to_string(), |t| t.to_string()),
         paths / best / 1e6
     );
+    Ok(())
+}
+
+fn bench_convergence(scene_path: &Path, reference: &Path, spp: &str, threads: Option<usize>) -> Result<()> {
+    let counts: Vec<u32> = spp
+        .split(',')
+        .map(|t| t.trim().parse::<u32>().ok().filter(|&n| n > 0))
+        .collect::<Option<_>>()
+        .with_context(|| format!("--spp {spp}: expected positive sample counts separated by commas"))?;
+    let scene = render::load(scene_path)?;
+    let truth = lumen::image::io::read_exr(reference)?;
+    if (truth.width, truth.height) != (scene.camera.width, scene.camera.height) || truth.channels != 3 {
+        bail!(
+            "{}: {}×{}×{}, but the scene renders {}×{}×3",
+            reference.display(),
+            truth.width,
+            truth.height,
+            truth.channels,
+            scene.camera.width,
+            scene.camera.height
+        );
+    }
+    // The reference's own noise sets a floor under every RMSE: say how high, when its variance
+    // image (NAME_variance.exr beside it) is there.
+    let var_path = reference.with_file_name(format!(
+        "{}_variance.exr",
+        reference.file_stem().and_then(|s| s.to_str()).unwrap_or("reference")
+    ));
+    if let Ok(var) = lumen::image::io::read_exr(&var_path) {
+        let mean_var = var.data.iter().map(|&v| v as f64).sum::<f64>() / var.data.len().max(1) as f64;
+        println!("reference noise (from {}): RMS {:.5}\n", var_path.display(), mean_var.sqrt());
+    }
+    println!("| spp | independent RMSE | time (s) | Sobol RMSE | time (s) | independent / Sobol |");
+    println!("|---:|---:|---:|---:|---:|---:|");
+    for &n in &counts {
+        let mut row = Vec::new();
+        for kind in [render::sampler::SamplerKind::Independent, render::sampler::SamplerKind::Sobol] {
+            let mut settings = render::Settings::from_scene(&scene);
+            settings.spp = n;
+            settings.sampler = kind;
+            settings.threads = threads;
+            let t = std::time::Instant::now();
+            let film = render::render(&scene, &settings);
+            let secs = t.elapsed().as_secs_f64();
+            let se: f64 =
+                film.mean.data.iter().zip(&truth.data).map(|(a, b)| (*a as f64 - *b as f64).powi(2)).sum();
+            row.push(((se / truth.data.len() as f64).sqrt(), secs));
+        }
+        println!(
+            "| {n} | {:.5} | {:.2} | {:.5} | {:.2} | {:.2} |",
+            row[0].0,
+            row[0].1,
+            row[1].0,
+            row[1].1,
+            row[0].0 / row[1].0
+        );
+    }
     Ok(())
 }
 

@@ -55,32 +55,60 @@ struct Sobol {
     dim: u64,
 }
 
-/// Burley's nested uniform scramble of a 32-bit fraction (bit 31 is the ½ digit): every digit
-/// is flipped by a hash of the digits above it and the seed (Vegdahl's improved constants).
+/// The hash behind Burley's nested uniform scramble (Laine–Karras form, Vegdahl's improved
+/// constants), applied to a bit-reversed fraction: every bit is flipped by a function of the
+/// seed and of the bits below it, i.e. of the more significant digits of the fraction.
 #[inline]
-fn owen_scramble(v: u32, seed: u32) -> u32 {
-    let mut x = v.reverse_bits();
+fn lk_hash(mut x: u32, seed: u32) -> u32 {
     x ^= x.wrapping_mul(0x3d20_adea);
     x = x.wrapping_add(seed);
     x = x.wrapping_mul((seed >> 16) | 1);
     x ^= x.wrapping_mul(0x0552_6c56);
     x ^= x.wrapping_mul(0x53a2_2864);
-    x.reverse_bits()
+    x
 }
 
-/// The second Sobol dimension at index i: bit k of i adds column k of the Pascal matrix mod 2.
-#[inline]
-fn sobol_dim1(mut i: u32) -> u32 {
-    let mut v = 1u32 << 31;
-    let mut out = 0;
-    while i != 0 {
-        if i & 1 != 0 {
-            out ^= v;
-        }
-        i >>= 1;
-        v ^= v >> 1;
+/// The second Sobol dimension's generator matrix (Pascal's triangle mod 2), bit-reversed and
+/// tabulated a byte of the index at a time: entry [b][v] is the XOR of the columns of the bits
+/// set in v, for index bits 8b..8b+8.
+const PASCAL_REVERSED: [[u32; 256]; 4] = {
+    let mut cols = [0u32; 32];
+    let mut v = 1u32;
+    let mut k = 0;
+    while k < 32 {
+        cols[k] = v;
+        v ^= v << 1;
+        k += 1;
     }
-    out
+    let mut table = [[0u32; 256]; 4];
+    let mut b = 0;
+    while b < 4 {
+        let mut byte = 0;
+        while byte < 256 {
+            let mut acc = 0;
+            let mut j = 0;
+            while j < 8 {
+                if (byte >> j) & 1 == 1 {
+                    acc ^= cols[8 * b + j];
+                }
+                j += 1;
+            }
+            table[b][byte] = acc;
+            byte += 1;
+        }
+        b += 1;
+    }
+    table
+};
+
+/// The second Sobol dimension at index i, bit-reversed (the form `lk_hash` takes).
+#[inline]
+fn sobol_dim1_reversed(i: u32) -> u32 {
+    let t = &PASCAL_REVERSED;
+    t[0][(i & 255) as usize]
+        ^ t[1][((i >> 8) & 255) as usize]
+        ^ t[2][((i >> 16) & 255) as usize]
+        ^ t[3][(i >> 24) as usize]
 }
 
 #[inline]
@@ -120,8 +148,10 @@ impl Sampler {
     pub fn next(&mut self) -> f32 {
         if let Some(sb) = &mut self.sobol {
             let (hi, hx, _) = Self::sobol_seeds(sb);
-            let i = owen_scramble(sb.index, hi);
-            return to_unit(owen_scramble(i.reverse_bits(), hx));
+            // The shuffled index (a nested uniform scramble of the index's digits), then the
+            // scrambled van der Corput point, whose reversed form is the index itself.
+            let i = lk_hash(sb.index.reverse_bits(), hi).reverse_bits();
+            return to_unit(lk_hash(i, hx).reverse_bits());
         }
         let old = self.state;
         self.state = old.wrapping_mul(PCG_MUL).wrapping_add(PCG_INC);
@@ -133,8 +163,11 @@ impl Sampler {
     pub fn next2(&mut self) -> (f32, f32) {
         if let Some(sb) = &mut self.sobol {
             let (hi, hx, hy) = Self::sobol_seeds(sb);
-            let i = owen_scramble(sb.index, hi);
-            return (to_unit(owen_scramble(i.reverse_bits(), hx)), to_unit(owen_scramble(sobol_dim1(i), hy)));
+            let i = lk_hash(sb.index.reverse_bits(), hi).reverse_bits();
+            return (
+                to_unit(lk_hash(i, hx).reverse_bits()),
+                to_unit(lk_hash(sobol_dim1_reversed(i), hy).reverse_bits()),
+            );
         }
         (self.next(), self.next())
     }
