@@ -5,5 +5,11 @@
 mod cli;
 
 fn main() {
+    // Output piped into `head` and closed early should end the program quietly, as it does a
+    // C tool, rather than make `println!` panic.
+    #[cfg(unix)]
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     std::process::exit(cli::main());
 }
