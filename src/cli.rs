@@ -81,6 +81,21 @@ enum Command {
         #[arg(long)]
         debug: Option<PathBuf>,
     },
+    /// Photometric stereo on a dataset in DiLiGenT's layout: normals, albedo and (with
+    /// ground truth) the angular error.
+    Ps {
+        /// Folder with filenames.txt, light_directions.txt, light_intensities.txt, mask.png
+        /// and optionally Normal_gt.mat.
+        #[arg(long)]
+        dataset: PathBuf,
+        /// lambertian (least squares over every light) or robust (shadows and highlights
+        /// left out).
+        #[arg(long, default_value = "robust")]
+        model: String,
+        /// Output folder: normals.exr/.png, albedo.exr/.png, error.png, summary.json.
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Undistort an image with a calibration (.yaml/.yml or .json).
     Undistort {
         /// Calibration file written by `lumen calibrate` or OpenCV.
@@ -179,6 +194,7 @@ pub fn main() -> i32 {
             };
             calibrate_cmd(&images, &board, square, &out, flags, debug.as_deref()).map(|_| 0)
         }
+        Command::Ps { dataset, model, out } => ps_cmd(&dataset, &model, &out).map(|_| 0),
         Command::Undistort { camera, alpha, input, output } => {
             undistort_cmd(&camera, alpha, &input, &output).map(|_| 0)
         }
@@ -596,6 +612,34 @@ fn bench_calibrate(patterns: &[String], board: &str, repeat: u32) -> Result<()> 
             cvc.rms_px
         );
     }
+    Ok(())
+}
+
+fn ps_cmd(dir: &Path, model: &str, out: &Path) -> Result<()> {
+    let model: lumen::photometric::Model =
+        model.parse().map_err(|e: String| anyhow::anyhow!("--model: {e}"))?;
+    let t = std::time::Instant::now();
+    let data = lumen::photometric::dataset::read(dir)?;
+    let read_s = t.elapsed().as_secs_f64();
+    let result = lumen::photometric::run(&data, model);
+    lumen::photometric::write(out, &data, &result)?;
+    let s = &result.summary;
+    let err = match (s.mean_angular_error_deg, s.median_angular_error_deg) {
+        (Some(m), Some(d)) => format!("mean angular error {m:.3}°, median {d:.3}°; "),
+        _ => String::new(),
+    };
+    eprintln!(
+        "{:?}: {} pixels solved, {} masked; {err}{} lights, condition number {:.2}{}; read {read_s:.2} s, solved in {:.3} s ({:.1} M pixel-lights/s); wrote {}",
+        s.model,
+        s.pixels,
+        s.masked_pixels,
+        s.lights,
+        s.light_condition_number,
+        if s.lights_nearly_coplanar { " (lights nearly coplanar)" } else { "" },
+        s.time_s,
+        s.pixel_lights_per_s / 1e6,
+        out.display()
+    );
     Ok(())
 }
 

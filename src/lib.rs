@@ -24,6 +24,7 @@ pub mod calib;
 pub mod cv;
 pub mod image;
 pub mod math;
+pub mod photometric;
 pub mod pipeline;
 pub mod render;
 
@@ -37,4 +38,6 @@ pub enum Error {
     Image(#[from] image::io::Error),
     #[error(transparent)]
     Pipeline(#[from] pipeline::Error),
+    #[error(transparent)]
+    Photometric(#[from] photometric::Error),
 }

@@ -1,0 +1,252 @@
+//! Photometric stereo: per-pixel normals and albedo from images under known distant lights.
+//!
+//! `dataset` reads DiLiGenT's layout, `lambertian` holds the least-squares solvers (Woodham
+//! 1980) and their robust variant, `mat` reads MATLAB v5 ground truth. `run` solves every
+//! masked pixel with the chosen model and, when the dataset has ground truth, measures the
+//! angular error; `write` puts the result files in a folder.
+
+pub mod dataset;
+pub mod lambertian;
+pub mod mat;
+
+use glam::DVec3;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("{path}: {message}")]
+    BadInput { path: PathBuf, message: String },
+    #[error(transparent)]
+    Image(#[from] crate::image::io::Error),
+    #[error("cannot write {path}: {message}")]
+    Write { path: PathBuf, message: String },
+}
+
+/// Raw values (fractions of the largest code) at or above this are saturated.
+pub const SATURATED: f32 = 0.999;
+
+/// Observations of many pixels under many lights, pixel-major: `lights` RGB triples per pixel,
+/// divided by the light's intensity, each with a flag saying whether it may be used (false
+/// when a channel was saturated).
+pub struct Observations {
+    lights: usize,
+    data: Vec<[f32; 3]>,
+    valid: Vec<bool>,
+}
+
+impl Observations {
+    pub fn new(pixels: usize, lights: usize) -> Observations {
+        Observations { lights, data: vec![[0.0; 3]; pixels * lights], valid: vec![true; pixels * lights] }
+    }
+    /// Stores a raw observation (code values as fractions of the largest code) under a light
+    /// of the given per-channel intensity.
+    pub fn set_raw(&mut self, pixel: usize, light: usize, raw: [f32; 3], intensity: [f64; 3]) {
+        let k = pixel * self.lights + light;
+        self.data[k] = std::array::from_fn(|c| (raw[c] as f64 / intensity[c]) as f32);
+        self.valid[k] = raw.iter().all(|&v| v < SATURATED);
+    }
+    /// All observations of one pixel, in light order.
+    pub fn pixel(&self, pixel: usize) -> &[[f32; 3]] {
+        &self.data[pixel * self.lights..(pixel + 1) * self.lights]
+    }
+    /// Which of them may be used.
+    pub fn valid(&self, pixel: usize) -> &[bool] {
+        &self.valid[pixel * self.lights..(pixel + 1) * self.lights]
+    }
+}
+
+/// Which reflectance model to fit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Model {
+    /// Least squares over every light, on the mean of the channels.
+    Lambertian,
+    /// Least squares over the observations a Lambertian surface explains (`lambertian` docs).
+    Robust,
+}
+
+impl std::str::FromStr for Model {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Model, String> {
+        match s {
+            "lambertian" => Ok(Model::Lambertian),
+            "robust" => Ok(Model::Robust),
+            _ => Err(format!("unknown model `{s}`: expected lambertian or robust")),
+        }
+    }
+}
+
+/// The solution over the masked pixels, and what the report needs.
+pub struct Output {
+    pub model: Model,
+    /// Unit normals (dataset frame), `None` where the pixel could not be solved.
+    pub normals: Vec<Option<DVec3>>,
+    pub albedo: Vec<[f64; 3]>,
+    pub summary: Summary,
+}
+
+/// `summary.json`.
+#[derive(Clone, Debug, Serialize)]
+pub struct Summary {
+    pub model: Model,
+    /// Mean and median angular error over the solved pixels (degrees), with ground truth.
+    pub mean_angular_error_deg: Option<f64>,
+    pub median_angular_error_deg: Option<f64>,
+    /// Pixels inside the mask that got a normal.
+    pub pixels: usize,
+    /// Pixels inside the mask left without one (fewer than 3 usable observations, or their
+    /// lights nearly coplanar).
+    pub masked_pixels: usize,
+    pub lights: usize,
+    /// σ_max / σ_min of the light matrix (rows: unit light directions).
+    pub light_condition_number: f64,
+    /// The lights nearly lie in a plane (condition number above 5; for a ring of lights at
+    /// elevation e it is 1/(√2·tan e), so this flags rings within 8° of the horizon): the
+    /// normals' component across the plane is poorly determined.
+    pub lights_nearly_coplanar: bool,
+    /// Mean number of observations a solved pixel used.
+    pub mean_observations_used: f64,
+    pub time_s: f64,
+    /// Pixel-lights per second of the solve.
+    pub pixel_lights_per_s: f64,
+}
+
+/// Condition number of the light matrix.
+pub fn light_condition_number(lights: &[DVec3]) -> f64 {
+    let m = nalgebra::DMatrix::from_fn(lights.len(), 3, |r, c| lights[r][c]);
+    let sv = m.singular_values();
+    let (lo, hi) = (sv.min(), sv.max());
+    if lo > 0.0 {
+        hi / lo
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// Solves every masked pixel of a dataset with `model`.
+pub fn run(data: &dataset::Dataset, model: Model) -> Output {
+    let t = std::time::Instant::now();
+    let solved: Vec<Option<lambertian::Pixel>> = (0..data.pixels.len())
+        .into_par_iter()
+        .map(|p| {
+            let obs = data.obs.pixel(p);
+            match model {
+                Model::Lambertian => lambertian::solve_plain(&data.lights, obs),
+                Model::Robust => lambertian::solve_robust(&data.lights, obs, data.obs.valid(p)),
+            }
+        })
+        .collect();
+    let time_s = t.elapsed().as_secs_f64();
+    let normals: Vec<Option<DVec3>> = solved.iter().map(|s| s.map(|p| p.normal)).collect();
+    let albedo = solved.iter().map(|s| s.map_or([0.0; 3], |p| p.albedo)).collect();
+    let ok: Vec<&lambertian::Pixel> = solved.iter().flatten().collect();
+    let used = ok.iter().map(|p| p.used as f64).sum::<f64>() / ok.len().max(1) as f64;
+    let (mean, median) = match &data.truth {
+        Some(truth) => {
+            let errs = angular_errors(&normals, truth);
+            (mean_of(&errs), median_of(&errs))
+        }
+        None => (None, None),
+    };
+    let cond = light_condition_number(&data.lights);
+    let summary = Summary {
+        model,
+        mean_angular_error_deg: mean,
+        median_angular_error_deg: median,
+        pixels: ok.len(),
+        masked_pixels: data.pixels.len() - ok.len(),
+        lights: data.lights.len(),
+        light_condition_number: cond,
+        lights_nearly_coplanar: !(cond <= 5.0),
+        mean_observations_used: used,
+        time_s,
+        pixel_lights_per_s: (data.pixels.len() * data.lights.len()) as f64 / time_s.max(1e-9),
+    };
+    Output { model, normals, albedo, summary }
+}
+
+/// Angle in degrees between each solved normal and its truth (unsolved pixels left out).
+pub fn angular_errors(normals: &[Option<DVec3>], truth: &[DVec3]) -> Vec<f64> {
+    normals
+        .iter()
+        .zip(truth)
+        .filter_map(|(n, t)| n.map(|n| n.dot(t.normalize()).clamp(-1.0, 1.0).acos().to_degrees()))
+        .collect()
+}
+
+fn mean_of(v: &[f64]) -> Option<f64> {
+    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+}
+
+fn median_of(v: &[f64]) -> Option<f64> {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    let n = s.len();
+    match n {
+        0 => None,
+        _ if n % 2 == 1 => Some(s[n / 2]),
+        _ => Some(0.5 * (s[n / 2 - 1] + s[n / 2])),
+    }
+}
+
+/// Writes `normals.exr` / `.png`, `albedo.exr` / `.png`, `error.png` (with ground truth:
+/// angular error, black 0° to white 20° and above) and `summary.json` into `dir`. Normals are
+/// unit vectors in the dataset's frame, zero outside the mask; the PNG shows (n + 1)/2. The
+/// albedo PNG is scaled so that the brightest 1 % of pixels saturate.
+pub fn write(dir: &Path, data: &dataset::Dataset, out: &Output) -> Result<(), Error> {
+    use crate::image::{io, Image};
+    std::fs::create_dir_all(dir).map_err(|e| Error::Write { path: dir.into(), message: e.to_string() })?;
+    let (w, h) = (data.width as u32, data.height as u32);
+    let mut normals = Image::new(w, h, 3);
+    let mut albedo = Image::new(w, h, 3);
+    for (k, &i) in data.pixels.iter().enumerate() {
+        if let Some(n) = out.normals[k] {
+            normals.data[3 * i..3 * i + 3].copy_from_slice(&[n.x as f32, n.y as f32, n.z as f32]);
+        }
+        for c in 0..3 {
+            albedo.data[3 * i + c] = out.albedo[k][c] as f32;
+        }
+    }
+    io::write_exr(&dir.join("normals.exr"), &normals)?;
+    let shown: Vec<u16> =
+        data_or_zero(&normals, data, |v| ((v + 1.0) * 0.5 * 255.0).round().clamp(0.0, 255.0) as u16);
+    io::write_png_raw(&dir.join("normals.png"), w, h, 3, &shown, 8)?;
+    io::write_exr(&dir.join("albedo.exr"), &albedo)?;
+    let mut bright: Vec<f32> = albedo.data.iter().copied().filter(|v| *v > 0.0).collect();
+    bright.sort_by(f32::total_cmp);
+    let top = bright.get(bright.len() * 99 / 100).copied().unwrap_or(1.0).max(1e-12);
+    let shown: Vec<u16> =
+        albedo.data.iter().map(|v| (v / top * 255.0).round().clamp(0.0, 255.0) as u16).collect();
+    io::write_png_raw(&dir.join("albedo.png"), w, h, 3, &shown, 8)?;
+    if let Some(truth) = &data.truth {
+        let mut err = vec![0u16; (w * h) as usize];
+        for (k, &i) in data.pixels.iter().enumerate() {
+            err[i] = match out.normals[k] {
+                Some(n) => {
+                    let deg = n.dot(truth[k].normalize()).clamp(-1.0, 1.0).acos().to_degrees();
+                    (deg / 20.0 * 255.0).round().clamp(0.0, 255.0) as u16
+                }
+                None => 255,
+            };
+        }
+        io::write_png_raw(&dir.join("error.png"), w, h, 1, &err, 8)?;
+    }
+    let json = serde_json::to_string_pretty(&out.summary)
+        .map_err(|e| Error::Write { path: dir.join("summary.json"), message: e.to_string() })?;
+    let path = dir.join("summary.json");
+    io::write_atomically(&path, |tmp| std::fs::write(tmp, json).map_err(|e| e.to_string()))?;
+    Ok(())
+}
+
+/// Maps every channel value of the masked pixels with `f`; pixels outside the mask are 0.
+fn data_or_zero(img: &crate::image::Image, data: &dataset::Dataset, f: impl Fn(f32) -> u16) -> Vec<u16> {
+    let mut out = vec![0u16; img.data.len()];
+    for &i in &data.pixels {
+        for c in 0..3 {
+            out[3 * i + c] = f(img.data[3 * i + c]);
+        }
+    }
+    out
+}

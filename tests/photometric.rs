@@ -1,0 +1,213 @@
+//! Photometric stereo: the DiLiGenT "ball" photographs, closed-form hard cases, bad input.
+
+mod common;
+
+use glam::DVec3;
+use lumen::photometric::{self, dataset::Dataset, Model, Observations};
+use std::process::Command;
+
+/// DiLiGenT's ball: least squares within 0.1° of the plain recipe's 4.29° (the folder's
+/// README), the robust model ≤ 2.0° (the best non-learning methods report about 1.7°), every
+/// masked pixel solved, every output written.
+#[test]
+fn diligent_ball() {
+    let Some(data) = common::shared_data() else { return };
+    let ds = photometric::dataset::read(&data.join("photometric/diligent-ball")).unwrap();
+    assert_eq!(ds.lights.len(), 96);
+    assert!(ds.truth.is_some());
+    let plain = photometric::run(&ds, Model::Lambertian);
+    let robust = photometric::run(&ds, Model::Robust);
+    let (p, r) =
+        (plain.summary.mean_angular_error_deg.unwrap(), robust.summary.mean_angular_error_deg.unwrap());
+    eprintln!(
+        "ball: least squares {p:.3}°, robust {r:.3}° (median {:.3}°)",
+        robust.summary.median_angular_error_deg.unwrap()
+    );
+    assert!((p - 4.29).abs() <= 0.1, "least squares {p}°");
+    assert!(r <= 2.0, "robust {r}°");
+    assert_eq!(robust.summary.masked_pixels, 0);
+    assert!(!robust.summary.lights_nearly_coplanar);
+    let dir = tempfile::tempdir().unwrap();
+    photometric::write(dir.path(), &ds, &robust).unwrap();
+    for f in ["normals.exr", "normals.png", "albedo.exr", "albedo.png", "error.png", "summary.json"] {
+        assert!(dir.path().join(f).is_file(), "{f} missing");
+    }
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["model"], "robust");
+    assert_eq!(summary["pixels"], 15791);
+    // Normals in the dataset's frame (y up): the ball's top rim points up.
+    let n = lumen::image::io::read_exr(&dir.path().join("normals.exr")).unwrap();
+    let top = ds.pixels[0];
+    assert!(n.data[3 * top + 1] > 0.5, "top pixel normal {:?}", &n.data[3 * top..3 * top + 3]);
+}
+
+/// A Lambertian sphere seen orthographically, rendered in closed form: pixel (x, y) of a
+/// size×size image, normal (x, −y, z) in DiLiGenT's frame; lights at the given elevations
+/// (degrees) and azimuths spread round.
+fn sphere(size: usize, lights: &[DVec3], albedo: f64) -> Dataset {
+    let mut pixels = Vec::new();
+    let mut normals = Vec::new();
+    let c = (size as f64 - 1.0) / 2.0;
+    for y in 0..size {
+        for x in 0..size {
+            let (u, v) = ((x as f64 - c) / (0.45 * size as f64), -(y as f64 - c) / (0.45 * size as f64));
+            if u * u + v * v < 0.95 {
+                pixels.push(y * size + x);
+                normals.push(DVec3::new(u, v, (1.0 - u * u - v * v).sqrt()));
+            }
+        }
+    }
+    let mut obs = Observations::new(pixels.len(), lights.len());
+    for (p, n) in normals.iter().enumerate() {
+        for (j, l) in lights.iter().enumerate() {
+            obs.set_raw(p, j, [(albedo * l.dot(*n).max(0.0)) as f32; 3], [1.0; 3]);
+        }
+    }
+    Dataset {
+        width: size,
+        height: size,
+        lights: lights.to_vec(),
+        intensities: vec![[1.0; 3]; lights.len()],
+        pixels,
+        obs,
+        truth: Some(normals),
+    }
+}
+
+fn ring(n: usize, elevation_deg: f64) -> Vec<DVec3> {
+    let e = elevation_deg.to_radians();
+    (0..n)
+        .map(|k| {
+            let a = std::f64::consts::TAU * k as f64 / n as f64;
+            DVec3::new(e.cos() * a.cos(), e.cos() * a.sin(), e.sin())
+        })
+        .collect()
+}
+
+/// The minimum of 3 lights: exact where all three light the pixel; pixels some light does
+/// not reach are solved by least squares (wrong but finite) or left out by the robust model,
+/// never NaN.
+#[test]
+fn three_lights() {
+    let lights = ring(3, 50.0);
+    let ds = sphere(64, &lights, 0.6);
+    let out = photometric::run(&ds, Model::Lambertian);
+    let truth = ds.truth.as_ref().unwrap();
+    let mut lit_errors = Vec::new();
+    for (k, n) in out.normals.iter().enumerate() {
+        let n = n.expect("three independent lights always give a least-squares normal");
+        assert!(n.is_finite());
+        if lights.iter().all(|l| l.dot(truth[k]) > 0.0) {
+            lit_errors.push(n.angle_between(truth[k]).to_degrees());
+        }
+    }
+    assert!(lit_errors.len() > 1000);
+    assert!(lit_errors.iter().all(|&e| e < 1e-4), "max {}", lit_errors.iter().fold(0.0f64, |a, &b| a.max(b)));
+    let robust = photometric::run(&ds, Model::Robust);
+    assert!(robust.normals.iter().flatten().all(|n| n.is_finite()));
+    assert_eq!(robust.summary.masked_pixels + robust.summary.pixels, ds.pixels.len());
+}
+
+/// Grazing lights (elevation 5°): the light matrix is ill-conditioned in z, which the summary
+/// says, yet noiseless data are still solved where every light reaches.
+#[test]
+fn grazing_lights() {
+    let mut lights = ring(12, 5.0);
+    lights.push(DVec3::Z);
+    let ds = sphere(64, &lights, 0.5);
+    let out = photometric::run(&ds, Model::Robust);
+    assert!(out.summary.light_condition_number > 1.0);
+    let errs = photometric::angular_errors(&out.normals, ds.truth.as_ref().unwrap());
+    let mean = errs.iter().sum::<f64>() / errs.len() as f64;
+    assert!(mean < 0.01, "mean error {mean}°");
+    // Only the ring, all at 5°: nearly coplanar, flagged.
+    let ds = sphere(32, &ring(12, 5.0), 0.5);
+    let out = photometric::run(&ds, Model::Lambertian);
+    assert!(out.summary.lights_nearly_coplanar, "condition number {}", out.summary.light_condition_number);
+}
+
+/// Exactly coplanar lights: detected, and no pixel gets a made-up normal.
+#[test]
+fn coplanar_lights() {
+    let ds = sphere(32, &ring(8, 0.0), 0.5);
+    for model in [Model::Lambertian, Model::Robust] {
+        let out = photometric::run(&ds, model);
+        assert!(out.summary.lights_nearly_coplanar);
+        assert_eq!(out.summary.pixels, 0);
+        assert_eq!(out.summary.masked_pixels, ds.pixels.len());
+        assert_eq!(out.summary.mean_angular_error_deg, None);
+    }
+}
+
+/// A very dark albedo (0.002 of white) and saturation (a bright albedo's values clipped at the
+/// largest code on its brightest lights): still solved, never NaN; the robust model leaves the
+/// saturated observations out.
+#[test]
+fn dark_albedo_and_saturation() {
+    let lights = [ring(8, 30.0), ring(8, 60.0), vec![DVec3::Z]].concat();
+    let dark = sphere(48, &lights, 0.002);
+    let out = photometric::run(&dark, Model::Robust);
+    let errs = photometric::angular_errors(&out.normals, dark.truth.as_ref().unwrap());
+    assert!(errs.iter().sum::<f64>() / (errs.len() as f64) < 0.01);
+    let mut bright = sphere(48, &lights, 1.6);
+    let n = bright.pixels.len();
+    let mut clipped = 0;
+    for p in 0..n {
+        let obs: Vec<[f32; 3]> = bright.obs.pixel(p).to_vec();
+        for (j, o) in obs.iter().enumerate() {
+            if o[0] > 1.0 {
+                clipped += 1;
+            }
+            // What a sensor records: clipped at its largest code.
+            bright.obs.set_raw(p, j, o.map(|v| v.min(1.0)), [1.0; 3]);
+        }
+    }
+    assert!(clipped > 1000);
+    let plain = photometric::run(&bright, Model::Lambertian).summary.mean_angular_error_deg.unwrap();
+    let robust = photometric::run(&bright, Model::Robust);
+    let r = robust.summary.mean_angular_error_deg.unwrap();
+    eprintln!("saturated: least squares {plain:.2}°, robust {r:.3}°");
+    assert!(r < 0.5 && r < plain / 3.0, "robust {r}°, least squares {plain}°");
+}
+
+fn lumen(args: &[&str]) -> (i32, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_lumen")).args(args).output().unwrap();
+    (o.status.code().unwrap_or(-1), String::from_utf8_lossy(&o.stderr).into_owned())
+}
+
+/// Broken datasets: each error names the file and what was expected; nothing is written.
+#[test]
+fn bad_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = d.join("out");
+    let run = || lumen(&["ps", "--dataset", d.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let (code, err) = run();
+    assert_eq!(code, 1);
+    assert!(err.contains("filenames.txt"), "{err}");
+    std::fs::write(d.join("filenames.txt"), "a.png\nb.png\nc.png\n").unwrap();
+    std::fs::write(d.join("light_directions.txt"), "0 0 1\n0 1 0\n").unwrap();
+    std::fs::write(d.join("light_intensities.txt"), "1 1 1\n1 1 1\n1 1 1\n").unwrap();
+    let (code, err) = run();
+    assert_eq!(code, 1);
+    assert!(err.contains("light_directions.txt") && err.contains("2 rows"), "{err}");
+    std::fs::write(d.join("light_directions.txt"), "0 0 1\n0 1 0\n0 0.5 x\n").unwrap();
+    let (_, err) = run();
+    assert!(err.contains("light_directions.txt") && err.contains("line 3"), "{err}");
+    std::fs::write(d.join("light_directions.txt"), "0 0 1\n0 1 0\n0 0.5 0.5\n").unwrap();
+    let (_, err) = run();
+    assert!(err.contains("line 3") && err.contains("unit vector"), "{err}");
+    std::fs::write(d.join("light_directions.txt"), "0 0 1\n0 1 0\n1 0 0\n").unwrap();
+    let (_, err) = run();
+    assert!(err.contains("mask.png"), "{err}");
+    image::save_buffer(d.join("mask.png"), &[255u8; 16], 4, 4, image::ExtendedColorType::L8).unwrap();
+    image::save_buffer(d.join("a.png"), &[9u8; 16], 4, 4, image::ExtendedColorType::L8).unwrap();
+    image::save_buffer(d.join("b.png"), &[9u8; 25], 5, 5, image::ExtendedColorType::L8).unwrap();
+    let (_, err) = run();
+    assert!(err.contains("b.png") || err.contains("c.png"), "{err}");
+    let (code, err) = lumen(&["ps", "--dataset", d.to_str().unwrap(), "--model", "phong", "--out", "x"]);
+    assert_eq!(code, 1);
+    assert!(err.contains("--model") && err.contains("phong"), "{err}");
+    assert!(!out.exists());
+}
