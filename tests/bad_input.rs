@@ -121,6 +121,16 @@ fn bad_values() {
     assert!(e.contains("missing.png"), "{e}");
     let e = scene_error("[sensor]\nbits = 12\n", &[]);
     assert!(e.contains("sensor") && e.contains("bits"), "{e}");
+    let glossy = |rest: &str| format!("[[materials]]\nname = \"g\"\nalbedo = [0.3, 0.3, 0.3]\n{rest}");
+    let e = scene_error(&glossy("type = \"lambertian\"\nexponent = 10.0\n"), &[]);
+    assert!(e.contains("materials[1] (g)") && e.contains("blinn-phong"), "{e}");
+    let e = scene_error(&glossy("type = \"blinn-phong\"\nspecular = [0.2, 0.2, 0.2]\n"), &[]);
+    assert!(e.contains("materials[1] (g)") && e.contains("exponent"), "{e}");
+    let e =
+        scene_error(&glossy("type = \"blinn-phong\"\nspecular = [0.2, 0.2, 0.2]\nexponent = -3.0\n"), &[]);
+    assert!(e.contains("materials[1] (g).exponent") && e.contains("-3"), "{e}");
+    let e = scene_error(&glossy("type = \"phong\"\n"), &[]);
+    assert!(e.contains("'phong'") && e.contains("blinn-phong"), "{e}");
 }
 
 #[test]

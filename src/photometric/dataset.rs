@@ -97,8 +97,7 @@ pub fn read(dir: &Path) -> Result<Dataset, Error> {
     // Images in parallel, each reduced at once to the masked pixels.
     let per_image: Vec<Vec<[f32; 3]>> = names
         .par_iter()
-        .enumerate()
-        .map(|(k, name)| {
+        .map(|name| {
             let path = dir.join(name);
             let img = crate::image::io::read_raw(&path)?;
             if (img.width as usize, img.height as usize) != (width, height) {

@@ -71,25 +71,6 @@ fn epsilon(p: Vec3A) -> f32 {
     1e-4 * (1.0 + p.abs().max_element())
 }
 
-/// Builds an orthonormal basis around unit `n` (Duff et al. 2017).
-#[inline]
-fn basis(n: Vec3A) -> (Vec3A, Vec3A) {
-    let s = if n.z >= 0.0 { 1.0 } else { -1.0 };
-    let a = -1.0 / (s + n.z);
-    let b = n.x * n.y * a;
-    (Vec3A::new(1.0 + s * n.x * n.x * a, s * b, -s * n.x), Vec3A::new(b, s + n.y * n.y * a, -n.y))
-}
-
-/// Cosine-weighted direction around `n` (Malley's method).
-#[inline]
-fn cosine_hemisphere(n: Vec3A, u1: f32, u2: f32) -> Vec3A {
-    let r = u1.sqrt();
-    let phi = 2.0 * PI * u2;
-    let (t, b) = basis(n);
-    let z = (1.0 - u1).max(0.0).sqrt();
-    (t * (r * phi.cos()) + b * (r * phi.sin()) + n * z).normalize()
-}
-
 /// Surface data at a hit.
 pub struct Surface {
     pub p: Vec3A,
@@ -162,7 +143,7 @@ impl Scene {
             if depth == max_depth {
                 break;
             }
-            // Two-sided diffuse: shade with the normal on the side the path arrived from.
+            // Two-sided surfaces: shade with the normal on the side the path arrived from.
             let n = if surf.n.dot(wo) < 0.0 { -surf.n } else { surf.n };
             let albedo = self.albedo(surf.material, &hit, surf.p);
             let origin = surf.p + n * epsilon(surf.p);
@@ -177,12 +158,15 @@ impl Scene {
                         dist * (1.0 - 1e-4) - epsilon(surf.p),
                     )
                 {
-                    l += beta * albedo * (cos / PI) * li;
+                    l += beta * mat.bsdf.eval(albedo, n, wo, wi) * cos * li;
                 }
             }
 
             let (u1, u2) = s.next2();
-            beta *= albedo;
+            let Some((wi, weight)) = mat.bsdf.sample(albedo, n, wo, u1, u2) else {
+                break;
+            };
+            beta *= weight;
             let u_rr = s.next();
             if depth >= RR_START {
                 let q = beta.max_element().min(0.95);
@@ -194,7 +178,7 @@ impl Scene {
             if beta == Vec3A::ZERO {
                 break;
             }
-            ray = Ray { origin, dir: cosine_hemisphere(n, u1, u2) };
+            ray = Ray { origin, dir: wi };
         }
         l
     }

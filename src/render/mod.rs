@@ -4,6 +4,7 @@
 //! `Film` (mean + variance); `truth` writes ground-truth images; `sensor` turns radiance into
 //! noisy, quantised code values.
 
+pub mod bsdf;
 pub mod bvh;
 pub mod geometry;
 pub mod integrator;

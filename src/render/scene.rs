@@ -6,6 +6,7 @@
 //! intensity in W·sr⁻¹ (or power in W), directional-light irradiance in W·m⁻².
 //! See `pipelines/scenes/*.toml` for examples of every field.
 
+use super::bsdf::Bsdf;
 use super::bvh::Bvh;
 use super::geometry::{Prim, PrimInfo};
 use super::texture::Texture;
@@ -124,10 +125,15 @@ impl Default for RenderSpec {
 #[serde(deny_unknown_fields)]
 pub struct MaterialSpec {
     pub name: String,
-    /// Only `"lambertian"` so far.
+    /// `"lambertian"` or `"blinn-phong"` (f = kd/π + ks·(e + 8)/(8π)·cosᵉθh, see
+    /// `render::bsdf`; kd is `albedo`).
     #[serde(rename = "type")]
     pub kind: String,
     pub albedo: TextureSpec,
+    /// Blinn-Phong only: specular colour ks (kd + ks ≤ 1 conserves energy).
+    pub specular: Option<[f64; 3]>,
+    /// Blinn-Phong only: the exponent e (shininess), > 0.
+    pub exponent: Option<f64>,
     /// Emitted radiance (linear RGB), one-sided along the surface normal: makes every shape
     /// with this material an area light.
     pub emission: Option<[f64; 3]>,
@@ -203,8 +209,10 @@ pub enum LightSpec {
 
 pub struct Material {
     pub name: String,
+    /// The diffuse colour kd.
     pub albedo: Texture,
     pub emission: Option<Vec3A>,
+    pub bsdf: Bsdf,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -335,20 +343,48 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
     let mut materials = Vec::new();
     for (i, m) in file.materials.iter().enumerate() {
         let field = format!("materials[{i}] ({})", m.name);
-        if m.kind != "lambertian" {
-            return Err(field_err(
-                path,
-                &format!("{field}.type"),
-                format!("'{}' is not a known material (expected \"lambertian\")", m.kind),
-            ));
-        }
+        let bsdf = match (m.kind.as_str(), m.specular, m.exponent) {
+            ("lambertian", None, None) => Bsdf::Lambertian,
+            ("lambertian", _, _) => {
+                return Err(field_err(
+                    path,
+                    &field,
+                    "a lambertian material takes no `specular` or `exponent` (use type = \"blinn-phong\")",
+                ))
+            }
+            ("blinn-phong", Some(ks), Some(e)) => {
+                let specular = non_negative3(path, &format!("{field}.specular"), ks)?;
+                if !(e.is_finite() && e > 0.0 && e <= 1e5) {
+                    return Err(field_err(
+                        path,
+                        &format!("{field}.exponent"),
+                        format!("{e}: expected a number in (0, 100000]"),
+                    ));
+                }
+                Bsdf::BlinnPhong { specular, exponent: e as f32 }
+            }
+            ("blinn-phong", _, _) => {
+                return Err(field_err(
+                    path,
+                    &field,
+                    "a blinn-phong material needs `specular` = [r, g, b] and `exponent`",
+                ))
+            }
+            (other, _, _) => {
+                return Err(field_err(
+                    path,
+                    &format!("{field}.type"),
+                    format!("'{other}' is not a known material (expected \"lambertian\" or \"blinn-phong\")"),
+                ))
+            }
+        };
         if materials.iter().any(|x: &Material| x.name == m.name) {
             return Err(field_err(path, &format!("{field}.name"), "is used by an earlier material"));
         }
         let albedo = Texture::build(&m.albedo, &dir, path, &format!("{field}.albedo"))?;
         let emission =
             m.emission.map(|e| non_negative3(path, &format!("{field}.emission"), e)).transpose()?;
-        materials.push(Material { name: m.name.clone(), albedo, emission });
+        materials.push(Material { name: m.name.clone(), albedo, emission, bsdf });
     }
     let material_index = |name: &str, field: &str| -> Result<u32, Error> {
         materials.iter().position(|m| m.name == name).map(|i| i as u32).ok_or_else(|| {
