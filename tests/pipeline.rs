@@ -158,3 +158,33 @@ fn bench_names_a_missing_scene() {
     assert_eq!(o.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&o.stderr).contains("/nonexistent/b.toml"));
 }
+
+/// The photometric stage on a small Lambertian sphere (12 lights, 8 spp): the robust model
+/// within 0.2° of the truth normals; a bad setting is refused naming it.
+#[test]
+fn photometric_stage() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let scene = common::root().join("pipelines/scenes/ps-sphere.toml");
+    let stage = |extra: &str| {
+        format!(
+            "name = \"ps\"\nseed = 3\n[[stages]]\nstage = \"photometric\"\ncase = \"sphere\"\nscene = \"{}\"\nspp = 8\n{extra}",
+            scene.display()
+        )
+    };
+    let (code, err) =
+        run(&stage("lights = 12\nbounds = { mean_angular_error_deg = 0.2, masked_pixels = 0 }\n"), &out);
+    assert_eq!(code, 0, "{err}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let metrics = report["stages"][0]["metrics"].as_array().unwrap();
+    let err_deg =
+        metrics.iter().find(|m| m["name"] == "mean_angular_error_deg").unwrap()["value"].as_f64().unwrap();
+    assert!(err_deg > 0.0 && err_deg <= 0.2, "{err_deg}");
+    let (code, err) = run(&stage("lights = 2\n"), &out);
+    assert_eq!(code, 1);
+    assert!(err.contains("lights = 2"), "{err}");
+    let (code, err) = run(&stage("model = \"phong\"\n"), &out);
+    assert_eq!(code, 1);
+    assert!(err.contains("phong"), "{err}");
+}

@@ -22,6 +22,7 @@
 
 pub mod report;
 pub mod stage_calibrate;
+pub mod stage_photometric;
 pub mod stage_render;
 
 use report::{Metric, Report, StageReport};
@@ -59,6 +60,7 @@ fn default_seed() -> u64 {
 pub enum StageSpec {
     Render(stage_render::RenderStage),
     Calibrate(stage_calibrate::CalibrateStage),
+    Photometric(stage_photometric::PhotometricStage),
 }
 
 /// What every stage entry has besides its own settings (each stage's file struct carries
@@ -78,12 +80,14 @@ impl StageSpec {
         match self {
             StageSpec::Render(s) => s.common(),
             StageSpec::Calibrate(s) => s.common(),
+            StageSpec::Photometric(s) => s.common(),
         }
     }
     fn name(&self) -> &'static str {
         match self {
             StageSpec::Render(_) => "render",
             StageSpec::Calibrate(_) => "calibrate",
+            StageSpec::Photometric(_) => "photometric",
         }
     }
 }
@@ -132,6 +136,7 @@ pub fn run(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Report
         let out = match spec {
             StageSpec::Render(s) => stage_render::run(s, &dir, seed, opts).map_err(stage_err)?,
             StageSpec::Calibrate(s) => stage_calibrate::run(s, &dir, seed, opts).map_err(stage_err)?,
+            StageSpec::Photometric(s) => stage_photometric::run(s, &dir, seed, opts).map_err(stage_err)?,
         };
         let mut timings = out.timings_s;
         timings.insert("total".into(), t.elapsed().as_secs_f64());

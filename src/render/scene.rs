@@ -670,6 +670,16 @@ pub fn light_power(l: &Light, scene_radius: f32) -> f32 {
     }
 }
 
+impl Scene {
+    /// Replaces the point and directional lights (emissive shapes stay lights), as a stage
+    /// that relights one scene does.
+    pub fn replace_lights(&mut self, lights: &[Light]) {
+        self.lights.retain(|l| matches!(l, Light::Area { .. }));
+        self.lights.extend(lights.iter().copied().filter(|l| !matches!(l, Light::Area { .. })));
+        self.light_cdf = light_cdf(&self.lights, self.bounds_radius);
+    }
+}
+
 fn light_cdf(lights: &[Light], scene_radius: f32) -> Vec<f32> {
     let powers: Vec<f64> = lights.iter().map(|l| light_power(l, scene_radius) as f64).collect();
     let total: f64 = powers.iter().sum();
