@@ -191,6 +191,28 @@ mod tests {
         assert!((sum / n as f64 - 0.5).abs() < 0.0046);
     }
 
+    /// Mean of the first stream's numbers and the correlation between two streams' numbers
+    /// at dimension `dim`, over `n` pairs of streams made by `pair(i)`.
+    fn mean_and_correlation(n: u64, dim: usize, pair: impl Fn(u64) -> (Sampler, Sampler)) -> (f64, f64) {
+        let (mut sx, mut sy, mut sxy, mut sxx, mut syy) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
+        for i in 0..n {
+            let (mut a, mut b) = pair(i);
+            let (mut x, mut y) = (0.0, 0.0);
+            for _ in 0..=dim {
+                x = a.next() as f64;
+                y = b.next() as f64;
+            }
+            sx += x;
+            sy += y;
+            sxy += x * y;
+            sxx += x * x;
+            syy += y * y;
+        }
+        let nf = n as f64;
+        let cov = sxy / nf - sx * sy / nf / nf;
+        (sx / nf, cov / ((sxx / nf - (sx / nf).powi(2)) * (syy / nf - (sy / nf).powi(2))).sqrt())
+    }
+
     /// Neighbouring pixels' and samples' streams are uncorrelated in every early dimension
     /// (the ones a path uses most): |corr| < 5/√n.
     #[test]
@@ -198,35 +220,17 @@ mod tests {
         let n = 20_000;
         for dim in 0..8 {
             for (dp, ds) in [(1u64, 0u64), (0, 1)] {
-                let (mut sx, mut sy, mut sxy, mut sxx, mut syy) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
-                for i in 0..n as u64 {
-                    let mut a = Sampler::new(5, i, 3);
-                    let mut b = Sampler::new(5, i + dp, 3 + ds);
-                    let (mut x, mut y) = (0.0, 0.0);
-                    for _ in 0..=dim {
-                        x = a.next() as f64;
-                        y = b.next() as f64;
-                    }
-                    sx += x;
-                    sy += y;
-                    sxy += x * y;
-                    sxx += x * x;
-                    syy += y * y;
-                }
-                let nf = n as f64;
-                let cov = sxy / nf - sx * sy / nf / nf;
-                let corr = cov / ((sxx / nf - (sx / nf).powi(2)) * (syy / nf - (sy / nf).powi(2))).sqrt();
+                let (_, corr) = mean_and_correlation(n, dim, |i| {
+                    (Sampler::new(5, i, 3), Sampler::new(5, i + dp, 3 + ds))
+                });
                 assert!(
-                    corr.abs() < 5.0 / nf.sqrt(),
+                    corr.abs() < 5.0 / (n as f64).sqrt(),
                     "dimension {dim}, offset {dp}/{ds}: correlation {corr}"
                 );
             }
         }
     }
 
-    /// With 2^m samples, every pair of a pixel is a (0, m, 2)-net: each elementary interval
-    /// [a/2^k, (a+1)/2^k) × [b/2^(m−k), (b+1)/2^(m−k)) holds exactly one sample; and every single
-    /// number is one per stratum of width 2^−m.
     #[test]
     fn sobol_pairs_are_nets() {
         let m = 6u32;
@@ -262,26 +266,11 @@ mod tests {
     #[test]
     fn sobol_pixels_are_uncorrelated() {
         let n = 20_000u64;
+        let sobol = |pixel| Sampler::with_kind(SamplerKind::Sobol, 5, pixel, 3);
         for dim in 0..8 {
-            let (mut sx, mut sy, mut sxy, mut sxx, mut syy) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
-            for i in 0..n {
-                let mut a = Sampler::with_kind(SamplerKind::Sobol, 5, i, 3);
-                let mut b = Sampler::with_kind(SamplerKind::Sobol, 5, i + 1, 3);
-                let (mut x, mut y) = (0.0, 0.0);
-                for _ in 0..=dim {
-                    x = a.next() as f64;
-                    y = b.next() as f64;
-                }
-                sx += x;
-                sy += y;
-                sxy += x * y;
-                sxx += x * x;
-                syy += y * y;
-            }
+            let (mean, corr) = mean_and_correlation(n, dim, |i| (sobol(i), sobol(i + 1)));
             let nf = n as f64;
-            assert!((sx / nf - 0.5).abs() < 5.0 / (12.0 * nf).sqrt(), "dimension {dim}: mean {}", sx / nf);
-            let cov = sxy / nf - sx * sy / nf / nf;
-            let corr = cov / ((sxx / nf - (sx / nf).powi(2)) * (syy / nf - (sy / nf).powi(2))).sqrt();
+            assert!((mean - 0.5).abs() < 5.0 / (12.0 * nf).sqrt(), "dimension {dim}: mean {mean}");
             assert!(corr.abs() < 5.0 / nf.sqrt(), "dimension {dim}: correlation {corr}");
         }
     }
