@@ -29,7 +29,16 @@ fn diligent_ball() {
     assert!(!robust.summary.lights_nearly_coplanar);
     let dir = tempfile::tempdir().unwrap();
     photometric::write(dir.path(), &ds, &robust).unwrap();
-    for f in ["normals.exr", "normals.png", "albedo.exr", "albedo.png", "error.png", "summary.json"] {
+    for f in [
+        "normals.exr",
+        "normals.png",
+        "albedo.exr",
+        "albedo.png",
+        "error.png",
+        "depth.exr",
+        "surface.obj",
+        "summary.json",
+    ] {
         assert!(dir.path().join(f).is_file(), "{f} missing");
     }
     let summary: serde_json::Value =

@@ -1,11 +1,13 @@
 //! Photometric stereo: per-pixel normals and albedo from images under known distant lights.
 //!
 //! `dataset` reads DiLiGenT's layout, `lambertian` holds the least-squares solvers (Woodham
-//! 1980) and their robust variant, `mat` reads MATLAB v5 ground truth. `run` solves every
+//! 1980) and their robust variant, `integrate` turns normals into a depth map and a mesh,
+//! `mat` reads MATLAB v5 ground truth. `run` solves every
 //! masked pixel with the chosen model and, when the dataset has ground truth, measures the
 //! angular error; `write` puts the result files in a folder.
 
 pub mod dataset;
+pub mod integrate;
 pub mod lambertian;
 pub mod mat;
 
@@ -192,7 +194,8 @@ fn median_of(v: &[f64]) -> Option<f64> {
 }
 
 /// Writes `normals.exr` / `.png`, `albedo.exr` / `.png`, `error.png` (with ground truth:
-/// angular error, black 0° to white 20° and above) and `summary.json` into `dir`. Normals are
+/// angular error, black 0° to white 20° and above), the integrated surface as `depth.exr`
+/// (orthographic, pixel units, mean 0) and `surface.obj`, and `summary.json` into `dir`. Normals are
 /// unit vectors in the dataset's frame, zero outside the mask; the PNG shows (n + 1)/2. The
 /// albedo PNG is scaled so that the brightest 1 % of pixels saturate.
 pub fn write(dir: &Path, data: &dataset::Dataset, out: &Output) -> Result<(), Error> {
@@ -232,6 +235,16 @@ pub fn write(dir: &Path, data: &dataset::Dataset, out: &Output) -> Result<(), Er
             };
         }
         io::write_png_raw(&dir.join("error.png"), w, h, 1, &err, 8)?;
+    }
+    if let Some(z) = integrate::depth(data.width, &data.pixels, &out.normals) {
+        let mut depth = Image::new(w, h, 1);
+        for (k, &i) in data.pixels.iter().enumerate() {
+            depth.data[i] = z[k] as f32;
+        }
+        io::write_exr(&dir.join("depth.exr"), &depth)?;
+        let obj = integrate::to_obj(data.width, &data.pixels, &out.normals, &z);
+        let path = dir.join("surface.obj");
+        io::write_atomically(&path, |tmp| std::fs::write(tmp, obj).map_err(|e| e.to_string()))?;
     }
     let json = serde_json::to_string_pretty(&out.summary)
         .map_err(|e| Error::Write { path: dir.join("summary.json"), message: e.to_string() })?;
