@@ -280,29 +280,6 @@ mod tests {
                 }
             }
             let p = chi2_test(&observed, &expected).expect("enough cells");
-            if std::env::var("CHI_DEBUG").is_ok() && p < alpha {
-                let mut worst: Vec<(f64, usize)> = observed
-                    .iter()
-                    .zip(&expected)
-                    .enumerate()
-                    .map(|(i, (o, e))| ((o - e) * (o - e) / e.max(1e-9), i))
-                    .collect();
-                worst.sort_by(|a, b| b.0.total_cmp(&a.0));
-                for &(c, i) in worst.iter().take(6) {
-                    eprintln!(
-                        "cell t {} p {}: observed {} expected {:.2} chi {c:.1}",
-                        i / np,
-                        i % np,
-                        observed[i],
-                        expected[i]
-                    );
-                }
-                eprintln!(
-                    "totals: observed {} expected {:.1}",
-                    observed.iter().sum::<f64>(),
-                    expected.iter().sum::<f64>()
-                );
-            }
             assert!(
                 p >= alpha,
                 "case {case} ({bsdf:?}, θo {theta_o}°): χ² p-value {p:.3e} below {alpha:.3e}"
