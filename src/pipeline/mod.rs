@@ -119,8 +119,18 @@ pub fn pipeline_name(file: &PipelineFile, path: &Path) -> String {
         .unwrap_or_else(|| path.file_stem().and_then(|s| s.to_str()).unwrap_or("pipeline").to_string())
 }
 
-/// Runs every stage of a pipeline file and returns the report (not yet written).
+/// Runs every stage of a pipeline file and returns the report (not yet written). With
+/// `opts.threads`, all of a stage's parallel work (rendering, detection, solving) shares that
+/// many threads.
 pub fn run(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Report, Error> {
+    let pool = opts.threads.and_then(|n| rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build().ok());
+    match pool {
+        Some(pool) => pool.install(|| run_stages(path, file, opts)),
+        None => run_stages(path, file, opts),
+    }
+}
+
+fn run_stages(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Report, Error> {
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     let mut stages = Vec::new();
     for (i, spec) in file.stages.iter().enumerate() {
