@@ -12,22 +12,12 @@
 
 use crate::math::{CameraModel, Distortion, Intrinsics};
 use glam::{DVec2, DVec3};
-use opencv::core::{Mat, Point2f, Point3f, Size, TermCriteria, TermCriteria_Type, Vector, CV_8UC1};
+use opencv::core::{Mat, Point2f, Point3f, Size, TermCriteria, TermCriteria_Type, Vector};
 use opencv::prelude::*;
 
 /// An OpenCV error as text (the module's callers are tests and benchmarks).
 fn err(e: opencv::Error) -> String {
     format!("OpenCV: {e}")
-}
-
-/// An 8-bit grey image as OpenCV holds it, from values in [0, 1].
-pub fn grey_mat(img: &crate::image::filter::Grey) -> Result<Mat, String> {
-    let bytes: Vec<u8> = img.data.iter().map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect();
-    let flat = Mat::from_slice(&bytes).map_err(err)?;
-    let m = flat.reshape(1, img.height as i32).map_err(err)?;
-    let out = m.try_clone().map_err(err)?;
-    debug_assert_eq!(out.typ(), CV_8UC1);
-    Ok(out)
 }
 
 /// Reads an image file as OpenCV's users do (`imread`, greyscale).

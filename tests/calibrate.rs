@@ -91,25 +91,8 @@ fn parallel_views_are_refused() {
 }
 
 fn real_images() -> Option<Vec<(String, lumen::image::filter::Grey)>> {
-    let dir = common::shared_data()?.join("calibration/opencv-left");
-    let mut files: Vec<_> = std::fs::read_dir(&dir)
-        .unwrap()
-        .filter_map(|e| e.ok())
-        .map(|e| e.path())
-        .filter(|p| p.extension().is_some_and(|e| e == "jpg"))
-        .collect();
-    files.sort();
-    Some(
-        files
-            .iter()
-            .map(|f| {
-                (
-                    f.display().to_string(),
-                    lumen::image::filter::Grey::from_image(&lumen::image::io::read(f).unwrap()),
-                )
-            })
-            .collect(),
-    )
+    let files = common::calibration_photographs()?;
+    Some(files.iter().map(|f| (f.display().to_string(), common::grey(f))).collect())
 }
 
 /// OpenCV's sample photographs: every view found and the RMS reprojection error ≤ 0.19 px

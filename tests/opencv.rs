@@ -11,20 +11,15 @@ use lumen::cv;
 
 const BOARD: BoardSize = BoardSize { cols: 9, rows: 6 };
 
-fn photographs() -> Option<Vec<std::path::PathBuf>> {
-    let dir = common::shared_data()?.join("calibration/opencv-left");
-    let mut files: Vec<_> = std::fs::read_dir(&dir)
-        .unwrap()
-        .filter_map(|e| e.ok())
-        .map(|e| e.path())
-        .filter(|p| p.extension().is_some_and(|e| e == "jpg"))
-        .collect();
-    files.sort();
-    Some(files)
-}
-
-fn lumen_grey(path: &std::path::Path) -> lumen::image::filter::Grey {
-    lumen::image::filter::Grey::from_image(&lumen::image::io::read(path).unwrap())
+/// lumen's calibration settings for these tests: unit squares, free distortion.
+fn config(max_iterations: usize) -> Config {
+    Config {
+        board: BOARD,
+        square: 1.0,
+        flags: Default::default(),
+        detect: Default::default(),
+        max_iterations,
+    }
 }
 
 /// Displacement p − K·undistort(p) of a camera model at p.
@@ -38,15 +33,9 @@ fn displacement(cam: &lumen::math::CameraModel, p: DVec2) -> DVec2 {
 /// field within 1e-4 px over every corner.
 #[test]
 fn same_corners_same_calibration() {
-    let Some(files) = photographs() else { return };
-    let images: Vec<_> = files.iter().map(|f| (f.display().to_string(), lumen_grey(f))).collect();
-    let config = Config {
-        board: BOARD,
-        square: 1.0,
-        flags: Default::default(),
-        detect: Default::default(),
-        max_iterations: 1000,
-    };
+    let Some(files) = common::calibration_photographs() else { return };
+    let images: Vec<_> = files.iter().map(|f| (f.display().to_string(), common::grey(f))).collect();
+    let config = config(1000);
     let (views, _) = calib::detect_views(&images, &config).unwrap();
     assert_eq!(views.len(), 13);
     let views: Vec<(String, Vec<DVec2>)> = views
@@ -82,11 +71,11 @@ fn same_corners_same_calibration() {
 /// corners, calibrated by its own library, gives lumen the lower RMS.
 #[test]
 fn corners_compared_per_view() {
-    let Some(files) = photographs() else { return };
+    let Some(files) = common::calibration_photographs() else { return };
     let mut all = Vec::new();
     let mut cv_views = Vec::new();
     for f in &files {
-        let ours = calib::detect::detect(&lumen_grey(f), BOARD, &Default::default()).unwrap();
+        let ours = calib::detect::detect(&common::grey(f), BOARD, &Default::default()).unwrap();
         let theirs = cv::find_corners(&cv::read_grey(f).unwrap(), 9, 6).unwrap();
         let theirs = theirs.unwrap_or_else(|| panic!("{}: OpenCV found no board", f.display()));
         let dist = |t: &[DVec2]| ours.iter().zip(t).map(|(a, b)| a.distance(*b)).collect::<Vec<f64>>();
@@ -113,14 +102,8 @@ fn corners_compared_per_view() {
     let board = calib::board_points(BOARD, 1.0);
     // calibrateCamera's default criteria (30 iterations or a change below machine epsilon).
     let theirs = cv::calibrate(&board, &cv_views, (640, 480), 30, f64::EPSILON).unwrap();
-    let images: Vec<_> = files.iter().map(|f| (f.display().to_string(), lumen_grey(f))).collect();
-    let config = Config {
-        board: BOARD,
-        square: 1.0,
-        flags: Default::default(),
-        detect: Default::default(),
-        max_iterations: 100,
-    };
+    let images: Vec<_> = files.iter().map(|f| (f.display().to_string(), common::grey(f))).collect();
+    let config = config(100);
     let ours = calib::run(&images, &config).unwrap();
     eprintln!("RMS reprojection error: lumen {:.4} px, OpenCV {:.4} px", ours.rms_px, theirs.rms_px);
     assert!(ours.rms_px < theirs.rms_px);

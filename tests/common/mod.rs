@@ -27,6 +27,25 @@ pub fn shared_data() -> Option<PathBuf> {
     }
 }
 
+/// OpenCV's 13 sample chessboard photographs (`../shared/data/calibration/opencv-left`),
+/// sorted, or `None` (with a printed reason) without `../shared`.
+pub fn calibration_photographs() -> Option<Vec<PathBuf>> {
+    let dir = shared_data()?.join("calibration/opencv-left");
+    let mut files: Vec<_> = std::fs::read_dir(&dir)
+        .expect("the calibration folder is readable")
+        .filter_map(|e| e.ok())
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|e| e == "jpg"))
+        .collect();
+    files.sort();
+    Some(files)
+}
+
+/// An image file as lumen's detectors see it.
+pub fn grey(path: &Path) -> lumen::image::filter::Grey {
+    lumen::image::filter::Grey::from_image(&lumen::image::io::read(path).expect("a readable image"))
+}
+
 pub fn settings(scene: &Scene, spp: u32, max_depth: u32) -> render::Settings {
     let mut s = render::Settings::from_scene(scene);
     s.spp = spp;
