@@ -25,6 +25,9 @@ pub struct Dataset {
     pub obs: Observations,
     /// Ground-truth unit normals of the masked pixels, when the dataset has them.
     pub truth: Option<Vec<DVec3>>,
+    /// Unit directions from each masked pixel's surface point towards the camera; `None` for
+    /// an orthographic view along +z (DiLiGenT's assumption: its objects are small and far).
+    pub views: Option<Vec<DVec3>>,
 }
 
 fn bad(path: &Path, message: impl Into<String>) -> Error {
@@ -139,5 +142,5 @@ pub fn read(dir: &Path) -> Result<Dataset, Error> {
     } else {
         None
     };
-    Ok(Dataset { width, height, lights, intensities, pixels, obs, truth })
+    Ok(Dataset { width, height, lights, intensities, pixels, obs, truth, views: None })
 }

@@ -1,11 +1,12 @@
 //! Photometric stereo: per-pixel normals and albedo from images under known distant lights.
 //!
 //! `dataset` reads DiLiGenT's layout, `lambertian` holds the least-squares solvers (Woodham
-//! 1980) and their robust variant, `integrate` turns normals into a depth map and a mesh,
+//! 1980) and their robust variant, `blinn_phong` the non-linear fit of a glossy model, `integrate` turns normals into a depth map and a mesh,
 //! `mat` reads MATLAB v5 ground truth. `run` solves every
 //! masked pixel with the chosen model and, when the dataset has ground truth, measures the
 //! angular error; `write` puts the result files in a folder.
 
+pub mod blinn_phong;
 pub mod dataset;
 pub mod integrate;
 pub mod lambertian;
@@ -67,6 +68,8 @@ pub enum Model {
     Lambertian,
     /// Least squares over the observations a Lambertian surface explains (`lambertian` docs).
     Robust,
+    /// Normal, diffuse and specular albedo and shininess of Blinn-Phong (`blinn_phong` docs).
+    BlinnPhong,
 }
 
 impl std::str::FromStr for Model {
@@ -75,7 +78,8 @@ impl std::str::FromStr for Model {
         match s {
             "lambertian" => Ok(Model::Lambertian),
             "robust" => Ok(Model::Robust),
-            _ => Err(format!("unknown model `{s}`: expected lambertian or robust")),
+            "blinn-phong" => Ok(Model::BlinnPhong),
+            _ => Err(format!("unknown model `{s}`: expected lambertian, robust or blinn-phong")),
         }
     }
 }
@@ -86,6 +90,9 @@ pub struct Output {
     /// Unit normals (dataset frame), `None` where the pixel could not be solved.
     pub normals: Vec<Option<DVec3>>,
     pub albedo: Vec<[f64; 3]>,
+    /// Blinn-Phong only: specular albedo σ and shininess e per pixel (0 where the pixel kept
+    /// the Lambertian solution or was not solved).
+    pub specular: Option<Vec<[f64; 2]>>,
     pub summary: Summary,
 }
 
@@ -113,6 +120,17 @@ pub struct Summary {
     pub time_s: f64,
     /// Pixel-lights per second of the solve.
     pub pixel_lights_per_s: f64,
+    /// Seconds per million masked pixels.
+    pub time_per_megapixel_s: f64,
+    /// Blinn-Phong only: solved pixels without a specular term (they kept the robust
+    /// Lambertian solution, or no observation sampled their lobe; `blinn_phong` docs).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pixels_without_specular: Option<usize>,
+    /// Blinn-Phong with ground truth: the mean angular error (degrees) of the normals after
+    /// k Gauss-Newton iterations, k = 0 (the robust Lambertian start), 1, 2, …; a pixel that
+    /// stopped earlier counts with its final normal.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mean_angular_error_by_iteration_deg: Option<Vec<f64>>,
 }
 
 /// Condition number of the light matrix.
@@ -127,23 +145,52 @@ pub fn light_condition_number(lights: &[DVec3]) -> f64 {
     }
 }
 
+/// One pixel's solution under any model.
+struct Solved {
+    normal: DVec3,
+    albedo: [f64; 3],
+    used: usize,
+    /// σ, e (Blinn-Phong).
+    specular: [f64; 2],
+    /// Normals after each iteration (Blinn-Phong).
+    history: Vec<DVec3>,
+}
+
+impl From<lambertian::Pixel> for Solved {
+    fn from(p: lambertian::Pixel) -> Solved {
+        Solved { normal: p.normal, albedo: p.albedo, used: p.used, specular: [0.0; 2], history: Vec::new() }
+    }
+}
+
 /// Solves every masked pixel of a dataset with `model`.
 pub fn run(data: &dataset::Dataset, model: Model) -> Output {
     let t = std::time::Instant::now();
-    let solved: Vec<Option<lambertian::Pixel>> = (0..data.pixels.len())
+    let solved: Vec<Option<Solved>> = (0..data.pixels.len())
         .into_par_iter()
         .map(|p| {
             let obs = data.obs.pixel(p);
             match model {
-                Model::Lambertian => lambertian::solve_plain(&data.lights, obs),
-                Model::Robust => lambertian::solve_robust(&data.lights, obs, data.obs.valid(p)),
+                Model::Lambertian => lambertian::solve_plain(&data.lights, obs).map(Solved::from),
+                Model::Robust => {
+                    lambertian::solve_robust(&data.lights, obs, data.obs.valid(p)).map(Solved::from)
+                }
+                Model::BlinnPhong => {
+                    let view = data.views.as_ref().map_or(DVec3::Z, |v| v[p]);
+                    blinn_phong::solve(&data.lights, view, obs, data.obs.valid(p)).map(|b| Solved {
+                        normal: b.normal,
+                        albedo: b.albedo,
+                        used: b.used,
+                        specular: [b.specular, b.exponent],
+                        history: b.history,
+                    })
+                }
             }
         })
         .collect();
     let time_s = t.elapsed().as_secs_f64();
-    let normals: Vec<Option<DVec3>> = solved.iter().map(|s| s.map(|p| p.normal)).collect();
-    let albedo = solved.iter().map(|s| s.map_or([0.0; 3], |p| p.albedo)).collect();
-    let ok: Vec<&lambertian::Pixel> = solved.iter().flatten().collect();
+    let normals: Vec<Option<DVec3>> = solved.iter().map(|s| s.as_ref().map(|p| p.normal)).collect();
+    let albedo = solved.iter().map(|s| s.as_ref().map_or([0.0; 3], |p| p.albedo)).collect();
+    let ok: Vec<&Solved> = solved.iter().flatten().collect();
     let used = ok.iter().map(|p| p.used as f64).sum::<f64>() / ok.len().max(1) as f64;
     let (mean, median) = match &data.truth {
         Some(truth) => {
@@ -151,6 +198,11 @@ pub fn run(data: &dataset::Dataset, model: Model) -> Output {
             (mean_of(&errs), median_of(&errs))
         }
         None => (None, None),
+    };
+    let glossy = model == Model::BlinnPhong;
+    let by_iteration = match &data.truth {
+        Some(truth) if glossy => Some(error_by_iteration(&solved, truth)),
+        _ => None,
     };
     let cond = light_condition_number(&data.lights);
     let summary = Summary {
@@ -165,8 +217,31 @@ pub fn run(data: &dataset::Dataset, model: Model) -> Output {
         mean_observations_used: used,
         time_s,
         pixel_lights_per_s: (data.pixels.len() * data.lights.len()) as f64 / time_s.max(1e-9),
+        time_per_megapixel_s: time_s / (data.pixels.len().max(1) as f64 / 1e6),
+        pixels_without_specular: glossy.then(|| ok.iter().filter(|p| p.specular[0] == 0.0).count()),
+        mean_angular_error_by_iteration_deg: by_iteration,
     };
-    Output { model, normals, albedo, summary }
+    let specular =
+        glossy.then(|| solved.iter().map(|s| s.as_ref().map_or([0.0; 2], |p| p.specular)).collect());
+    Output { model, normals, albedo, specular, summary }
+}
+
+/// Mean angular error after each iteration (`Summary::mean_angular_error_by_iteration_deg`).
+fn error_by_iteration(solved: &[Option<Solved>], truth: &[DVec3]) -> Vec<f64> {
+    let longest = solved.iter().flatten().map(|p| p.history.len()).max().unwrap_or(0);
+    (0..longest)
+        .map(|k| {
+            let (mut sum, mut n) = (0.0, 0usize);
+            for (s, t) in solved.iter().zip(truth) {
+                if let Some(p) = s {
+                    let normal = p.history.get(k).or(p.history.last()).copied().unwrap_or(p.normal);
+                    sum += normal.dot(t.normalize()).clamp(-1.0, 1.0).acos().to_degrees();
+                    n += 1;
+                }
+            }
+            sum / n.max(1) as f64
+        })
+        .collect()
 }
 
 /// Angle in degrees between each solved normal and its truth (unsolved pixels left out).
@@ -193,7 +268,8 @@ fn median_of(v: &[f64]) -> Option<f64> {
     }
 }
 
-/// Writes `normals.exr` / `.png`, `albedo.exr` / `.png`, `error.png` (with ground truth:
+/// Writes `normals.exr` / `.png`, `albedo.exr` / `.png`, for Blinn-Phong `specular.exr`
+/// (σ) and `shininess.exr` (e; both 0 where a pixel has no specular term), `error.png` (with ground truth:
 /// angular error, black 0° to white 20° and above), the integrated surface as `depth.exr`
 /// (orthographic, pixel units, mean 0) and `surface.obj`, and `summary.json` into `dir`. Normals are
 /// unit vectors in the dataset's frame, zero outside the mask; the PNG shows (n + 1)/2. The
@@ -223,6 +299,15 @@ pub fn write(dir: &Path, data: &dataset::Dataset, out: &Output) -> Result<(), Er
     let shown: Vec<u16> =
         albedo.data.iter().map(|v| (v / top * 255.0).round().clamp(0.0, 255.0) as u16).collect();
     io::write_png_raw(&dir.join("albedo.png"), w, h, 3, &shown, 8)?;
+    if let Some(spec) = &out.specular {
+        for (name, c) in [("specular.exr", 0), ("shininess.exr", 1)] {
+            let mut img = Image::new(w, h, 1);
+            for (k, &i) in data.pixels.iter().enumerate() {
+                img.data[i] = spec[k][c] as f32;
+            }
+            io::write_exr(&dir.join(name), &img)?;
+        }
+    }
     if let Some(truth) = &data.truth {
         let mut err = vec![0u16; (w * h) as usize];
         for (k, &i) in data.pixels.iter().enumerate() {
