@@ -7,8 +7,8 @@ use lumen::photometric::{self, dataset::Dataset, Model, Observations};
 use std::process::Command;
 
 /// DiLiGenT's ball: least squares within 0.1° of the plain recipe's 4.29° (the folder's
-/// README), the robust model ≤ 2.0° (the best non-learning methods report about 1.7°), every
-/// masked pixel solved, every output written.
+/// README), the robust model and the Blinn-Phong fit ≤ 2.0° (the best non-learning methods
+/// report about 1.7°), every masked pixel solved, every output written.
 #[test]
 fn diligent_ball() {
     let Some(data) = common::shared_data() else { return };
@@ -26,6 +26,19 @@ fn diligent_ball() {
     assert!((p - 4.29).abs() <= 0.1, "least squares {p}°");
     assert!(r <= 2.0, "robust {r}°");
     assert_eq!(robust.summary.masked_pixels, 0);
+    let glossy = photometric::run(&ds, Model::BlinnPhong);
+    let b = glossy.summary.mean_angular_error_deg.unwrap();
+    eprintln!("ball: Blinn-Phong {b:.3}° (median {:.3}°)", glossy.summary.median_angular_error_deg.unwrap());
+    assert!(b <= 2.0 && b < r, "Blinn-Phong {b}°, robust {r}°");
+    assert_eq!(glossy.summary.masked_pixels, 0);
+    let curve = glossy.summary.mean_angular_error_by_iteration_deg.as_ref().unwrap();
+    assert_eq!(curve[0], r, "the curve starts from the robust Lambertian solution");
+    assert!((curve[curve.len() - 1] - b).abs() < 1e-9, "and ends at the final error");
+    let dir = tempfile::tempdir().unwrap();
+    photometric::write(dir.path(), &ds, &glossy).unwrap();
+    for f in ["specular.exr", "shininess.exr"] {
+        assert!(dir.path().join(f).is_file(), "{f} missing");
+    }
     assert!(!robust.summary.lights_nearly_coplanar);
     let dir = tempfile::tempdir().unwrap();
     photometric::write(dir.path(), &ds, &robust).unwrap();
@@ -55,6 +68,12 @@ fn diligent_ball() {
 /// size×size image, normal (x, −y, z) in DiLiGenT's frame; lights at the given elevations
 /// (degrees) and azimuths spread round.
 fn sphere(size: usize, lights: &[DVec3], albedo: f64) -> Dataset {
+    glossy_sphere(size, lights, albedo, 0.0, 1.0)
+}
+
+/// The same with a Blinn-Phong lobe of specular albedo σ and shininess e (the renderer's
+/// form, ρ = kd/π, σ = ks/π), seen from +z.
+fn glossy_sphere(size: usize, lights: &[DVec3], albedo: f64, sigma: f64, e: f64) -> Dataset {
     let mut pixels = Vec::new();
     let mut normals = Vec::new();
     let c = (size as f64 - 1.0) / 2.0;
@@ -70,7 +89,9 @@ fn sphere(size: usize, lights: &[DVec3], albedo: f64) -> Dataset {
     let mut obs = Observations::new(pixels.len(), lights.len());
     for (p, n) in normals.iter().enumerate() {
         for (j, l) in lights.iter().enumerate() {
-            obs.set_raw(p, j, [(albedo * l.dot(*n).max(0.0)) as f32; 3], [1.0; 3]);
+            let d = n.dot((*l + DVec3::Z).normalize()).max(0.0);
+            let f = albedo + sigma * (e + 8.0) / 8.0 * d.powf(e);
+            obs.set_raw(p, j, [(f * l.dot(*n).max(0.0)) as f32; 3], [1.0; 3]);
         }
     }
     Dataset {
@@ -81,6 +102,39 @@ fn sphere(size: usize, lights: &[DVec3], albedo: f64) -> Dataset {
         pixels,
         obs,
         truth: Some(normals),
+        views: None,
+    }
+}
+
+/// Lights spread by the golden angle over elevations 20°–80°.
+fn spread(n: usize) -> Vec<DVec3> {
+    (0..n)
+        .map(|k| {
+            let e = (20.0 + 60.0 * (k as f64 + 0.5) / n as f64).to_radians();
+            let a = k as f64 * 2.399_963_229_728_653;
+            DVec3::new(e.cos() * a.cos(), e.cos() * a.sin(), e.sin())
+        })
+        .collect()
+}
+
+fn mean_error(ds: &Dataset, out: &photometric::Output) -> f64 {
+    let errs = photometric::angular_errors(&out.normals, ds.truth.as_ref().unwrap());
+    assert!(out.normals.iter().flatten().all(|n| n.is_finite()));
+    errs.iter().sum::<f64>() / errs.len() as f64
+}
+
+/// Noiseless glossy spheres of several shininess values under 12, 24 and 96 lights: the
+/// Blinn-Phong fit is exact to 0.05° where the Lambertian models are degrees off.
+#[test]
+fn blinn_phong_spheres() {
+    for (lights, e) in [(12, 10.0), (24, 30.0), (96, 100.0), (48, 300.0)] {
+        let ds = glossy_sphere(48, &spread(lights), 0.12, 0.1, e);
+        let robust = mean_error(&ds, &photometric::run(&ds, Model::Robust));
+        let out = photometric::run(&ds, Model::BlinnPhong);
+        let fit = mean_error(&ds, &out);
+        eprintln!("{lights} lights, e = {e}: Blinn-Phong {fit:.4}°, robust {robust:.3}°");
+        assert!(fit < 0.05 && fit * 3.0 < robust, "Blinn-Phong {fit}°, robust {robust}°");
+        assert_eq!(out.summary.masked_pixels, 0);
     }
 }
 
@@ -113,9 +167,12 @@ fn three_lights() {
     }
     assert!(lit_errors.len() > 1000);
     assert!(lit_errors.iter().all(|&e| e < 1e-4), "max {}", lit_errors.iter().fold(0.0f64, |a, &b| a.max(b)));
-    let robust = photometric::run(&ds, Model::Robust);
-    assert!(robust.normals.iter().flatten().all(|n| n.is_finite()));
-    assert_eq!(robust.summary.masked_pixels + robust.summary.pixels, ds.pixels.len());
+    for model in [Model::Robust, Model::BlinnPhong] {
+        let out = photometric::run(&ds, model);
+        assert!(out.normals.iter().flatten().all(|n| n.is_finite()));
+        assert!(out.albedo.iter().flatten().all(|a| a.is_finite()));
+        assert_eq!(out.summary.masked_pixels + out.summary.pixels, ds.pixels.len());
+    }
 }
 
 /// Grazing lights (elevation 5°): the light matrix is ill-conditioned in z, which the summary
@@ -125,11 +182,12 @@ fn grazing_lights() {
     let mut lights = ring(12, 5.0);
     lights.push(DVec3::Z);
     let ds = sphere(64, &lights, 0.5);
-    let out = photometric::run(&ds, Model::Robust);
-    assert!(out.summary.light_condition_number > 1.0);
-    let errs = photometric::angular_errors(&out.normals, ds.truth.as_ref().unwrap());
-    let mean = errs.iter().sum::<f64>() / errs.len() as f64;
-    assert!(mean < 0.01, "mean error {mean}°");
+    for model in [Model::Robust, Model::BlinnPhong] {
+        let out = photometric::run(&ds, model);
+        assert!(out.summary.light_condition_number > 1.0);
+        let mean = mean_error(&ds, &out);
+        assert!(mean < 0.01, "{model:?}: mean error {mean}°");
+    }
     // Only the ring, all at 5°: nearly coplanar, flagged.
     let ds = sphere(32, &ring(12, 5.0), 0.5);
     let out = photometric::run(&ds, Model::Lambertian);
@@ -140,7 +198,7 @@ fn grazing_lights() {
 #[test]
 fn coplanar_lights() {
     let ds = sphere(32, &ring(8, 0.0), 0.5);
-    for model in [Model::Lambertian, Model::Robust] {
+    for model in [Model::Lambertian, Model::Robust, Model::BlinnPhong] {
         let out = photometric::run(&ds, model);
         assert!(out.summary.lights_nearly_coplanar);
         assert_eq!(out.summary.pixels, 0);
@@ -156,9 +214,10 @@ fn coplanar_lights() {
 fn dark_albedo_and_saturation() {
     let lights = [ring(8, 30.0), ring(8, 60.0), vec![DVec3::Z]].concat();
     let dark = sphere(48, &lights, 0.002);
-    let out = photometric::run(&dark, Model::Robust);
-    let errs = photometric::angular_errors(&out.normals, dark.truth.as_ref().unwrap());
-    assert!(errs.iter().sum::<f64>() / (errs.len() as f64) < 0.01);
+    for model in [Model::Robust, Model::BlinnPhong] {
+        let mean = mean_error(&dark, &photometric::run(&dark, model));
+        assert!(mean < 0.01, "{model:?}: mean error {mean}°");
+    }
     let mut bright = sphere(48, &lights, 1.6);
     let n = bright.pixels.len();
     let mut clipped = 0;
@@ -178,6 +237,26 @@ fn dark_albedo_and_saturation() {
     let r = robust.summary.mean_angular_error_deg.unwrap();
     eprintln!("saturated: least squares {plain:.2}°, robust {r:.3}°");
     assert!(r < 0.5 && r < plain / 3.0, "robust {r}°, least squares {plain}°");
+}
+
+/// Saturated highlights on a glossy sphere: clipped observations are left out of the
+/// Blinn-Phong fit, which stays accurate; never NaN.
+#[test]
+fn saturated_highlights() {
+    let mut ds = glossy_sphere(48, &spread(48), 0.15, 0.3, 40.0);
+    let mut clipped = 0;
+    for p in 0..ds.pixels.len() {
+        let obs: Vec<[f32; 3]> = ds.obs.pixel(p).to_vec();
+        for (j, o) in obs.iter().enumerate() {
+            clipped += (o[0] > 0.6) as usize;
+            ds.obs.set_raw(p, j, o.map(|v| (v / 0.6).min(1.0)), [1.0 / 0.6; 3]);
+        }
+    }
+    assert!(clipped > 500, "{clipped} clipped");
+    let robust = mean_error(&ds, &photometric::run(&ds, Model::Robust));
+    let fit = mean_error(&ds, &photometric::run(&ds, Model::BlinnPhong));
+    eprintln!("saturated highlights: Blinn-Phong {fit:.4}°, robust {robust:.3}°");
+    assert!(fit < 0.1 && fit * 3.0 < robust, "Blinn-Phong {fit}°, robust {robust}°");
 }
 
 fn lumen(args: &[&str]) -> (i32, String) {

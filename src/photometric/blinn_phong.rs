@@ -7,21 +7,29 @@
 //! with v the direction towards the camera. In the renderer's terms ρ = kd/π and σ = ks/π, so
 //! ρ is the same quantity the Lambertian models call albedo.
 //!
-//! Method: Gauss-Newton with a backtracking (Armijo) line search, argmin's `GaussNewtonLS`,
-//! with analytic Jacobians. Parameters: two offsets (a, b) of the normal in the tangent plane
-//! of the starting normal n₀ (n = (n₀ + a·t + b·s)/|…|, so the normal stays a unit vector
-//! without a constraint), ρ_r, ρ_g, ρ_b, σ and ln e. Seven small prior residuals
-//! √μ·(p − p₀), μ = 10⁻⁶, keep JᵀJ invertible where the data leave a parameter free (no
-//! highlight seen: σ ≈ 0 and e undetermined) at a cost far below the noise where the data do
-//! determine it.
+//! Method: Gauss-Newton with a backtracking (Armijo, step halving) line search, argmin's
+//! `GaussNewtonLS`, with analytic Jacobians. Parameters: two offsets (a, b) of the normal in
+//! the tangent plane of the robust Lambertian normal n₀ (n = (n₀ + a·t + b·s)/|…|, so the
+//! normal stays a unit vector without a constraint), ρ_r, ρ_g, ρ_b, σ and ln e (clamped to
+//! [0, ln 10⁴]). Seven tiny prior residuals √μ·(p − p₀), μ = 10⁻¹⁰, keep JᵀJ invertible where
+//! the data leave a parameter free (no highlight seen: σ ≈ 0 and e undetermined) without
+//! pulling where the data determine it.
 //!
-//! Start: the robust Lambertian solution (`lambertian::solve_robust`) for n₀; then, for each
-//! shininess on a grid 2, 4, …, 1024, the linear least squares for (ρ, σ) at n₀, keeping
-//! the best. Observations used: not saturated, lit (n·l > 0.02 under the current normal),
-//! and, after each fit, within max(3·1.4826·MAD, 2 % of the prediction + 10⁻⁴) of the model,
-//! which drops cast shadows and light the model has no term for (interreflections); up to
-//! three such rounds. A pixel whose fit fails, leaves the valid range (σ < 0, e outside
-//! [1, 10⁴]) or uses fewer than 7 observations keeps the robust Lambertian solution (σ = 0).
+//! Starts: the robust Lambertian normal (`lambertian::solve_robust`) and the plain
+//! least-squares one, each with shininess 4, 16, 64 and 256 and the linear least squares for
+//! (ρ, σ) at that normal; 8 iterations from each over every unsaturated observation, and the
+//! lowest cost goes on. One start is not enough: where a Lambertian normal leans towards a
+//! highlight, a very narrow lobe on that one observation fits better there than the true lobe,
+//! and Gauss-Newton stays in that basin; with 12 lights the robust start can be 20° off.
+//! Then up to three rounds over the observations that are lit (n·l > 0.02 under the current
+//! normal) and within max(3·1.4826·MAD, 2 % of the prediction + 10⁻⁴) of the model, which
+//! drops cast shadows and light the model has no term for (interreflections); 15 iterations
+//! each at most, stopping when ‖r‖ changes by less than 10⁻⁶.
+//!
+//! A pixel whose fit fails, ends with σ < 0 or a negative albedo, or has fewer than 7 usable
+//! observations keeps the robust Lambertian solution (σ = e = 0). Where no used observation
+//! lies where the lobe reaches 1 % of its peak, σ and e are reported as 0: the data say
+//! nothing about them (the normal and ρ still come from the fit).
 
 use super::lambertian;
 use argmin::core::observers::{Observe, ObserverMode};
@@ -30,6 +38,7 @@ use argmin::solver::gaussnewton::GaussNewtonLS;
 use argmin::solver::linesearch::{condition::ArmijoCondition, BacktrackingLineSearch};
 use glam::DVec3;
 use nalgebra::{DMatrix, DVector, Matrix4, Vector4};
+use std::cell::RefCell;
 use std::sync::{Arc, Mutex};
 
 /// Gauss-Newton iterations per round, and rounds of observation selection.
@@ -39,7 +48,7 @@ const ROUNDS: usize = 3;
 const START_SHININESS: [f64; 4] = [4.0, 16.0, 64.0, 256.0];
 /// Gauss-Newton iterations from each of them before the best goes on.
 const START_ITERATIONS: u64 = 8;
-const PRIOR: f64 = 1e-3; // √μ
+const PRIOR: f64 = 1e-5; // √μ
 const TOLERANCE: f64 = 1e-6;
 const LN_E_MAX: f64 = 9.210_340_371_976_184; // ln 10⁴
 
@@ -69,9 +78,45 @@ struct Fit<'a> {
     t: DVec3,
     s: DVec3,
     p0: [f64; 7],
+    /// (ln d, dᵉ) per used observation at the last parameters evaluated: Gauss-Newton asks
+    /// for the residuals and then the Jacobian at the same point, and exp and ln are most of
+    /// the cost.
+    powers: RefCell<(Option<DVector<f64>>, Vec<[f64; 2]>)>,
 }
 
-impl Fit<'_> {
+impl<'a> Fit<'a> {
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        lights: &'a [DVec3],
+        halves: &'a [DVec3],
+        obs: &'a [[f32; 3]],
+        used: &'a [usize],
+        (n0, t, s): (DVec3, DVec3, DVec3),
+        p0: &DVector<f64>,
+    ) -> Fit<'a> {
+        let p0 = std::array::from_fn(|i| p0[i]);
+        Fit { lights, halves, obs, used, n0, t, s, p0, powers: RefCell::new((None, Vec::new())) }
+    }
+
+    /// (ln d, dᵉ) for every used observation, d = max(0, n·h), (0, 0) where unlit or d = 0.
+    fn powers(&self, p: &DVector<f64>, n: DVec3, e: f64) -> std::cell::Ref<'_, Vec<[f64; 2]>> {
+        if self.powers.borrow().0.as_ref() != Some(p) {
+            let mut cache = self.powers.borrow_mut();
+            cache.1.clear();
+            for &j in self.used {
+                let (c, d) = (n.dot(self.lights[j]), n.dot(self.halves[j]));
+                cache.1.push(if c > 0.0 && d > 0.0 {
+                    let ln = d.ln();
+                    [ln, (e * ln).exp()]
+                } else {
+                    [0.0, 0.0]
+                });
+            }
+            cache.0 = Some(p.clone());
+        }
+        std::cell::Ref::map(self.powers.borrow(), |c| &c.1)
+    }
+
     fn normal(&self, p: &DVector<f64>) -> (DVec3, f64) {
         let m = self.n0 + self.t * p[0] + self.s * p[1];
         let len = m.length();
@@ -89,12 +134,13 @@ impl Fit<'_> {
         // ∂n/∂a and ∂n/∂b.
         let dna = (self.t - n * n.dot(self.t)) / len;
         let dnb = (self.s - n * n.dot(self.s)) / len;
+        let powers = self.powers(p, n, e);
         for (k, &j) in self.used.iter().enumerate() {
             let (l, h) = (self.lights[j], self.halves[j]);
             let c = n.dot(l);
             let d = n.dot(h).max(0.0);
-            let (de, lobe) =
-                if c > 0.0 && d > 0.0 { ((e * d.ln()).exp(), (e + 8.0) / 8.0) } else { (0.0, 0.0) };
+            let [ln_d, de] = powers[k];
+            let lobe = if de > 0.0 { (e + 8.0) / 8.0 } else { 0.0 };
             let spec = sigma * lobe * de;
             for ch in 0..3 {
                 let pred = if c > 0.0 { (p[2 + ch] + spec) * c } else { 0.0 };
@@ -107,7 +153,7 @@ impl Fit<'_> {
                 // ∂spec/∂n = σ·lobe·e·dᵉ⁻¹·h; ∂spec/∂ln e = e·σ·dᵉ·(1/8 + lobe·ln d).
                 let dspec_dn = if d > 0.0 { h * (sigma * lobe * e * de / d) } else { DVec3::ZERO };
                 let dspec_dt = if d > 0.0 && p[6] > 0.0 && p[6] < LN_E_MAX {
-                    e * sigma * de * (0.125 + lobe * d.ln())
+                    e * sigma * de * (0.125 + lobe * ln_d)
                 } else {
                     0.0
                 };
@@ -195,8 +241,16 @@ fn start_at(
         }
     }
     let x = a.cholesky()?.solve(&b);
-    (x[3] >= 0.0 && x.iter().all(|v| v.is_finite()) && lobe_seen(n, e, halves, used)).then(|| {
-        DVector::from_column_slice(&[0.0, 0.0, x[0].max(0.0), x[1].max(0.0), x[2].max(0.0), x[3], e.ln()])
+    x.iter().all(|v| v.is_finite()).then(|| {
+        DVector::from_column_slice(&[
+            0.0,
+            0.0,
+            x[0].max(0.0),
+            x[1].max(0.0),
+            x[2].max(0.0),
+            x[3].max(0.0),
+            e.ln(),
+        ])
     })
 }
 
@@ -211,7 +265,7 @@ fn gauss_newton(fit: Fit, p: &DVector<f64>, iterations: u64) -> Option<(DVector<
     let (n0, t, s) = (fit.n0, fit.t, fit.s);
     let normals = Arc::new(Mutex::new(Vec::new()));
     let observer = History { n0, t, s, normals: normals.clone() };
-    let line_search = BacktrackingLineSearch::new(ArmijoCondition::new(1e-4).ok()?);
+    let line_search = BacktrackingLineSearch::new(ArmijoCondition::new(1e-4).ok()?).rho(0.5).ok()?;
     let solver = GaussNewtonLS::new(line_search).with_tolerance(TOLERANCE).ok()?;
     let mut result = Executor::new(fit, solver)
         .configure(|state| state.param(p.clone()).max_iters(iterations))
@@ -244,21 +298,28 @@ pub fn solve(lights: &[DVec3], view: DVec3, obs: &[[f32; 3]], valid: &[bool]) ->
         (0..lights.len()).filter(|&j| valid[j] && n.dot(lights[j]) > 0.02).collect()
     };
     let fit = |used: &[usize], p: &DVector<f64>, iterations| -> Option<(DVector<f64>, f64, Vec<DVec3>)> {
-        let p0: [f64; 7] = std::array::from_fn(|i| p[i]);
-        gauss_newton(Fit { lights, halves: &halves, obs, used, n0, t, s, p0 }, p, iterations)
+        gauss_newton(Fit::new(lights, &halves, obs, used, (n0, t, s), p), p, iterations)
     };
-    let mut used = lit(n0);
+    // A few iterations from each of several starts, all on every usable observation (so
+    // that their costs compare); the lowest cost goes on. Starts: the robust and the plain
+    // least-squares normals, each with several shininess values. One start is not enough:
+    // where a Lambertian normal leans towards a highlight, a very narrow lobe on that one
+    // observation fits better there than the true lobe does, and Gauss-Newton stays in that
+    // basin; and with few lights the robust start can drop the wrong observations.
+    let mut used: Vec<usize> = (0..lights.len()).filter(|&j| valid[j]).collect();
     if used.len() < 7 {
         return Some(lambertian());
     }
-    // A few iterations from each of several shininess values, all on the same observations;
-    // the lowest cost goes on. One start is not enough: where the Lambertian normal leans
-    // towards a highlight, a very narrow lobe on that one observation fits better at n₀ than
-    // the true lobe does, and Gauss-Newton stays in that basin.
-    let Some((mut p, _, steps)) = START_SHININESS
-        .iter()
-        .filter_map(|&e| start_at(n0, e, lights, &halves, obs, &used))
-        .filter_map(|p| fit(&used, &p, START_ITERATIONS))
+    let plain = lambertian::solve_plain(lights, obs).map(|p| p.normal).filter(|n| n.dot(n0) > 0.5);
+    let starts = std::iter::once(n0).chain(plain);
+    let Some((mut p, _, steps)) = starts
+        .flat_map(|n| START_SHININESS.iter().map(move |&e| (n, e)))
+        .filter_map(|(n, e)| {
+            let mut p = start_at(n, e, lights, &halves, obs, &used)?;
+            // n in the (a, b) parameters around n₀.
+            (p[0], p[1]) = (n.dot(t) / n.dot(n0), n.dot(s) / n.dot(n0));
+            fit(&used, &p, START_ITERATIONS)
+        })
         .min_by(|a, b| a.1.total_cmp(&b.1))
     else {
         return Some(lambertian());
@@ -274,8 +335,7 @@ pub fn solve(lights: &[DVec3], view: DVec3, obs: &[[f32; 3]], valid: &[bool]) ->
         }
         // Keep the observations the fit explains.
         let lit_now = lit(normal_of(n0, t, s, &p));
-        let p0: [f64; 7] = std::array::from_fn(|i| p[i]);
-        let r = Fit { lights, halves: &halves, obs, used: &lit_now, n0, t, s, p0 }.eval(&p, None);
+        let r = Fit::new(lights, &halves, obs, &lit_now, (n0, t, s), &p).eval(&p, None);
         // Per observation: the largest channel residual, and the mean prediction.
         let judged: Vec<(f64, f64)> = (0..lit_now.len())
             .map(|k| {
