@@ -64,6 +64,8 @@ pub struct Pixel {
     pub specular: f64,
     pub exponent: f64,
     pub used: usize,
+    /// RMS residual of the fit over the used observations, relative to their mean.
+    pub misfit: f64,
     /// The normal after each Gauss-Newton iteration, the start first.
     pub history: Vec<DVec3>,
 }
@@ -289,6 +291,7 @@ pub fn solve(lights: &[DVec3], view: DVec3, obs: &[[f32; 3]], valid: &[bool]) ->
         specular: 0.0,
         exponent: 0.0,
         used: start.used,
+        misfit: f64::NAN,
         history: vec![start.normal],
     };
     let halves: Vec<DVec3> = lights.iter().map(|&l| (l + view).normalize_or_zero()).collect();
@@ -306,7 +309,15 @@ pub fn solve(lights: &[DVec3], view: DVec3, obs: &[[f32; 3]], valid: &[bool]) ->
     // where a Lambertian normal leans towards a highlight, a very narrow lobe on that one
     // observation fits better there than the true lobe does, and Gauss-Newton stays in that
     // basin; and with few lights the robust start can drop the wrong observations.
-    let mut used: Vec<usize> = (0..lights.len()).filter(|&j| valid[j]).collect();
+    // Cast shadows: lit under n₀ yet far darker than the Lambertian solution predicts (a
+    // highlight only adds light, so the diffuse prediction is a floor).
+    let rho = (start.albedo[0] + start.albedo[1] + start.albedo[2]) / 3.0;
+    let shadowed = |j: usize| {
+        let c = n0.dot(lights[j]);
+        let grey = obs[j].iter().map(|&v| v as f64).sum::<f64>() / 3.0;
+        c > 0.1 && grey < 0.5 * rho * c
+    };
+    let mut used: Vec<usize> = (0..lights.len()).filter(|&j| valid[j] && !shadowed(j)).collect();
     if used.len() < 7 {
         return Some(lambertian());
     }
@@ -374,7 +385,20 @@ pub fn solve(lights: &[DVec3], view: DVec3, obs: &[[f32; 3]], valid: &[bool]) ->
     if history.last() != Some(&normal) {
         history.push(normal);
     }
-    Some(Pixel { normal, albedo: [p[2], p[3], p[4]], specular: sigma, exponent, used: used.len(), history })
+    let r = Fit::new(lights, &halves, obs, &used, (n0, t, s), &p).eval(&p, None);
+    let data = &r.as_slice()[..3 * used.len()];
+    let mean =
+        used.iter().map(|&j| obs[j].iter().map(|&v| v as f64).sum::<f64>()).sum::<f64>() / data.len() as f64;
+    let misfit = (data.iter().map(|v| v * v).sum::<f64>() / data.len() as f64).sqrt() / mean.max(1e-12);
+    Some(Pixel {
+        normal,
+        albedo: [p[2], p[3], p[4]],
+        specular: sigma,
+        exponent,
+        used: used.len(),
+        misfit,
+        history,
+    })
 }
 
 fn normal_of(n0: DVec3, t: DVec3, s: DVec3, p: &DVector<f64>) -> DVec3 {

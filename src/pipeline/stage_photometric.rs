@@ -50,7 +50,14 @@ pub struct PhotometricStage {
     pub model: String,
     /// Overrides the shininess (exponent) of every Blinn-Phong material in the scene.
     pub shininess: Option<f64>,
+    /// Makes every material Lambertian, keeping its diffuse colour (default false).
+    #[serde(default)]
+    pub diffuse_only: bool,
 }
+
+/// Largest angle between a pixel's mean normal and any normal in its footprint for the
+/// pixel to be in the truth mask (degrees).
+const MAX_SPREAD_DEG: f64 = 10.0;
 
 fn default_lights() -> usize {
     24
@@ -101,6 +108,11 @@ pub fn run(s: &PhotometricStage, dir: &Path, seed: u64, opts: &RunOptions) -> Re
         return Err(format!("irradiance = {}: expected a positive number", s.irradiance));
     }
     let mut scene = render::load(&dir.join(&s.scene)).map_err(|e| e.to_string())?;
+    if s.diffuse_only {
+        for m in &mut scene.materials {
+            m.bsdf = render::bsdf::Bsdf::Lambertian;
+        }
+    }
     if let Some(e) = s.shininess {
         if !(e.is_finite() && e > 0.0) {
             return Err(format!("shininess = {e}: expected a positive number"));
@@ -131,13 +143,20 @@ pub fn run(s: &PhotometricStage, dir: &Path, seed: u64, opts: &RunOptions) -> Re
     }
     // OpenCV camera frame (x right, y down, z forward) to the dataset's: flip y and z.
     let to_dataset = |v: DVec3| DVec3::new(v.x, -v.y, -v.z);
-    let normals: Vec<DVec3> = pixels
+    // Truth: the normal averaged over each pixel's footprint (`render::truth` docs); pixels
+    // whose footprint holds normals more than MAX_SPREAD_DEG from that mean (occlusion edges
+    // of an object with itself, creases) are left out: no one normal is right for them.
+    let xy: Vec<(u32, u32)> = pixels.iter().map(|&i| ((i % w) as u32, (i / w) as u32)).collect();
+    let mean = render::truth::footprint_normals(&scene, &xy, 8);
+    let object_pixels = pixels.len();
+    let (pixels, normals): (Vec<usize>, Vec<DVec3>) = pixels
         .iter()
-        .map(|&i| {
-            let n = &truth.normal_camera.data[3 * i..3 * i + 3];
-            to_dataset(DVec3::new(n[0] as f64, n[1] as f64, n[2] as f64))
-        })
-        .collect();
+        .zip(&mean)
+        .filter_map(|(&i, m)| m.filter(|m| m.1 <= MAX_SPREAD_DEG).map(|m| (i, to_dataset(m.0))))
+        .unzip();
+    if pixels.is_empty() {
+        return Err(format!("{}: no pixel sees one smooth piece of the object", s.scene));
+    }
 
     // Towards the camera from each pixel's surface point: the reversed ray through the pixel
     // centre (OpenCV pixel coordinates), from the calibrated camera, not from truth.
@@ -226,9 +245,11 @@ pub fn run(s: &PhotometricStage, dir: &Path, seed: u64, opts: &RunOptions) -> Re
     notes.insert(
         0,
         format!(
-            "{} lights at {e0}°–{e1}° elevation, {} object pixels in the mask, {}x{} px, {} spp, model {}.",
+            "{} lights at {e0}°–{e1}° elevation, {} object pixels in the mask ({} more left out: their \
+             footprint straddles an occlusion edge or crease), {}x{} px, {} spp, model {}.",
             s.lights,
             data.pixels.len(),
+            object_pixels - data.pixels.len(),
             w,
             h,
             settings.spp,

@@ -12,6 +12,7 @@ pub mod obj;
 pub mod sampler;
 pub mod scene;
 pub mod sensor;
+pub mod surfaces;
 pub mod texture;
 pub mod truth;
 

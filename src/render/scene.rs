@@ -10,7 +10,7 @@ use super::bsdf::Bsdf;
 use super::bvh::Bvh;
 use super::geometry::{Prim, PrimInfo};
 use super::texture::Texture;
-use super::{obj, Error};
+use super::{obj, surfaces, Error};
 use crate::math::{CameraModel, Distortion, Intrinsics, Pose};
 use glam::{DMat3, DVec2, DVec3, Vec2, Vec3A};
 use serde::Deserialize;
@@ -181,6 +181,43 @@ pub enum ShapeSpec {
         #[serde(default)]
         reverse_orientation: bool,
     },
+    /// A torus round its local z axis (`render::surfaces`): `radius` to the tube's centre
+    /// line, `tube` the tube's radius, `segments` [round the axis, round the tube]
+    /// (default [256, 128]).
+    Torus {
+        radius: f64,
+        tube: f64,
+        #[serde(default = "torus_segments")]
+        segments: [u32; 2],
+        material: String,
+        #[serde(default)]
+        transform: TransformSpec,
+    },
+    /// A sphere displaced along its normal, r = radius·(1 + amplitude·sin(k·x)·sin(k·y)·sin(k·z))
+    /// on unit directions (`render::surfaces`); `lobes` is k; `segments` [θ, φ] (default
+    /// [128, 256]).
+    Blob {
+        radius: f64,
+        amplitude: f64,
+        lobes: f64,
+        #[serde(default = "blob_segments")]
+        segments: [u32; 2],
+        material: String,
+        #[serde(default)]
+        transform: TransformSpec,
+    },
+    /// A height field of bumps and dimples over the square of side `size` in the local z = 0
+    /// plane, the tallest `height` high (`render::surfaces`); `segments` cells per side
+    /// (default 256).
+    Relief {
+        size: f64,
+        height: f64,
+        #[serde(default = "relief_segments")]
+        segments: u32,
+        material: String,
+        #[serde(default)]
+        transform: TransformSpec,
+    },
     /// A parallelogram `corner + s·edge_u + t·edge_v`, s, t ∈ [0, 1] (the texture coordinates),
     /// facing edge_u × edge_v.
     Quad {
@@ -191,6 +228,67 @@ pub enum ShapeSpec {
         #[serde(default)]
         reverse_orientation: bool,
     },
+}
+
+fn torus_segments() -> [u32; 2] {
+    [256, 128]
+}
+fn blob_segments() -> [u32; 2] {
+    [128, 256]
+}
+fn relief_segments() -> u32 {
+    256
+}
+
+/// The generated surface a `torus`, `blob` or `relief` shape describes, with its material and
+/// transform; `None` for other shapes.
+fn generated_surface<'a>(
+    shape: &'a ShapeSpec,
+    path: &Path,
+    field: &str,
+) -> Result<Option<(surfaces::Surface, &'a str, &'a TransformSpec)>, Error> {
+    let positive = |name: &str, v: f64| {
+        if v.is_finite() && v > 0.0 {
+            Ok(())
+        } else {
+            Err(field_err(path, &format!("{field}.{name}"), format!("{v} must be positive")))
+        }
+    };
+    let counts = |n: &[u32]| {
+        if n.iter().all(|&k| (3..=4096).contains(&k)) {
+            Ok(())
+        } else {
+            Err(field_err(path, &format!("{field}.segments"), format!("{n:?}: expected 3 to 4096")))
+        }
+    };
+    Ok(Some(match shape {
+        ShapeSpec::Torus { radius, tube, segments, material, transform } => {
+            positive("radius", *radius)?;
+            positive("tube", *tube)?;
+            counts(segments)?;
+            (surfaces::torus(*radius, *tube, *segments), material, transform)
+        }
+        ShapeSpec::Blob { radius, amplitude, lobes, segments, material, transform } => {
+            positive("radius", *radius)?;
+            positive("lobes", *lobes)?;
+            if !(0.0..1.0).contains(amplitude) {
+                return Err(field_err(
+                    path,
+                    &format!("{field}.amplitude"),
+                    format!("{amplitude}: expected [0, 1)"),
+                ));
+            }
+            counts(segments)?;
+            (surfaces::blob(*radius, *amplitude, *lobes, *segments), material, transform)
+        }
+        ShapeSpec::Relief { size, height, segments, material, transform } => {
+            positive("size", *size)?;
+            positive("height", *height)?;
+            counts(&[*segments])?;
+            (surfaces::relief(*size, *height, *segments), material, transform)
+        }
+        _ => return Ok(None),
+    }))
 }
 
 #[derive(Debug, Deserialize)]
@@ -515,6 +613,38 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                         object_id: id,
                         reverse: *reverse_orientation,
                         uv,
+                        normal: Vec3A::ZERO,
+                    });
+                }
+            }
+            ShapeSpec::Torus { .. } | ShapeSpec::Blob { .. } | ShapeSpec::Relief { .. } => {
+                let Some((surface, material, transform)) = generated_surface(shape, path, &field)? else {
+                    continue;
+                };
+                let (r, t, s) = transform.build(path, &format!("{field}.transform"))?;
+                let mtl = material_index(material, &format!("{field}.material"))?;
+                let kind = match shape {
+                    ShapeSpec::Torus { .. } => "torus",
+                    ShapeSpec::Blob { .. } => "blob",
+                    _ => "relief",
+                };
+                object_names.push(format!("{kind}{i}"));
+                let id = object_names.len() as u32 - 1;
+                let positions: Vec<Vec3A> =
+                    surface.positions.iter().map(|&p| (r * (s * p) + t).as_vec3().into()).collect();
+                let mirrored = s.x * s.y * s.z < 0.0;
+                for tri in &surface.triangles {
+                    let [a, b, c] = tri.map(|k| positions[k as usize]);
+                    let (e1, e2) = (b - a, c - a);
+                    if e1.cross(e2).length_squared() == 0.0 {
+                        continue; // the blob's poles
+                    }
+                    prims.push(Prim::Triangle { v0: a, e1, e2 });
+                    info.push(PrimInfo {
+                        material: mtl,
+                        object_id: id,
+                        reverse: mirrored,
+                        uv: [Vec2::ZERO, Vec2::X, Vec2::Y],
                         normal: Vec3A::ZERO,
                     });
                 }

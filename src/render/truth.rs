@@ -82,3 +82,37 @@ pub fn truth(scene: &Scene, crop: Option<[u32; 4]>) -> Truth {
     }
     t
 }
+
+/// The mean of the surface normal over each pixel's footprint, in the OpenCV camera frame and
+/// normalised: `k`×`k` rays spread evenly over the pixel's square (centre ± 0.5 px, the
+/// film's box filter), each normal turned towards the camera. This is the normal a
+/// Lambertian pixel's brightness is linear in (the pixel integrates ρ·l·n over its square),
+/// so it is the truth for photometric stereo on a faceted mesh, where the normal at the
+/// centre alone can be a facet away. With each mean comes the largest angle (degrees)
+/// between it and a ray's normal: large where the pixel straddles an occlusion edge or a
+/// crease, which no single normal describes. `None` where a ray misses every object.
+pub fn footprint_normals(scene: &Scene, pixels: &[(u32, u32)], k: u32) -> Vec<Option<(DVec3, f64)>> {
+    use rayon::prelude::*;
+    let cam_from_world = scene.t_world_cam.inverse();
+    pixels
+        .par_iter()
+        .map(|&(x, y)| {
+            let mut normals = Vec::with_capacity((k * k) as usize);
+            for sy in 0..k {
+                for sx in 0..k {
+                    let off = |s: u32| (s as f64 + 0.5) / k as f64 - 0.5;
+                    let px = DVec2::new(x as f64 + off(sx), y as f64 + off(sy));
+                    let (o, d) = scene.camera_ray(px)?;
+                    let ray = Ray { origin: Vec3A::from(o.as_vec3()), dir: Vec3A::from(d.as_vec3()) };
+                    let hit = scene.bvh.intersect(&ray, 0.0, f32::INFINITY)?;
+                    let n = scene.surface(&ray, &hit).n;
+                    let n = if n.dot(ray.dir) > 0.0 { -n } else { n };
+                    normals.push(cam_from_world.transform_vector(DVec3::from(n.to_array().map(f64::from))));
+                }
+            }
+            let mean = normals.iter().sum::<DVec3>().try_normalize()?;
+            let spread = normals.iter().map(|n| n.dot(mean).clamp(-1.0, 1.0).acos()).fold(0.0, f64::max);
+            Some((mean, spread.to_degrees()))
+        })
+        .collect()
+}
