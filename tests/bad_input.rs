@@ -112,8 +112,23 @@ fn bad_values() {
     assert!(e.contains("gold"), "{e}");
     let e = scene_error("[[lights]]\ntype = \"point\"\nposition = [0.0, 0.0, 0.0]\n", &[]);
     assert!(e.contains("lights[0]") && e.contains("intensity"), "{e}");
+    let e = scene_error("[[shapes]]\ntype = \"donut\"\n", &[]);
+    assert!(e.contains("donut"), "{e}");
     let e = scene_error("[[shapes]]\ntype = \"torus\"\n", &[]);
-    assert!(e.contains("torus"), "{e}");
+    assert!(e.contains("radius"), "{e}");
+    let e =
+        scene_error("[[shapes]]\ntype = \"torus\"\nradius = 1.0\ntube = -0.2\nmaterial = \"white\"\n", &[]);
+    assert!(e.contains("shapes[0].tube") && e.contains("-0.2"), "{e}");
+    let e = scene_error(
+        "[[shapes]]\ntype = \"blob\"\nradius = 1.0\namplitude = 1.5\nlobes = 3.0\nmaterial = \"white\"\n",
+        &[],
+    );
+    assert!(e.contains("shapes[0].amplitude") && e.contains("1.5"), "{e}");
+    let e = scene_error(
+        "[[shapes]]\ntype = \"relief\"\nsize = 1.0\nheight = 0.2\nsegments = 1\nmaterial = \"white\"\n",
+        &[],
+    );
+    assert!(e.contains("shapes[0].segments"), "{e}");
     let e = scene_error(
         "[[materials]]\nname = \"m\"\ntype = \"lambertian\"\nalbedo = { texture = \"missing.png\" }\n",
         &[],

@@ -187,4 +187,7 @@ fn photometric_stage() {
     let (code, err) = run(&stage("model = \"phong\"\n"), &out);
     assert_eq!(code, 1);
     assert!(err.contains("phong"), "{err}");
+    let (code, err) = run(&stage("shininess = -5.0\n"), &out);
+    assert_eq!(code, 1);
+    assert!(err.contains("shininess = -5"), "{err}");
 }

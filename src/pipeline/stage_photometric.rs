@@ -6,11 +6,19 @@
 //! `elevation_deg[0]` to `[1]` above the plane facing the camera, each with the same
 //! irradiance. Data reach the solver as DiLiGenT's would: directions and normals in its frame
 //! (x right, y up, z towards the camera), the images' linear radiance, the light intensities.
-//! The mask is the object's pixels whose 3×3 neighbourhood is all object (edge pixels mix in
-//! the background). Truth: the geometric normal at each pixel centre (`render::truth`).
+//! The view direction of each pixel comes from the camera model (the reversed ray through its
+//! centre), as a calibrated setup would give it. The mask is the object's pixels whose 3×3
+//! neighbourhood is all object (edge pixels mix in the background). Truth: the normal
+//! averaged over each pixel's footprint (`render::truth::footprint_normals`, 8×8 rays), the
+//! normal a Lambertian pixel's brightness is linear in; pixels whose footprint holds normals
+//! more than 10° from that mean (the object occluding itself, creases) are left out.
 //!
 //! Metrics: `mean_angular_error_deg`, `median_angular_error_deg`, `masked_pixels` (mask
-//! pixels left without a normal), `light_condition_number`, `pixel_lights_per_s`.
+//! pixels left without a normal), `light_condition_number`, `pixel_lights_per_s`,
+//! `time_per_megapixel_s`; with `model = "blinn-phong"` also the robust Lambertian model's
+//! error on the same images (`robust_lambertian_mean_angular_error_deg`), the ratio of the
+//! two (`improvement_over_lambertian`, higher is better), `pixels_without_specular`, and a
+//! note with the mean error after each Gauss-Newton iteration.
 
 use super::report::{Better, Metric};
 use super::{Common, RunOptions, StageOutput};
