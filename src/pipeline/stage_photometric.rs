@@ -14,7 +14,8 @@
 //! more than 10° from that mean (the object occluding itself, creases) are left out.
 //!
 //! Metrics: `mean_angular_error_deg`, `median_angular_error_deg`, `masked_pixels` (mask
-//! pixels left without a normal), `light_condition_number`, `pixel_lights_per_s`,
+//! pixels left without a normal), `mean_albedo_rel_err` (|π·ρ − kd|/kd against the truth
+//! albedo image, over channels and solved pixels), `light_condition_number`, `pixel_lights_per_s`,
 //! `time_per_megapixel_s`; with `model = "blinn-phong"` also the robust Lambertian model's
 //! error on the same images (`robust_lambertian_mean_angular_error_deg`), the ratio of the
 //! two (`improvement_over_lambertian`, higher is better), `pixels_without_specular`, and a
@@ -53,6 +54,9 @@ pub struct PhotometricStage {
     pub irradiance: f64,
     /// Samples per pixel (default: the scene's).
     pub spp: Option<u32>,
+    /// Longest path (default: the scene's); 2 renders direct light only, without
+    /// interreflections.
+    pub max_depth: Option<u32>,
     /// `lambertian`, `robust` or `blinn-phong` (default robust).
     #[serde(default = "default_model")]
     pub model: String,
@@ -135,6 +139,12 @@ pub fn run(s: &PhotometricStage, dir: &Path, seed: u64, opts: &RunOptions) -> Re
     settings.threads = opts.threads;
     if let Some(n) = s.spp {
         settings.spp = n.max(1);
+    }
+    if let Some(d) = s.max_depth {
+        if d < 2 {
+            return Err(format!("max_depth = {d}: the object is lit only from depth 2 on"));
+        }
+        settings.max_depth = d;
     }
     let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
 
@@ -224,6 +234,21 @@ pub fn run(s: &PhotometricStage, dir: &Path, seed: u64, opts: &RunOptions) -> Re
         Better::Lower,
     ));
     m.push(Metric::new("masked_pixels", sm.masked_pixels as f64, "pixels", Better::Lower));
+    // Albedo: the solvers' ρ is kd/π in the renderer's terms (observations are radiance over
+    // irradiance), so π·ρ is compared with the truth albedo image, relative, per channel.
+    let mut rel = Vec::new();
+    for (k, &i) in data.pixels.iter().enumerate() {
+        if out.normals[k].is_some() {
+            for c in 0..3 {
+                let kd = truth.albedo.data[3 * i + c] as f64;
+                if kd > 0.0 {
+                    rel.push((std::f64::consts::PI * out.albedo[k][c] - kd).abs() / kd);
+                }
+            }
+        }
+    }
+    let albedo_err = if rel.is_empty() { f64::INFINITY } else { rel.iter().sum::<f64>() / rel.len() as f64 };
+    m.push(Metric::new("mean_albedo_rel_err", albedo_err, "", Better::Lower));
     m.push(Metric::new("light_condition_number", sm.light_condition_number, "", Better::Lower));
     m.push(Metric::new("pixel_lights_per_s", sm.pixel_lights_per_s, "1/s", Better::Higher));
     m.push(Metric::new("time_per_megapixel_s", sm.time_per_megapixel_s, "s", Better::Lower));
