@@ -17,8 +17,9 @@
 //!
 //! Starts: the robust Lambertian normal (`lambertian::solve_robust`) and the plain
 //! least-squares one, each with shininess 4, 16, 64 and 256 and the linear least squares for
-//! (ρ, σ) at that normal; 8 iterations from each over every unsaturated observation, and the
-//! lowest cost goes on. One start is not enough: where a Lambertian normal leans towards a
+//! (ρ, σ) at that normal; 8 iterations from each, all over the same observations (every
+//! unsaturated one except clear cast shadows: n₀·l > 0.1 yet darker than half the Lambertian
+//! prediction), and the lowest cost goes on. One start is not enough: where a Lambertian normal leans towards a
 //! highlight, a very narrow lobe on that one observation fits better there than the true lobe,
 //! and Gauss-Newton stays in that basin; with 12 lights the robust start can be 20° off.
 //! Then up to three rounds over the observations that are lit (n·l > 0.02 under the current
@@ -64,8 +65,6 @@ pub struct Pixel {
     pub specular: f64,
     pub exponent: f64,
     pub used: usize,
-    /// RMS residual of the fit over the used observations, relative to their mean.
-    pub misfit: f64,
     /// The normal after each Gauss-Newton iteration, the start first.
     pub history: Vec<DVec3>,
 }
@@ -291,7 +290,6 @@ pub fn solve(lights: &[DVec3], view: DVec3, obs: &[[f32; 3]], valid: &[bool]) ->
         specular: 0.0,
         exponent: 0.0,
         used: start.used,
-        misfit: f64::NAN,
         history: vec![start.normal],
     };
     let halves: Vec<DVec3> = lights.iter().map(|&l| (l + view).normalize_or_zero()).collect();
@@ -303,14 +301,9 @@ pub fn solve(lights: &[DVec3], view: DVec3, obs: &[[f32; 3]], valid: &[bool]) ->
     let fit = |used: &[usize], p: &DVector<f64>, iterations| -> Option<(DVector<f64>, f64, Vec<DVec3>)> {
         gauss_newton(Fit::new(lights, &halves, obs, used, (n0, t, s), p), p, iterations)
     };
-    // A few iterations from each of several starts, all on every usable observation (so
-    // that their costs compare); the lowest cost goes on. Starts: the robust and the plain
-    // least-squares normals, each with several shininess values. One start is not enough:
-    // where a Lambertian normal leans towards a highlight, a very narrow lobe on that one
-    // observation fits better there than the true lobe does, and Gauss-Newton stays in that
-    // basin; and with few lights the robust start can drop the wrong observations.
-    // Cast shadows: lit under n₀ yet far darker than the Lambertian solution predicts (a
-    // highlight only adds light, so the diffuse prediction is a floor).
+    // The starts all fit the same observations, so that their costs compare: every
+    // unsaturated one except clear cast shadows, lit under n₀ yet far darker than the
+    // Lambertian solution predicts (a highlight only adds light to that floor).
     let rho = (start.albedo[0] + start.albedo[1] + start.albedo[2]) / 3.0;
     let shadowed = |j: usize| {
         let c = n0.dot(lights[j]);
@@ -321,6 +314,7 @@ pub fn solve(lights: &[DVec3], view: DVec3, obs: &[[f32; 3]], valid: &[bool]) ->
     if used.len() < 7 {
         return Some(lambertian());
     }
+    // A few iterations from each start (module docs); the lowest cost goes on.
     let plain = lambertian::solve_plain(lights, obs).map(|p| p.normal).filter(|n| n.dot(n0) > 0.5);
     let starts = std::iter::once(n0).chain(plain);
     let Some((mut p, _, steps)) = starts
@@ -385,20 +379,7 @@ pub fn solve(lights: &[DVec3], view: DVec3, obs: &[[f32; 3]], valid: &[bool]) ->
     if history.last() != Some(&normal) {
         history.push(normal);
     }
-    let r = Fit::new(lights, &halves, obs, &used, (n0, t, s), &p).eval(&p, None);
-    let data = &r.as_slice()[..3 * used.len()];
-    let mean =
-        used.iter().map(|&j| obs[j].iter().map(|&v| v as f64).sum::<f64>()).sum::<f64>() / data.len() as f64;
-    let misfit = (data.iter().map(|v| v * v).sum::<f64>() / data.len() as f64).sqrt() / mean.max(1e-12);
-    Some(Pixel {
-        normal,
-        albedo: [p[2], p[3], p[4]],
-        specular: sigma,
-        exponent,
-        used: used.len(),
-        misfit,
-        history,
-    })
+    Some(Pixel { normal, albedo: [p[2], p[3], p[4]], specular: sigma, exponent, used: used.len(), history })
 }
 
 fn normal_of(n0: DVec3, t: DVec3, s: DVec3, p: &DVector<f64>) -> DVec3 {
