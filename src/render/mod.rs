@@ -8,6 +8,7 @@ pub mod bsdf;
 pub mod bvh;
 pub mod geometry;
 pub mod integrator;
+pub mod microfacet;
 pub mod obj;
 pub mod sampler;
 pub mod scene;

@@ -10,7 +10,7 @@ use super::bsdf::Bsdf;
 use super::bvh::Bvh;
 use super::geometry::{Prim, PrimInfo};
 use super::texture::Texture;
-use super::{obj, surfaces, Error};
+use super::{microfacet, obj, surfaces, Error};
 use crate::math::{CameraModel, Distortion, Intrinsics, Pose};
 use glam::{DMat3, DVec2, DVec3, Vec2, Vec3A};
 use serde::Deserialize;
@@ -125,8 +125,9 @@ impl Default for RenderSpec {
 #[serde(deny_unknown_fields)]
 pub struct MaterialSpec {
     pub name: String,
-    /// `"lambertian"` or `"blinn-phong"` (f = kd/π + ks·(e + 8)/(8π)·cosᵉθh, see
-    /// `render::bsdf`; kd is `albedo`).
+    /// `"lambertian"`, `"blinn-phong"` (f = kd/π + ks·(e + 8)/(8π)·cosᵉθh, see
+    /// `render::bsdf`; kd is `albedo`) or `"conductor"` (a rough metal, `render::microfacet`;
+    /// `albedo` tints it, as Mitsuba's `specular_reflectance`).
     #[serde(rename = "type")]
     pub kind: String,
     pub albedo: TextureSpec,
@@ -134,6 +135,15 @@ pub struct MaterialSpec {
     pub specular: Option<[f64; 3]>,
     /// Blinn-Phong only: the exponent e (shininess), > 0.
     pub exponent: Option<f64>,
+    /// Conductor only: `"ggx"` (default) or `"beckmann"`.
+    pub distribution: Option<String>,
+    /// Conductor only: roughness α in [0.001, 1] (Mitsuba's `alpha`; default 0.1).
+    pub alpha: Option<f64>,
+    /// Conductor only: the real and imaginary parts of the complex index of refraction per
+    /// channel (default gold's at 650, 550, 450 nm: η = [0.143, 0.374, 1.442],
+    /// k = [3.983, 2.385, 1.603]).
+    pub eta: Option<[f64; 3]>,
+    pub k: Option<[f64; 3]>,
     /// Emitted radiance (linear RGB), one-sided along the surface normal: makes every shape
     /// with this material an area light.
     pub emission: Option<[f64; 3]>,
@@ -228,6 +238,72 @@ pub enum ShapeSpec {
         #[serde(default)]
         reverse_orientation: bool,
     },
+}
+
+/// The reflectance model a material names, each field checked.
+fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error> {
+    let blinn_phong = m.specular.is_some() || m.exponent.is_some();
+    let conductor = m.distribution.is_some() || m.alpha.is_some() || m.eta.is_some() || m.k.is_some();
+    let foreign = |kind: &str, other: &str| {
+        field_err(path, field, format!("a {kind} material takes no {other} fields (check `type`)"))
+    };
+    match m.kind.as_str() {
+        "lambertian" if blinn_phong => Err(field_err(
+            path,
+            field,
+            "a lambertian material takes no `specular` or `exponent` (use type = \"blinn-phong\")",
+        )),
+        "lambertian" if conductor => Err(foreign("lambertian", "conductor")),
+        "lambertian" => Ok(Bsdf::Lambertian),
+        "blinn-phong" if conductor => Err(foreign("blinn-phong", "conductor")),
+        "blinn-phong" => {
+            let (Some(ks), Some(e)) = (m.specular, m.exponent) else {
+                return Err(field_err(
+                    path,
+                    field,
+                    "a blinn-phong material needs `specular` = [r, g, b] and `exponent`",
+                ));
+            };
+            let specular = non_negative3(path, &format!("{field}.specular"), ks)?;
+            if !(e.is_finite() && e > 0.0 && e <= 1e5) {
+                return Err(field_err(
+                    path,
+                    &format!("{field}.exponent"),
+                    format!("{e}: expected a number in (0, 100000]"),
+                ));
+            }
+            Ok(Bsdf::BlinnPhong { specular, exponent: e as f32 })
+        }
+        "conductor" if blinn_phong => Err(foreign("conductor", "blinn-phong")),
+        "conductor" => {
+            let distribution = match m.distribution.as_deref().unwrap_or("ggx") {
+                "ggx" => microfacet::Distribution::Ggx,
+                "beckmann" => microfacet::Distribution::Beckmann,
+                other => {
+                    return Err(field_err(
+                        path,
+                        &format!("{field}.distribution"),
+                        format!("'{other}': expected \"ggx\" or \"beckmann\""),
+                    ))
+                }
+            };
+            let alpha = m.alpha.unwrap_or(0.1);
+            if !(0.001..=1.0).contains(&alpha) {
+                return Err(field_err(path, &format!("{field}.alpha"), format!("{alpha}: expected [0.001, 1]")));
+            }
+            let eta = non_negative3(path, &format!("{field}.eta"), m.eta.unwrap_or([0.143, 0.374, 1.442]))?;
+            let k = non_negative3(path, &format!("{field}.k"), m.k.unwrap_or([3.983, 2.385, 1.603]))?;
+            if eta.min_element() <= 0.0 {
+                return Err(field_err(path, &format!("{field}.eta"), "must be positive"));
+            }
+            Ok(Bsdf::Conductor { distribution, alpha: alpha as f32, eta, k })
+        }
+        other => Err(field_err(
+            path,
+            &format!("{field}.type"),
+            format!("'{other}' is not a known material (expected \"lambertian\", \"blinn-phong\" or \"conductor\")"),
+        )),
+    }
 }
 
 fn torus_segments() -> [u32; 2] {
@@ -441,41 +517,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
     let mut materials = Vec::new();
     for (i, m) in file.materials.iter().enumerate() {
         let field = format!("materials[{i}] ({})", m.name);
-        let bsdf = match (m.kind.as_str(), m.specular, m.exponent) {
-            ("lambertian", None, None) => Bsdf::Lambertian,
-            ("lambertian", _, _) => {
-                return Err(field_err(
-                    path,
-                    &field,
-                    "a lambertian material takes no `specular` or `exponent` (use type = \"blinn-phong\")",
-                ))
-            }
-            ("blinn-phong", Some(ks), Some(e)) => {
-                let specular = non_negative3(path, &format!("{field}.specular"), ks)?;
-                if !(e.is_finite() && e > 0.0 && e <= 1e5) {
-                    return Err(field_err(
-                        path,
-                        &format!("{field}.exponent"),
-                        format!("{e}: expected a number in (0, 100000]"),
-                    ));
-                }
-                Bsdf::BlinnPhong { specular, exponent: e as f32 }
-            }
-            ("blinn-phong", _, _) => {
-                return Err(field_err(
-                    path,
-                    &field,
-                    "a blinn-phong material needs `specular` = [r, g, b] and `exponent`",
-                ))
-            }
-            (other, _, _) => {
-                return Err(field_err(
-                    path,
-                    &format!("{field}.type"),
-                    format!("'{other}' is not a known material (expected \"lambertian\" or \"blinn-phong\")"),
-                ))
-            }
-        };
+        let bsdf = build_bsdf(m, path, &field)?;
         if materials.iter().any(|x: &Material| x.name == m.name) {
             return Err(field_err(path, &format!("{field}.name"), "is used by an earlier material"));
         }
