@@ -146,6 +146,14 @@ fn bad_values() {
     assert!(e.contains("materials[1] (g).exponent") && e.contains("-3"), "{e}");
     let e = scene_error(&glossy("type = \"phong\"\n"), &[]);
     assert!(e.contains("'phong'") && e.contains("blinn-phong"), "{e}");
+    let e = scene_error(&glossy("type = \"conductor\"\ndistribution = \"phong\"\n"), &[]);
+    assert!(e.contains("materials[1] (g).distribution") && e.contains("ggx"), "{e}");
+    let e = scene_error(&glossy("type = \"conductor\"\nalpha = 0.0\n"), &[]);
+    assert!(e.contains("materials[1] (g).alpha") && e.contains("[0.001, 1]"), "{e}");
+    let e = scene_error(&glossy("type = \"conductor\"\nexponent = 10.0\n"), &[]);
+    assert!(e.contains("materials[1] (g)") && e.contains("blinn-phong"), "{e}");
+    let e = scene_error(&glossy("type = \"conductor\"\neta = [0.2, -1.0, 0.5]\n"), &[]);
+    assert!(e.contains("materials[1] (g).eta"), "{e}");
 }
 
 #[test]

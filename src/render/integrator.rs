@@ -4,9 +4,15 @@
 //!
 //!   L += β · f(xₖ) · Lₑ · cos θₖ · G / (p_light · p_pick),  β = Π f·cos / p_bsdf
 //!
-//! and emission found by BSDF sampling is counted only on the camera ray, since every emitter
-//! is reached by light sampling (no double counting, no MIS needed for diffuse-only scenes).
-//! Lambertian surfaces are two-sided; emitters emit on their front side only.
+//! At a Lambertian vertex that light sample is the only estimate of direct light, and emission
+//! found by BSDF sampling is counted only on the camera ray. At a glossy vertex (Blinn-Phong,
+//! conductor) the two strategies are combined by multiple importance sampling (Veach 1997,
+//! power heuristic): the light sample of an area light is weighted p_light²/(p_light² + p_bsdf²)
+//! and an emitter the BSDF-sampled ray reaches counts with p_bsdf²/(p_light² + p_bsdf²), both
+//! densities in solid angle (p_light = p_pick·r²/(A·cos θ_light)); samples of point and
+//! directional lights, which BSDF sampling cannot hit, keep weight 1. Scenes without glossy
+//! materials do none of this bookkeeping. Surfaces are two-sided; emitters emit on their front
+//! side only.
 //!
 //! Depth follows Mitsuba's convention: `max_depth` counts path segments, so 1 shows emitters
 //! seen directly and 2 is direct lighting only. Russian roulette starts after 5 segments (as in
@@ -16,6 +22,7 @@
 //! in OpenCV's pixel coordinates (centre at the integer), so sample position = index + ξ − ½.
 //! The film keeps the mean and the variance of that mean (sample variance / n) per channel.
 
+use super::bsdf::Bsdf;
 use super::geometry::{Hit, Prim, Ray};
 use super::sampler::{Sampler, SamplerKind};
 use super::scene::{Light, Scene};
@@ -126,6 +133,9 @@ impl Scene {
     pub fn trace(&self, mut ray: Ray, max_depth: u32, s: &mut Sampler) -> Vec3A {
         let mut beta = Vec3A::ONE;
         let mut l = Vec3A::ZERO;
+        // The solid-angle density of the BSDF sample that made `ray`, when its vertex was
+        // glossy (module docs).
+        let mut mis_pdf: Option<f32> = None;
         for depth in 1..=max_depth {
             let Some(hit) = self.bvh.intersect(&ray, 0.0, f32::INFINITY) else {
                 break;
@@ -133,10 +143,13 @@ impl Scene {
             let surf = self.surface(&ray, &hit);
             let mat = &self.materials[surf.material as usize];
             let wo = -ray.dir;
-            if depth == 1 {
-                if let Some(le) = mat.emission {
-                    if surf.n.dot(wo) > 0.0 {
+            if let Some(le) = mat.emission {
+                if surf.n.dot(wo) > 0.0 {
+                    if depth == 1 {
                         l += beta * le;
+                    } else if let Some(p_bsdf) = mis_pdf {
+                        let p_light = self.area_light_pdf(hit.prim, ray.origin, surf.p, surf.n);
+                        l += beta * le * power_heuristic(p_bsdf, p_light);
                     }
                 }
             }
@@ -148,8 +161,9 @@ impl Scene {
             let albedo = self.albedo(surf.material, &hit, surf.p);
             let origin = surf.p + n * epsilon(surf.p);
 
+            let glossy = mat.bsdf != Bsdf::Lambertian;
             let (u_pick, u_light) = (s.next(), s.next2());
-            if let Some((li, wi, dist)) = self.sample_light(u_pick, u_light, surf.p) {
+            if let Some((li, wi, dist, p_light)) = self.sample_light(u_pick, u_light, surf.p) {
                 let cos = n.dot(wi);
                 if cos > 0.0
                     && !self.bvh.occluded(
@@ -158,7 +172,11 @@ impl Scene {
                         dist * (1.0 - 1e-4) - epsilon(surf.p),
                     )
                 {
-                    l += beta * mat.bsdf.eval(albedo, n, wo, wi) * cos * li;
+                    let w = match p_light {
+                        Some(p) if glossy => power_heuristic(p, mat.bsdf.pdf(albedo, n, wo, wi)),
+                        _ => 1.0,
+                    };
+                    l += beta * mat.bsdf.eval(albedo, n, wo, wi) * (cos * w) * li;
                 }
             }
 
@@ -166,6 +184,7 @@ impl Scene {
             let Some((wi, weight)) = mat.bsdf.sample(albedo, n, wo, u1, u2) else {
                 break;
             };
+            mis_pdf = glossy.then(|| mat.bsdf.pdf(albedo, n, wo, wi));
             beta *= weight;
             let u_rr = s.next();
             if depth >= RR_START {
@@ -183,20 +202,42 @@ impl Scene {
         l
     }
 
+    /// Solid-angle density with which light sampling from `from` picks the point `y` (normal
+    /// `ny`) of primitive `prim`: 0 unless it is an area light seen from its front.
+    pub fn area_light_pdf(&self, prim: u32, from: Vec3A, y: Vec3A, ny: Vec3A) -> f32 {
+        let i = self.light_of_prim[prim as usize];
+        let Some(&Light::Area { area, .. }) = self.lights.get(i as usize) else {
+            return 0.0;
+        };
+        let d = y - from;
+        let r2 = d.length_squared();
+        let cos_light = -ny.dot(d) / r2.sqrt();
+        if cos_light <= 0.0 {
+            return 0.0;
+        }
+        self.pick_probability(i as usize) * r2 / (area * cos_light)
+    }
+
     /// One light sample seen from `p`: (incident radiance divided by every pdf, unit direction
-    /// towards the light, distance). `None` when the sample carries nothing.
+    /// towards the light, distance, solid-angle density of the sample, `None` for point and
+    /// directional lights). `None` when the sample carries nothing.
     #[inline]
-    pub fn sample_light(&self, u_pick: f32, u: (f32, f32), p: Vec3A) -> Option<(Vec3A, Vec3A, f32)> {
+    pub fn sample_light(
+        &self,
+        u_pick: f32,
+        u: (f32, f32),
+        p: Vec3A,
+    ) -> Option<(Vec3A, Vec3A, f32, Option<f32>)> {
         let (i, p_pick) = self.pick_light(u_pick)?;
         match self.lights[i] {
             Light::Point { position, intensity } => {
                 let d = position - p;
                 let r2 = d.length_squared();
                 let r = r2.sqrt();
-                Some((intensity / (r2 * p_pick), d / r, r))
+                Some((intensity / (r2 * p_pick), d / r, r, None))
             }
             Light::Directional { to_light, irradiance } => {
-                Some((irradiance / p_pick, to_light, f32::INFINITY))
+                Some((irradiance / p_pick, to_light, f32::INFINITY, None))
             }
             Light::Area { prim, radiance, area } => {
                 let (y, mut ny) = self.bvh.prims[prim as usize].sample_area(u.0, u.1);
@@ -212,9 +253,23 @@ impl Scene {
                     return None;
                 }
                 // Area-measure pdf 1/A converted to solid angle: r² / (A cos θ_light).
-                Some((radiance * (cos_light * area / (r2 * p_pick)), wi, r))
+                let pdf = p_pick * r2 / (area * cos_light);
+                Some((radiance / pdf, wi, r, Some(pdf)))
             }
         }
+    }
+}
+
+/// Veach's power heuristic (β = 2) weight of strategy a against b.
+#[inline]
+fn power_heuristic(a: f32, b: f32) -> f32 {
+    let (a2, b2) = (a * a, b * b);
+    if a2 + b2 > 0.0 && a2.is_finite() {
+        a2 / (a2 + b2)
+    } else if a.is_infinite() {
+        1.0
+    } else {
+        0.0
     }
 }
 

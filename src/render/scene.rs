@@ -419,6 +419,8 @@ pub struct Scene {
     pub lights: Vec<Light>,
     /// Cumulative light-selection probabilities, proportional to power.
     pub light_cdf: Vec<f32>,
+    /// Per primitive (BVH order), the index of its area light in `lights`, or `u32::MAX`.
+    pub light_of_prim: Vec<u32>,
     /// Object names by id (index 0 is the background).
     pub object_names: Vec<String>,
     /// Centre and radius of a sphere bounding the geometry.
@@ -751,6 +753,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
         }
     }
     let light_cdf = light_cdf(&lights, bounds_radius);
+    let light_of_prim = light_of_prim(&lights, bvh.prims.len());
 
     Ok(Scene {
         camera,
@@ -762,6 +765,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
         info,
         lights,
         light_cdf,
+        light_of_prim,
         object_names,
         bounds_center,
         bounds_radius,
@@ -849,7 +853,18 @@ impl Scene {
         self.lights.retain(|l| matches!(l, Light::Area { .. }));
         self.lights.extend(lights.iter().copied().filter(|l| !matches!(l, Light::Area { .. })));
         self.light_cdf = light_cdf(&self.lights, self.bounds_radius);
+        self.light_of_prim = light_of_prim(&self.lights, self.bvh.prims.len());
     }
+}
+
+fn light_of_prim(lights: &[Light], prims: usize) -> Vec<u32> {
+    let mut map = vec![u32::MAX; prims];
+    for (i, l) in lights.iter().enumerate() {
+        if let Light::Area { prim, .. } = l {
+            map[*prim as usize] = i as u32;
+        }
+    }
+    map
 }
 
 fn light_cdf(lights: &[Light], scene_radius: f32) -> Vec<f32> {
@@ -877,6 +892,13 @@ impl Scene {
         let prev = if i == 0 { 0.0 } else { self.light_cdf[i - 1] };
         let p = self.light_cdf[i] - prev;
         (p > 0.0).then_some((i, p))
+    }
+
+    /// Probability that `pick_light` chooses light `i`.
+    #[inline]
+    pub fn pick_probability(&self, i: usize) -> f32 {
+        let prev = if i == 0 { 0.0 } else { self.light_cdf[i - 1] };
+        self.light_cdf[i] - prev
     }
 
     /// World-space ray origin and unit direction through OpenCV pixel coordinates `px`.
