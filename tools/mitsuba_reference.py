@@ -1,0 +1,67 @@
+"""Renders Mitsuba 3 references for lumen's comparison scenes and the variance of their mean.
+
+Usage: $PEERS_PY tools/mitsuba_reference.py glossy-spheres [--passes 32] [--spp 512] [--out tests/data/mitsuba]
+Writes NAME.exr (the mean of `passes` independent renders of `spp` samples, box pixel filter,
+linear RGB) and NAME_variance.exr (the variance of that mean: the passes' sample variance /
+passes). Each scene here is the lumen scene file pipelines/scenes/NAME.toml written in
+Mitsuba's terms; how each part was matched is said beside it. Mitsuba comes from the peers
+virtual environment (../shared/tools/peers-venv.sh), never from lumen's dependencies.
+"""
+import argparse, os
+import numpy as np
+import mitsuba as mi
+
+mi.set_variant('llvm_ad_rgb')
+T = mi.ScalarTransform4f
+
+
+def rgb(v):
+    return {'type': 'rgb', 'value': v}
+
+
+def glossy_spheres():
+    return {
+        'type': 'scene',
+        # Mitsuba's depth counts the camera hit as 1, as lumen's max_depth does.
+        'integrator': {'type': 'path', 'max_depth': 6},
+        # lumen's fov_deg spans the smaller side, and its pixel (i, j) integrates the box
+        # [i − ½, i + ½) around the centre: Mitsuba's box filter over pixel (i, j).
+        'sensor': {'type': 'perspective', 'fov': 40, 'fov_axis': 'smaller',
+                   'to_world': T().look_at(origin=[0, 1.2, 4], target=[0, 0.4, 0], up=[0, 1, 0]),
+                   'film': {'type': 'hdrfilm', 'width': 64, 'height': 64, 'rfilter': {'type': 'box'},
+                            'pixel_format': 'rgb'}},
+        # The floor quad: a rectangle ([-1, 1]², normal +z) turned to face +y, 6 × 6.
+        'floor': {'type': 'rectangle', 'to_world': T().rotate([1, 0, 0], -90).scale(3),
+                  'bsdf': {'type': 'diffuse', 'reflectance': rgb([0.5, 0.5, 0.5])}},
+        # The lamp: 1 × 1 at height 3 facing down, black, emitting 10 from its front only.
+        'lamp': {'type': 'rectangle',
+                 'to_world': T().translate([0, 3, 0.5]).rotate([1, 0, 0], 90).scale(0.5),
+                 'bsdf': {'type': 'diffuse', 'reflectance': rgb([0, 0, 0])},
+                 'emitter': {'type': 'area', 'radiance': rgb([10, 10, 10])}},
+        # roughconductor with RGB η, k as lumen's conductor; specular_reflectance 1 = albedo 1.
+        'gold': {'type': 'sphere', 'center': [-0.55, 0.5, 0], 'radius': 0.5,
+                 'bsdf': {'type': 'roughconductor', 'distribution': 'ggx', 'alpha': 0.2,
+                          'eta': rgb([0.143, 0.374, 1.442]), 'k': rgb([3.983, 2.385, 1.603])}},
+        'copper': {'type': 'sphere', 'center': [0.55, 0.5, 0], 'radius': 0.5,
+                   'bsdf': {'type': 'roughconductor', 'distribution': 'beckmann', 'alpha': 0.3,
+                            'eta': rgb([0.2, 0.92, 1.1]), 'k': rgb([3.9, 2.45, 2.14])}},
+    }
+
+
+SCENES = {'glossy-spheres': glossy_spheres}
+
+a = argparse.ArgumentParser()
+a.add_argument('scene', choices=sorted(SCENES))
+a.add_argument('--passes', type=int, default=32)
+a.add_argument('--spp', type=int, default=512)
+a.add_argument('--out', default='tests/data/mitsuba')
+o = a.parse_args()
+scene = mi.load_dict(SCENES[o.scene]())
+imgs = np.stack([np.array(mi.render(scene, spp=o.spp, seed=k + 1)) for k in range(o.passes)])
+mean, var = imgs.mean(axis=0), imgs.var(axis=0, ddof=1) / o.passes
+os.makedirs(o.out, exist_ok=True)
+mi.util.write_bitmap(os.path.join(o.out, f'{o.scene}.exr'), mi.TensorXf(mean.astype(np.float32)), write_async=False)
+mi.util.write_bitmap(os.path.join(o.out, f'{o.scene}_variance.exr'), mi.TensorXf(var.astype(np.float32)), write_async=False)
+print(f'{o.scene}: {o.passes} × {o.spp} spp, mean {mean.reshape(-1, 3).mean(axis=0)}', flush=True)
+# Leave at once: drjit's thread pool can keep the interpreter from exiting.
+os._exit(0)
