@@ -165,13 +165,7 @@ impl Scene {
             let (u_pick, u_light) = (s.next(), s.next2());
             if let Some((li, wi, dist, p_light)) = self.sample_light(u_pick, u_light, surf.p) {
                 let cos = n.dot(wi);
-                if cos > 0.0
-                    && !self.bvh.occluded(
-                        &Ray { origin, dir: wi },
-                        0.0,
-                        dist * (1.0 - 1e-4) - epsilon(surf.p),
-                    )
-                {
+                if cos > 0.0 && self.unoccluded(origin, surf.p, wi, dist) {
                     let w = match p_light {
                         Some(p) if glossy => power_heuristic(p, mat.bsdf.pdf(albedo, n, wo, wi)),
                         _ => 1.0,
@@ -202,13 +196,71 @@ impl Scene {
         l
     }
 
+    /// Whether the light point `p + wi·dist` (or the direction `wi`, for an infinite `dist`)
+    /// is visible from the offset ray origin `origin`. The shadow ray aims at the point itself
+    /// rather than along wi: near a sphere light's silhouette, moving the origin by the offset
+    /// moves where a grazing ray enters the sphere by many times that offset.
+    #[inline]
+    fn unoccluded(&self, origin: Vec3A, p: Vec3A, wi: Vec3A, dist: f32) -> bool {
+        if !dist.is_finite() {
+            return !self.bvh.occluded(&Ray { origin, dir: wi }, 0.0, f32::INFINITY);
+        }
+        let to = p + wi * dist - origin;
+        let len = to.length();
+        len > 0.0 && !self.bvh.occluded(&Ray { origin, dir: to / len }, 0.0, len * (1.0 - 1e-4) - epsilon(p))
+    }
+
+    /// An emitting sphere seen from outside is sampled by the cone of directions it subtends
+    /// (uniform in solid angle, cos θ_max = √(1 − R²/d²)), not by its area: every sample
+    /// then reaches the visible cap, and the density 1/(2π(1 − cos θ_max)) stays bounded
+    /// however small or far the sphere. Returns (direction, distance to the sphere, density);
+    /// `None` for other primitives, inward-emitting spheres and points inside or on one.
+    #[inline]
+    fn sample_sphere_cone(&self, prim: u32, p: Vec3A, u: (f32, f32)) -> Option<(Vec3A, f32, f32)> {
+        let (w, d, one_minus) = self.sphere_cone(prim, p)?;
+        let Prim::Sphere { radius, .. } = self.bvh.prims[prim as usize] else { return None };
+        let cos_t = 1.0 - u.0 * one_minus;
+        let sin2 = (1.0 - cos_t * cos_t).max(0.0);
+        let phi = 2.0 * PI * u.1;
+        let (t, b) = super::bsdf::basis(w);
+        let s = sin2.sqrt();
+        let wi = (t * (s * phi.cos()) + b * (s * phi.sin()) + w * cos_t).normalize();
+        // Nearest intersection along wi with the sphere.
+        let dist = d * cos_t - (radius * radius - d * d * sin2).max(0.0).sqrt();
+        Some((wi, dist.max(0.0), 1.0 / (2.0 * PI * one_minus)))
+    }
+
+    /// The cone an outward-emitting sphere light subtends from `p`: (axis, distance to the
+    /// centre, 1 − cos θ_max computed without cancellation as sin²θ_max / (1 + cos θ_max)).
+    #[inline]
+    fn sphere_cone(&self, prim: u32, p: Vec3A) -> Option<(Vec3A, f32, f32)> {
+        let Prim::Sphere { center, radius } = self.bvh.prims[prim as usize] else { return None };
+        if self.info[prim as usize].reverse {
+            return None;
+        }
+        let dc = center - p;
+        let d2 = dc.length_squared();
+        let sin2 = radius * radius / d2;
+        if !(sin2 < 1.0 - 1e-4) {
+            return None;
+        }
+        let cos_max = (1.0 - sin2).sqrt();
+        let d = d2.sqrt();
+        Some((dc / d, d, sin2 / (1.0 + cos_max)))
+    }
+
     /// Solid-angle density with which light sampling from `from` picks the point `y` (normal
-    /// `ny`) of primitive `prim`: 0 unless it is an area light seen from its front.
+    /// `ny`) of primitive `prim`: 0 unless it is an area light seen from its front. For a sphere
+    /// seen from outside, the cone density whatever the point (a ray from outside first meets
+    /// the cap the cone covers).
     pub fn area_light_pdf(&self, prim: u32, from: Vec3A, y: Vec3A, ny: Vec3A) -> f32 {
         let i = self.light_of_prim[prim as usize];
         let Some(&Light::Area { area, .. }) = self.lights.get(i as usize) else {
             return 0.0;
         };
+        if let Some((.., one_minus)) = self.sphere_cone(prim, from) {
+            return self.pick_probability(i as usize) / (2.0 * PI * one_minus);
+        }
         let d = y - from;
         let r2 = d.length_squared();
         let cos_light = -ny.dot(d) / r2.sqrt();
@@ -240,6 +292,10 @@ impl Scene {
                 Some((irradiance / p_pick, to_light, f32::INFINITY, None))
             }
             Light::Area { prim, radiance, area } => {
+                if let Some((wi, dist, pdf)) = self.sample_sphere_cone(prim, p, u) {
+                    let pdf = p_pick * pdf;
+                    return Some((radiance / pdf, wi, dist, Some(pdf)));
+                }
                 let (y, mut ny) = self.bvh.prims[prim as usize].sample_area(u.0, u.1);
                 if self.info[prim as usize].reverse {
                     ny = -ny;
