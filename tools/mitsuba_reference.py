@@ -48,7 +48,29 @@ def glossy_spheres():
     }
 
 
-SCENES = {'glossy-spheres': glossy_spheres}
+def sphere_light():
+    return {
+        'type': 'scene',
+        'integrator': {'type': 'path', 'max_depth': 6},
+        'sensor': {'type': 'perspective', 'fov': 40, 'fov_axis': 'smaller',
+                   'to_world': T().look_at(origin=[0, 1.2, 4], target=[0, 0.5, 0], up=[0, 1, 0]),
+                   'film': {'type': 'hdrfilm', 'width': 64, 'height': 64, 'rfilter': {'type': 'box'},
+                            'pixel_format': 'rgb'}},
+        'floor': {'type': 'rectangle', 'to_world': T().rotate([1, 0, 0], -90).scale(3),
+                  'bsdf': {'type': 'diffuse', 'reflectance': rgb([0.5, 0.5, 0.5])}},
+        # A sphere emitter radiates from its outside, as an emissive sphere in lumen.
+        'lamp': {'type': 'sphere', 'center': [0.6, 1.5, 0.4], 'radius': 0.25,
+                 'bsdf': {'type': 'diffuse', 'reflectance': rgb([0, 0, 0])},
+                 'emitter': {'type': 'area', 'radiance': rgb([8, 7, 6])}},
+        'copper': {'type': 'sphere', 'center': [-0.5, 0.5, 0], 'radius': 0.5,
+                   'bsdf': {'type': 'roughconductor', 'distribution': 'ggx', 'alpha': 0.15,
+                            'eta': rgb([0.2, 0.92, 1.1]), 'k': rgb([3.9, 2.45, 2.14])}},
+        'clay': {'type': 'sphere', 'center': [0.6, 0.35, 0.3], 'radius': 0.35,
+                 'bsdf': {'type': 'diffuse', 'reflectance': rgb([0.6, 0.3, 0.2])}},
+    }
+
+
+SCENES = {'glossy-spheres': glossy_spheres, 'sphere-light': sphere_light}
 
 a = argparse.ArgumentParser()
 a.add_argument('scene', choices=sorted(SCENES))
