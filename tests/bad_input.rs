@@ -112,6 +112,11 @@ fn bad_values() {
     assert!(e.contains("gold"), "{e}");
     let e = scene_error("[[lights]]\ntype = \"point\"\nposition = [0.0, 0.0, 0.0]\n", &[]);
     assert!(e.contains("lights[0]") && e.contains("intensity"), "{e}");
+    let spot = "[[lights]]\ntype = \"spot\"\nposition = [0.0, 0.0, 1.0]\ntarget = [0.0, 0.0, 0.0]\nintensity = [1.0, 1.0, 1.0]\n";
+    let e = scene_error(&format!("{spot}cutoff_deg = 120.0\n"), &[]);
+    assert!(e.contains("lights[0].cutoff_deg") && e.contains("120"), "{e}");
+    let e = scene_error(&format!("{spot}cutoff_deg = 20.0\nbeam_width_deg = 30.0\n"), &[]);
+    assert!(e.contains("lights[0].beam_width_deg") && e.contains("30"), "{e}");
     let e = scene_error("[[shapes]]\ntype = \"donut\"\n", &[]);
     assert!(e.contains("donut"), "{e}");
     let e = scene_error("[[shapes]]\ntype = \"torus\"\n", &[]);

@@ -291,6 +291,15 @@ impl Scene {
             Light::Directional { to_light, irradiance } => {
                 Some((irradiance / p_pick, to_light, f32::INFINITY, None))
             }
+            Light::Spot { position, axis, intensity, cutoff, beam } => {
+                let d = position - p;
+                let r2 = d.length_squared();
+                let r = r2.sqrt();
+                let wi = d / r;
+                let theta = (-wi).dot(axis).clamp(-1.0, 1.0).acos();
+                let falloff = super::scene::spot_falloff(theta, cutoff, beam);
+                (falloff > 0.0).then(|| (intensity * (falloff / (r2 * p_pick)), wi, r, None))
+            }
             Light::Area { prim, radiance, area } => {
                 if let Some((wi, dist, pdf)) = self.sample_sphere_cone(prim, p, u) {
                     let pdf = p_pick * pdf;

@@ -375,6 +375,16 @@ pub enum LightSpec {
     /// Distant light from direction `to_light` (towards the light), `irradiance` in W/m² on a
     /// surface facing it.
     Directional { to_light: [f64; 3], irradiance: [f64; 3] },
+    /// Spot light at `position` aimed at `target`, as Mitsuba's `spot`: `intensity` (W/sr) on
+    /// the axis and out to `beam_width_deg`, falling linearly in angle to 0 at `cutoff_deg`
+    /// (defaults 20° and ¾ of the cutoff).
+    Spot {
+        position: [f64; 3],
+        target: [f64; 3],
+        intensity: [f64; 3],
+        cutoff_deg: Option<f64>,
+        beam_width_deg: Option<f64>,
+    },
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -398,6 +408,14 @@ pub enum Light {
     Directional {
         to_light: Vec3A,
         irradiance: Vec3A,
+    },
+    /// Angles in radians; `axis` is the unit direction the spot points along.
+    Spot {
+        position: Vec3A,
+        axis: Vec3A,
+        intensity: Vec3A,
+        cutoff: f32,
+        beam: f32,
     },
     /// An emissive primitive (index into the BVH's leaf-ordered primitives).
     Area {
@@ -733,6 +751,36 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                     intensity,
                 }
             }
+            LightSpec::Spot { position, target, intensity, cutoff_deg, beam_width_deg } => {
+                let p = finite3(path, &format!("{field}.position"), *position)?;
+                let t = finite3(path, &format!("{field}.target"), *target)?;
+                if (t - p).length() == 0.0 {
+                    return Err(field_err(path, &format!("{field}.target"), "must differ from `position`"));
+                }
+                let cutoff = cutoff_deg.unwrap_or(20.0);
+                if !(cutoff > 0.0 && cutoff <= 90.0) {
+                    return Err(field_err(
+                        path,
+                        &format!("{field}.cutoff_deg"),
+                        format!("{cutoff}: expected (0, 90]"),
+                    ));
+                }
+                let beam = beam_width_deg.unwrap_or(0.75 * cutoff);
+                if !(beam > 0.0 && beam <= cutoff) {
+                    return Err(field_err(
+                        path,
+                        &format!("{field}.beam_width_deg"),
+                        format!("{beam}: expected (0, cutoff_deg = {cutoff}]"),
+                    ));
+                }
+                Light::Spot {
+                    position: p.as_vec3().into(),
+                    axis: (t - p).normalize().as_vec3().into(),
+                    intensity: non_negative3(path, &format!("{field}.intensity"), *intensity)?,
+                    cutoff: cutoff.to_radians() as f32,
+                    beam: beam.to_radians() as f32,
+                }
+            }
             LightSpec::Directional { to_light, irradiance } => {
                 let d = finite3(path, &format!("{field}.to_light"), *to_light)?;
                 if d.length() == 0.0 {
@@ -843,7 +891,32 @@ pub fn light_power(l: &Light, scene_radius: f32) -> f32 {
         Light::Point { intensity, .. } => 4.0 * pi * mean(intensity),
         Light::Directional { irradiance, .. } => pi * scene_radius * scene_radius * mean(irradiance),
         Light::Area { radiance, area, .. } => pi * area * mean(radiance),
+        Light::Spot { intensity, cutoff, beam, .. } => {
+            spot_power_per_intensity(cutoff, beam) * mean(intensity)
+        }
     }
+}
+
+/// Spot light falloff at angle θ from its axis: 1 inside the beam, linear in θ to 0 at the
+/// cutoff (Mitsuba's `spot`).
+#[inline]
+pub fn spot_falloff(theta: f32, cutoff: f32, beam: f32) -> f32 {
+    if theta >= cutoff {
+        0.0
+    } else if theta <= beam {
+        1.0
+    } else {
+        (cutoff - theta) / (cutoff - beam)
+    }
+}
+
+/// Power of a spot light per unit on-axis intensity, 2π ∫ falloff(θ) sin θ dθ
+/// = 2π [(1 − cos b) + cos b − (sin c − sin b)/(c − b)] for beam b < cutoff c (the second
+/// part by parts over the linear transition).
+pub fn spot_power_per_intensity(cutoff: f32, beam: f32) -> f32 {
+    let (c, b) = (cutoff as f64, beam as f64);
+    let transition = if c - b > 1e-9 { b.cos() - (c.sin() - b.sin()) / (c - b) } else { 0.0 };
+    (2.0 * std::f64::consts::PI * ((1.0 - b.cos()) + transition)) as f32
 }
 
 impl Scene {
