@@ -113,6 +113,9 @@ fn bad_values() {
     let e = scene_error("[[lights]]\ntype = \"point\"\nposition = [0.0, 0.0, 0.0]\n", &[]);
     assert!(e.contains("lights[0]") && e.contains("intensity"), "{e}");
     let spot = "[[lights]]\ntype = \"spot\"\nposition = [0.0, 0.0, 1.0]\ntarget = [0.0, 0.0, 0.0]\nintensity = [1.0, 1.0, 1.0]\n";
+    let env = "[[lights]]\ntype = \"environment\"\nradiance = [1.0, 1.0, 1.0]\n";
+    let e = scene_error(&format!("{env}{env}"), &[]);
+    assert!(e.contains("lights[1]") && e.contains("one environment"), "{e}");
     let e = scene_error(&format!("{spot}cutoff_deg = 120.0\n"), &[]);
     assert!(e.contains("lights[0].cutoff_deg") && e.contains("120"), "{e}");
     let e = scene_error(&format!("{spot}cutoff_deg = 20.0\nbeam_width_deg = 30.0\n"), &[]);

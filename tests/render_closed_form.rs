@@ -469,6 +469,65 @@ beam_width_deg = 15.0
     assert!((closed / power - 1.0).abs() < 1e-5, "{closed} vs {power}");
 }
 
+/// A constant environment of radiance L: a Lambertian sphere shows ρ·L (it is convex: no
+/// light comes back from itself), the background L, and a glossy sphere, seen head-on at its
+/// centre, L·∫ f cos dω — Blinn-Phong, where light and BSDF samples of the environment are
+/// combined by MIS, the integral by quadrature.
+#[test]
+fn constant_environment() {
+    for (material, kd) in [
+        ("type = \"lambertian\"\nalbedo = [0.6, 0.4, 0.2]", [0.6f32, 0.4, 0.2]),
+        (
+            "type = \"blinn-phong\"\nalbedo = [0.3, 0.3, 0.3]\nspecular = [0.5, 0.5, 0.5]\nexponent = 20.0",
+            [0.3; 3],
+        ),
+    ] {
+        let text = format!(
+            "[camera]\nwidth = 3\nheight = 3\nfx = 2000.0\nfy = 2000.0\ncx = 1.0\ncy = 1.0\nlook_at = {{ origin = [0.0, 0.0, 3.0], target = [0.0, 0.0, 0.0], up = [0.0, 1.0, 0.0] }}\n[render]\nmax_depth = 4\n[[materials]]\nname = \"m\"\n{material}\n[[shapes]]\ntype = \"sphere\"\ncenter = [0.0, 0.0, 0.0]\nradius = 1.0\nmaterial = \"m\"\n[[lights]]\ntype = \"environment\"\nradiance = [2.0, 2.0, 2.0]\n"
+        );
+        let dir = tempfile::tempdir().unwrap();
+        let scene = common::scene(&text, dir.path()).unwrap();
+        let mut s = common::settings(&scene, 1 << 16, 4);
+        s.crop = Some([1, 1, 2, 2]);
+        let film = render::render(&scene, &s);
+        let bsdf = scene.materials[0].bsdf;
+        let kd = glam::Vec3A::from(kd);
+        // ∫ f(n, wi) cos θi dωi over the hemisphere around n = +z, wo = n.
+        let (nt, np) = (2000, 400);
+        let mut albedo = [0.0f64; 3];
+        for i in 0..nt {
+            let ct = (i as f64 + 0.5) / nt as f64;
+            let st = (1.0 - ct * ct).sqrt();
+            for j in 0..np {
+                let phi = 2.0 * std::f64::consts::PI * (j as f64 + 0.5) / np as f64;
+                let wi = glam::Vec3A::new((st * phi.cos()) as f32, (st * phi.sin()) as f32, ct as f32);
+                let f = bsdf.eval(kd, glam::Vec3A::Z, glam::Vec3A::Z, wi);
+                for c in 0..3 {
+                    albedo[c] += f[c] as f64 * ct * 2.0 * std::f64::consts::PI / (nt * np) as f64;
+                }
+            }
+        }
+        for c in 0..3 {
+            let want = 2.0 * albedo[c];
+            let got = film.mean.data[c] as f64;
+            let se = (film.variance.data[c] as f64).sqrt();
+            eprintln!("{:?} channel {c}: {got:.5} vs {want:.5} (SE {se:.1e})", bsdf);
+            assert!(
+                ((got - want) / se).abs() < 4.0 && (got / want - 1.0).abs() < 0.01,
+                "channel {c}: {got} vs {want}"
+            );
+        }
+        // The background: the environment itself.
+        let mut s = common::settings(&scene, 4, 4);
+        s.crop = Some([0, 0, 1, 1]);
+        let mut far = scene;
+        far.camera.intrinsics.fx = 2.0;
+        far.camera.intrinsics.fy = 2.0;
+        let film = render::render(&far, &s);
+        assert!((film.mean.data[0] - 2.0).abs() < 1e-6, "background {}", film.mean.data[0]);
+    }
+}
+
 /// A sphere light facing a point: E = π·L·(R/d)², so a Lambertian floor shows
 /// ρ·L·(R/d)² under it; the cone sampling of the sphere makes that exact to Monte Carlo noise.
 #[test]

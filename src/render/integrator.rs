@@ -10,9 +10,11 @@
 //! power heuristic): the light sample of an area light is weighted p_light²/(p_light² + p_bsdf²)
 //! and an emitter the BSDF-sampled ray reaches counts with p_bsdf²/(p_light² + p_bsdf²), both
 //! densities in solid angle (p_light = p_pick·r²/(A·cos θ_light)); samples of point and
-//! directional lights, which BSDF sampling cannot hit, keep weight 1. Scenes without glossy
-//! materials do none of this bookkeeping. Surfaces are two-sided; emitters emit on their front
-//! side only.
+//! directional lights, which BSDF sampling cannot hit, keep weight 1. A constant environment
+//! is sampled uniformly over the sphere (p_light = p_pick/4π) and, like an emitter, counted
+//! when a ray leaves the scene: on the camera ray, or after a glossy vertex with its MIS
+//! weight. Scenes without glossy materials do none of this bookkeeping. Surfaces are
+//! two-sided; emitters emit on their front side only.
 //!
 //! Depth follows Mitsuba's convention: `max_depth` counts path segments, so 1 shows emitters
 //! seen directly and 2 is direct lighting only. Russian roulette starts after 5 segments (as in
@@ -138,6 +140,14 @@ impl Scene {
         let mut mis_pdf: Option<f32> = None;
         for depth in 1..=max_depth {
             let Some(hit) = self.bvh.intersect(&ray, 0.0, f32::INFINITY) else {
+                // Leaving the scene: the environment, counted as emission is (module docs).
+                if let Some((le, p_pick)) = self.environment() {
+                    if depth == 1 {
+                        l += beta * le;
+                    } else if let Some(p_bsdf) = mis_pdf {
+                        l += beta * le * power_heuristic(p_bsdf, p_pick / (4.0 * PI));
+                    }
+                }
                 break;
             };
             let surf = self.surface(&ray, &hit);
@@ -290,6 +300,14 @@ impl Scene {
             }
             Light::Directional { to_light, irradiance } => {
                 Some((irradiance / p_pick, to_light, f32::INFINITY, None))
+            }
+            Light::Environment { radiance } => {
+                // Uniform over the sphere of directions.
+                let z = 1.0 - 2.0 * u.0;
+                let r = (1.0 - z * z).max(0.0).sqrt();
+                let phi = 2.0 * PI * u.1;
+                let pdf = p_pick / (4.0 * PI);
+                Some((radiance / pdf, Vec3A::new(r * phi.cos(), r * phi.sin(), z), f32::INFINITY, Some(pdf)))
             }
             Light::Spot { position, axis, intensity, cutoff, beam } => {
                 let d = position - p;

@@ -375,6 +375,9 @@ pub enum LightSpec {
     /// Distant light from direction `to_light` (towards the light), `irradiance` in W/m² on a
     /// surface facing it.
     Directional { to_light: [f64; 3], irradiance: [f64; 3] },
+    /// Uniform light from every direction, `radiance` in W/(m²·sr), as Mitsuba's `constant`:
+    /// what a ray leaving the scene sees.
+    Environment { radiance: [f64; 3] },
     /// Spot light at `position` aimed at `target`, as Mitsuba's `spot`: `intensity` (W/sr) on
     /// the axis and out to `beam_width_deg`, falling linearly in angle to 0 at `cutoff_deg`
     /// (defaults 20° and ¾ of the cutoff).
@@ -408,6 +411,10 @@ pub enum Light {
     Directional {
         to_light: Vec3A,
         irradiance: Vec3A,
+    },
+    /// Constant radiance from every direction.
+    Environment {
+        radiance: Vec3A,
     },
     /// Angles in radians; `axis` is the unit direction the spot points along.
     Spot {
@@ -751,6 +758,12 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                     intensity,
                 }
             }
+            LightSpec::Environment { radiance } => {
+                if lights.iter().any(|l| matches!(l, Light::Environment { .. })) {
+                    return Err(field_err(path, &field, "a scene takes one environment light"));
+                }
+                Light::Environment { radiance: non_negative3(path, &format!("{field}.radiance"), *radiance)? }
+            }
             LightSpec::Spot { position, target, intensity, cutoff_deg, beam_width_deg } => {
                 let p = finite3(path, &format!("{field}.position"), *position)?;
                 let t = finite3(path, &format!("{field}.target"), *target)?;
@@ -894,6 +907,8 @@ pub fn light_power(l: &Light, scene_radius: f32) -> f32 {
         Light::Spot { intensity, cutoff, beam, .. } => {
             spot_power_per_intensity(cutoff, beam) * mean(intensity)
         }
+        // The flux into the bounding sphere: 4πR² · πL.
+        Light::Environment { radiance } => 4.0 * pi * pi * scene_radius * scene_radius * mean(radiance),
     }
 }
 
@@ -920,11 +935,14 @@ pub fn spot_power_per_intensity(cutoff: f32, beam: f32) -> f32 {
 }
 
 impl Scene {
-    /// Replaces the point and directional lights (emissive shapes stay lights), as a stage
+    /// Replaces the point, spot and directional lights (emissive shapes and the environment
+    /// stay), as a stage
     /// that relights one scene does.
     pub fn replace_lights(&mut self, lights: &[Light]) {
-        self.lights.retain(|l| matches!(l, Light::Area { .. }));
-        self.lights.extend(lights.iter().copied().filter(|l| !matches!(l, Light::Area { .. })));
+        self.lights.retain(|l| matches!(l, Light::Area { .. } | Light::Environment { .. }));
+        self.lights.extend(
+            lights.iter().copied().filter(|l| !matches!(l, Light::Area { .. } | Light::Environment { .. })),
+        );
         self.light_cdf = light_cdf(&self.lights, self.bounds_radius);
         self.light_of_prim = light_of_prim(&self.lights, self.bvh.prims.len());
     }
@@ -965,6 +983,15 @@ impl Scene {
         let prev = if i == 0 { 0.0 } else { self.light_cdf[i - 1] };
         let p = self.light_cdf[i] - prev;
         (p > 0.0).then_some((i, p))
+    }
+
+    /// The environment light's radiance and pick probability, when the scene has one.
+    #[inline]
+    pub fn environment(&self) -> Option<(Vec3A, f32)> {
+        self.lights.iter().enumerate().find_map(|(i, l)| match l {
+            Light::Environment { radiance } => Some((*radiance, self.pick_probability(i))),
+            _ => None,
+        })
     }
 
     /// Probability that `pick_light` chooses light `i`.
