@@ -7,49 +7,47 @@ mod common;
 use lumen::image::{io, metrics};
 use lumen::render;
 
-/// Per-channel image means within 1 % of Mitsuba's, and a per-pixel z-test (lumen's variance +
-/// the reference's, Šidák-corrected at α = 0.01) accepting ≥ 99.75 % of pixel channels.
+/// Renders `pipelines/scenes/SCENE.toml` at `spp` (max depth `depth`) and compares it with
+/// Mitsuba's reference `REFERENCE.exr` / `REFERENCE_variance.exr` in `dir`: per-channel means
+/// within 1 %, and a per-pixel z-test (lumen's variance + the reference's, Šidák-corrected at
+/// α = 0.01) accepting at least `min_pass` of the pixel channels.
+fn matches_mitsuba(dir: &std::path::Path, reference: &str, scene: &str, spp: u32, depth: u32, min_pass: f64) {
+    let ref_mean = io::read_exr(&dir.join(format!("{reference}.exr"))).unwrap();
+    let ref_var = io::read_exr(&dir.join(format!("{reference}_variance.exr"))).unwrap();
+    let scene_file = common::root().join(format!("pipelines/scenes/{scene}.toml"));
+    let scene_data = render::load(&scene_file).unwrap();
+    let film = render::render(&scene_data, &common::settings(&scene_data, spp, depth));
+    assert!(!film.mean.has_non_finite() && film.dropped_samples == 0);
+    let a = metrics::agreement(&film.mean, &film.variance, &ref_mean, &ref_var, 0.01).unwrap();
+    eprintln!("{scene}: {a:?}");
+    for (c, e) in a.mean_rel_err.iter().enumerate() {
+        assert!(e.abs() < 0.01, "{scene} channel {c}: mean differs by {:.3} %", 100.0 * e);
+    }
+    assert!(
+        a.pass_fraction >= min_pass,
+        "{scene}: {} of {} pixel channels fail the z-test",
+        a.failed,
+        a.tested
+    );
+}
+
+fn references() -> std::path::PathBuf {
+    common::root().join("tests/data/mitsuba")
+}
+
+/// The Cornell box (8192 spp, in ../shared): ≥ 99.75 % of pixel channels pass.
 #[test]
 fn cornell_box_matches_mitsuba() {
     let Some(data) = common::shared_data() else { return };
-    let dir = data.join("scenes/cornell-box");
-    let reference = io::read_exr(&dir.join("reference.exr")).unwrap();
-    let ref_var = io::read_exr(&dir.join("reference_variance.exr")).unwrap();
-    let scene = render::load(&common::root().join("pipelines/scenes/cornell-box.toml")).unwrap();
-    let film = render::render(&scene, &common::settings(&scene, 256, 8));
-    assert!(!film.mean.has_non_finite() && film.dropped_samples == 0);
-    let a = metrics::agreement(&film.mean, &film.variance, &reference, &ref_var, 0.01).unwrap();
-    eprintln!("{a:?}");
-    for (c, e) in a.mean_rel_err.iter().enumerate() {
-        assert!(e.abs() < 0.01, "channel {c}: mean differs by {:.3} %", 100.0 * e);
-    }
-    assert!(a.pass_fraction >= 0.9975, "{} of {} pixel channels fail the z-test", a.failed, a.tested);
-}
-
-/// lumen's render of `pipelines/scenes/NAME.toml` at `spp` against Mitsuba's reference in
-/// tests/data/mitsuba: per-channel means within 1 %, ≥ 99 % of pixel channels passing the
-/// z-test.
-fn matches_mitsuba(name: &str, spp: u32) {
-    let dir = common::root().join("tests/data/mitsuba");
-    let reference = io::read_exr(&dir.join(format!("{name}.exr"))).unwrap();
-    let ref_var = io::read_exr(&dir.join(format!("{name}_variance.exr"))).unwrap();
-    let scene = render::load(&common::root().join(format!("pipelines/scenes/{name}.toml"))).unwrap();
-    let film = render::render(&scene, &common::settings(&scene, spp, 6));
-    assert!(!film.mean.has_non_finite() && film.dropped_samples == 0);
-    let a = metrics::agreement(&film.mean, &film.variance, &reference, &ref_var, 0.01).unwrap();
-    eprintln!("{name}: {a:?}");
-    for (c, e) in a.mean_rel_err.iter().enumerate() {
-        assert!(e.abs() < 0.01, "{name} channel {c}: mean differs by {:.3} %", 100.0 * e);
-    }
-    assert!(a.pass_fraction >= 0.99, "{name}: {} of {} pixel channels fail the z-test", a.failed, a.tested);
+    matches_mitsuba(&data.join("scenes/cornell-box"), "reference", "cornell-box", 256, 8, 0.9975);
 }
 
 /// Two rough metal spheres (GGX gold, Beckmann copper) on a diffuse floor under a small area
 /// light: glossy reflection and multiple importance sampling against Mitsuba 3's
-/// `roughconductor` (16384 spp).
+/// `roughconductor` (16384 spp); ≥ 99 % of pixel channels pass.
 #[test]
 fn glossy_spheres_match_mitsuba() {
-    matches_mitsuba("glossy-spheres", 256);
+    matches_mitsuba(&references(), "glossy-spheres", "glossy-spheres", 256, 6, 0.99);
 }
 
 /// A sphere light in view over a rough copper sphere and a diffuse one: the light's cone
@@ -58,5 +56,5 @@ fn glossy_spheres_match_mitsuba() {
 fn sphere_light_matches_mitsuba() {
     // Light reflected by the metal onto the floor is heavy-tailed at 256 spp, where the
     // per-pixel variance estimate runs low (99.3 % pass); 1024 spp gives 99.8 %.
-    matches_mitsuba("sphere-light", 1024);
+    matches_mitsuba(&references(), "sphere-light", "sphere-light", 1024, 6, 0.99);
 }

@@ -19,7 +19,8 @@ def rgb(v):
     return {'type': 'rgb', 'value': v}
 
 
-def glossy_spheres():
+def base(target):
+    """Integrator, 64×64 camera from (0, 1.2, 4) and the grey floor both scenes share."""
     return {
         'type': 'scene',
         # Mitsuba's depth counts the camera hit as 1, as lumen's max_depth does.
@@ -27,12 +28,17 @@ def glossy_spheres():
         # lumen's fov_deg spans the smaller side, and its pixel (i, j) integrates the box
         # [i − ½, i + ½) around the centre: Mitsuba's box filter over pixel (i, j).
         'sensor': {'type': 'perspective', 'fov': 40, 'fov_axis': 'smaller',
-                   'to_world': T().look_at(origin=[0, 1.2, 4], target=[0, 0.4, 0], up=[0, 1, 0]),
+                   'to_world': T().look_at(origin=[0, 1.2, 4], target=target, up=[0, 1, 0]),
                    'film': {'type': 'hdrfilm', 'width': 64, 'height': 64, 'rfilter': {'type': 'box'},
                             'pixel_format': 'rgb'}},
         # The floor quad: a rectangle ([-1, 1]², normal +z) turned to face +y, 6 × 6.
         'floor': {'type': 'rectangle', 'to_world': T().rotate([1, 0, 0], -90).scale(3),
                   'bsdf': {'type': 'diffuse', 'reflectance': rgb([0.5, 0.5, 0.5])}},
+    }
+
+
+def glossy_spheres():
+    return base([0, 0.4, 0]) | {
         # The lamp: 1 × 1 at height 3 facing down, black, emitting 10 from its front only.
         'lamp': {'type': 'rectangle',
                  'to_world': T().translate([0, 3, 0.5]).rotate([1, 0, 0], 90).scale(0.5),
@@ -49,15 +55,7 @@ def glossy_spheres():
 
 
 def sphere_light():
-    return {
-        'type': 'scene',
-        'integrator': {'type': 'path', 'max_depth': 6},
-        'sensor': {'type': 'perspective', 'fov': 40, 'fov_axis': 'smaller',
-                   'to_world': T().look_at(origin=[0, 1.2, 4], target=[0, 0.5, 0], up=[0, 1, 0]),
-                   'film': {'type': 'hdrfilm', 'width': 64, 'height': 64, 'rfilter': {'type': 'box'},
-                            'pixel_format': 'rgb'}},
-        'floor': {'type': 'rectangle', 'to_world': T().rotate([1, 0, 0], -90).scale(3),
-                  'bsdf': {'type': 'diffuse', 'reflectance': rgb([0.5, 0.5, 0.5])}},
+    return base([0, 0.5, 0]) | {
         # A sphere emitter radiates from its outside, as an emissive sphere in lumen.
         'lamp': {'type': 'sphere', 'center': [0.6, 1.5, 0.4], 'radius': 0.25,
                  'bsdf': {'type': 'diffuse', 'reflectance': rgb([0, 0, 0])},

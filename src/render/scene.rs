@@ -446,6 +446,8 @@ pub struct Scene {
     pub light_cdf: Vec<f32>,
     /// Per primitive (BVH order), the index of its area light in `lights`, or `u32::MAX`.
     pub light_of_prim: Vec<u32>,
+    /// The environment light's index in `lights`, if any (looked up on every escaping ray).
+    pub environment_light: Option<usize>,
     /// Object names by id (index 0 is the background).
     pub object_names: Vec<String>,
     /// Centre and radius of a sphere bounding the geometry.
@@ -815,6 +817,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
     }
     let light_cdf = light_cdf(&lights, bounds_radius);
     let light_of_prim = light_of_prim(&lights, bvh.prims.len());
+    let environment_light = lights.iter().position(|l| matches!(l, Light::Environment { .. }));
 
     Ok(Scene {
         camera,
@@ -827,6 +830,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
         lights,
         light_cdf,
         light_of_prim,
+        environment_light,
         object_names,
         bounds_center,
         bounds_radius,
@@ -945,6 +949,7 @@ impl Scene {
         );
         self.light_cdf = light_cdf(&self.lights, self.bounds_radius);
         self.light_of_prim = light_of_prim(&self.lights, self.bvh.prims.len());
+        self.environment_light = self.lights.iter().position(|l| matches!(l, Light::Environment { .. }));
     }
 }
 
@@ -988,10 +993,11 @@ impl Scene {
     /// The environment light's radiance and pick probability, when the scene has one.
     #[inline]
     pub fn environment(&self) -> Option<(Vec3A, f32)> {
-        self.lights.iter().enumerate().find_map(|(i, l)| match l {
-            Light::Environment { radiance } => Some((*radiance, self.pick_probability(i))),
+        let i = self.environment_light?;
+        match self.lights[i] {
+            Light::Environment { radiance } => Some((radiance, self.pick_probability(i))),
             _ => None,
-        })
+        }
     }
 
     /// Probability that `pick_light` chooses light `i`.
