@@ -110,52 +110,32 @@ fn truth_images_of_plane() {
     }
 }
 
+/// A lamp shape (emitting radiance 2 from its front) over a 4×4 Lambertian floor of albedo 0.9
+/// at z = 0, direct light only; a 3×3 camera at z = 0.5 looking straight down with a footprint
+/// of 0.0005 rad per pixel: the centre pixel's mean and standard error after `spp` samples.
+fn floor_under_lamp(lamp: &str, spp: u32) -> (f64, f64) {
+    let text = format!(
+        "[camera]\nwidth = 3\nheight = 3\nfx = 2000.0\nfy = 2000.0\ncx = 1.0\ncy = 1.0\nlook_at = {{ origin = [0.0, 0.0, 0.5], target = [0.0, 0.0, 0.0], up = [0.0, 1.0, 0.0] }}\n[[materials]]\nname = \"lamp\"\ntype = \"lambertian\"\nalbedo = [0.0, 0.0, 0.0]\nemission = [2.0, 2.0, 2.0]\n[[materials]]\nname = \"floor\"\ntype = \"lambertian\"\nalbedo = [0.9, 0.9, 0.9]\n[[shapes]]\n{lamp}\nmaterial = \"lamp\"\n[[shapes]]\ntype = \"quad\"\ncorner = [-2.0, -2.0, 0.0]\nedge_u = [4.0, 0.0, 0.0]\nedge_v = [0.0, 4.0, 0.0]\nmaterial = \"floor\"\n"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let scene = common::scene(&text, dir.path()).unwrap();
+    let mut s = common::settings(&scene, spp, 2);
+    s.crop = Some([1, 1, 2, 2]);
+    let film = render::render(&scene, &s);
+    (film.mean.data[0] as f64, (film.variance.data[0] as f64).sqrt())
+}
+
 /// Irradiance on the axis of a uniformly emitting rectangle with half sides a, b at distance d:
 /// E = 2L [X/√(1+X²)·atan(Y/√(1+X²)) + Y/√(1+Y²)·atan(X/√(1+Y²))], X = a/d, Y = b/d.
 #[test]
 fn emissive_quad_on_axis_irradiance() {
-    let text = r#"
-[camera]
-width = 3
-height = 3
-fx = 2000.0
-fy = 2000.0
-cx = 1.0
-cy = 1.0
-look_at = { origin = [0.0, 0.0, 0.5], target = [0.0, 0.0, 0.0], up = [0.0, 1.0, 0.0] }
-[[materials]]
-name = "lamp"
-type = "lambertian"
-albedo = [0.0, 0.0, 0.0]
-emission = [2.0, 2.0, 2.0]
-[[materials]]
-name = "floor"
-type = "lambertian"
-albedo = [0.9, 0.9, 0.9]
-[[shapes]]
-type = "quad"
-corner = [-0.5, -0.3, 1.0]
-edge_u = [0.0, 0.6, 0.0]
-edge_v = [1.0, 0.0, 0.0]
-material = "lamp"
-[[shapes]]
-type = "quad"
-corner = [-2.0, -2.0, 0.0]
-edge_u = [4.0, 0.0, 0.0]
-edge_v = [0.0, 4.0, 0.0]
-material = "floor"
-"#;
-    let dir = tempfile::tempdir().unwrap();
-    let scene = common::scene(text, dir.path()).unwrap();
-    let mut s = common::settings(&scene, 1 << 18, 2);
-    s.crop = Some([1, 1, 2, 2]);
-    let film = render::render(&scene, &s);
+    let lamp =
+        "type = \"quad\"\ncorner = [-0.5, -0.3, 1.0]\nedge_u = [0.0, 0.6, 0.0]\nedge_v = [1.0, 0.0, 0.0]";
+    let (got, se) = floor_under_lamp(lamp, 1 << 18);
     let (x, y, l) = (0.5f64, 0.3f64, 2.0f64);
     let (sx, sy) = ((1.0 + x * x).sqrt(), (1.0 + y * y).sqrt());
     let e = 2.0 * l * (x / sx * (y / sx).atan() + y / sy * (x / sy).atan());
     let expected = 0.9 / std::f64::consts::PI * e;
-    let got = film.mean.data[0] as f64;
-    let se = (film.variance.data[0] as f64).sqrt();
     assert!(((got - expected) / se).abs() < 4.0, "got {got}, expected {expected}, standard error {se}");
     assert!((got / expected - 1.0).abs() < 2e-3, "got {got}, expected {expected}");
 }
@@ -532,46 +512,8 @@ fn constant_environment() {
 /// ρ·L·(R/d)² under it; the cone sampling of the sphere makes that exact to Monte Carlo noise.
 #[test]
 fn sphere_light_irradiance() {
-    let text = r#"
-[camera]
-width = 3
-height = 3
-fx = 2000.0
-fy = 2000.0
-cx = 1.0
-cy = 1.0
-look_at = { origin = [0.0, 0.0, 0.5], target = [0.0, 0.0, 0.0], up = [0.0, 1.0, 0.0] }
-[render]
-max_depth = 2
-[[materials]]
-name = "lamp"
-type = "lambertian"
-albedo = [0.0, 0.0, 0.0]
-emission = [2.0, 2.0, 2.0]
-[[materials]]
-name = "floor"
-type = "lambertian"
-albedo = [0.9, 0.9, 0.9]
-[[shapes]]
-type = "sphere"
-center = [0.0, 0.0, 1.0]
-radius = 0.3
-material = "lamp"
-[[shapes]]
-type = "quad"
-corner = [-2.0, -2.0, 0.0]
-edge_u = [4.0, 0.0, 0.0]
-edge_v = [0.0, 4.0, 0.0]
-material = "floor"
-"#;
-    let dir = tempfile::tempdir().unwrap();
-    let scene = common::scene(text, dir.path()).unwrap();
-    let mut s = common::settings(&scene, 1 << 14, 2);
-    s.crop = Some([1, 1, 2, 2]);
-    let film = render::render(&scene, &s);
+    let (got, se) = floor_under_lamp("type = \"sphere\"\ncenter = [0.0, 0.0, 1.0]\nradius = 0.3", 1 << 14);
     let expected = 0.9 * 2.0 * 0.3f64.powi(2);
-    let got = film.mean.data[0] as f64;
-    let se = (film.variance.data[0] as f64).sqrt();
     eprintln!("sphere light: {got} vs {expected} (SE {se:.2e})");
     assert!(((got - expected) / se.max(1e-9)).abs() < 4.0 || (got / expected - 1.0).abs() < 1e-5);
     assert!((got / expected - 1.0).abs() < 1e-3, "got {got}, expected {expected}");
