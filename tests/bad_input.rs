@@ -162,6 +162,16 @@ fn bad_values() {
     assert!(e.contains("materials[1] (g)") && e.contains("blinn-phong"), "{e}");
     let e = scene_error(&glossy("type = \"conductor\"\neta = [0.2, -1.0, 0.5]\n"), &[]);
     assert!(e.contains("materials[1] (g).eta"), "{e}");
+    let e = scene_error(&glossy("type = \"mirror\"\neta = [0.2, 0.2, 0.5]\n"), &[]);
+    assert!(e.contains("materials[1] (g)") && e.contains("both `eta` and `k`"), "{e}");
+    let e = scene_error(&glossy("type = \"mirror\"\nalpha = 0.1\n"), &[]);
+    assert!(e.contains("materials[1] (g)") && e.contains("smooth"), "{e}");
+    let e = scene_error(&glossy("type = \"dielectric\"\nior = 7.0\n"), &[]);
+    assert!(e.contains("materials[1] (g).ior") && e.contains("7") && e.contains("[0.25, 4]"), "{e}");
+    let e = scene_error(&glossy("type = \"dielectric\"\nk = [1.0, 1.0, 1.0]\n"), &[]);
+    assert!(e.contains("materials[1] (g)") && e.contains("dielectric"), "{e}");
+    let e = scene_error(&glossy("type = \"lambertian\"\nior = 1.5\n"), &[]);
+    assert!(e.contains("materials[1] (g).ior") && e.contains("dielectric"), "{e}");
 }
 
 #[test]

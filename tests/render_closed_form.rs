@@ -812,3 +812,55 @@ material = "tex"
         );
     }
 }
+
+/// The white furnace per BSDF: a sphere of each material inside a constant environment of
+/// radiance L, the whole 8 × 8 image (sphere and background). Whatever a lossless material
+/// does with the light, every path ends in the environment with weight 1, so the image is L
+/// (Lambertian of albedo 1, perfect mirror, clear glass — the glass also checks that refracted
+/// rays leave from the right side and that the η² factors of entering and leaving cancel);
+/// a lossy one (rough conductors, Blinn-Phong within its energy bound, a gold mirror) never
+/// shows more than L. No sample may be NaN or infinite.
+#[test]
+fn white_furnace_per_bsdf() {
+    let lossless = [
+        "type = \"lambertian\"\nalbedo = [1.0, 1.0, 1.0]",
+        "type = \"mirror\"\nalbedo = [1.0, 1.0, 1.0]",
+        "type = \"dielectric\"\nalbedo = [1.0, 1.0, 1.0]\nior = 1.5",
+        "type = \"dielectric\"\nalbedo = [1.0, 1.0, 1.0]\nior = 0.7",
+    ];
+    let lossy = [
+        "type = \"conductor\"\nalbedo = [1.0, 1.0, 1.0]\nalpha = 0.5\neta = [0.2, 0.2, 0.2]\nk = [5.0, 5.0, 5.0]",
+        "type = \"conductor\"\nalbedo = [1.0, 1.0, 1.0]\ndistribution = \"beckmann\"\nalpha = 1.0\neta = [0.2, 0.2, 0.2]\nk = [5.0, 5.0, 5.0]",
+        "type = \"blinn-phong\"\nalbedo = [0.4, 0.4, 0.4]\nspecular = [0.55, 0.55, 0.55]\nexponent = 10.0",
+        "type = \"mirror\"\nalbedo = [1.0, 1.0, 1.0]\neta = [0.143, 0.374, 1.442]\nk = [3.983, 2.385, 1.603]",
+    ];
+    let l = 2.0;
+    for (material, is_lossless) in lossless.iter().map(|m| (m, true)).chain(lossy.iter().map(|m| (m, false))) {
+        let text = format!(
+            "[camera]\nwidth = 8\nheight = 8\nfx = 12.0\nfy = 12.0\ncx = 3.5\ncy = 3.5\nlook_at = {{ origin = [0.0, 0.0, 3.0], target = [0.0, 0.0, 0.0], up = [0.0, 1.0, 0.0] }}\n[[materials]]\nname = \"m\"\n{material}\n[[shapes]]\ntype = \"sphere\"\ncenter = [0.0, 0.0, 0.0]\nradius = 1.0\nmaterial = \"m\"\n[[lights]]\ntype = \"environment\"\nradiance = [{l}, {l}, {l}]\n"
+        );
+        let dir = tempfile::tempdir().unwrap();
+        let scene = common::scene(&text, dir.path()).unwrap();
+        let film = render::render(&scene, &common::settings(&scene, 1024, 64));
+        assert_eq!(film.dropped_samples, 0, "{material}: non-finite samples");
+        let n = (film.mean.data.len() / 3) as f64;
+        for c in 0..3 {
+            let (mut sum, mut var, mut worst) = (0.0f64, 0.0f64, 0.0f64);
+            for (m, v) in film.mean.data.iter().zip(&film.variance.data).skip(c).step_by(3) {
+                sum += *m as f64;
+                var += *v as f64;
+                let z = (*m as f64 - l) / (*v as f64).sqrt().max(1e-6 * l);
+                worst = worst.max(if is_lossless { z.abs() } else { z });
+            }
+            let (mean, se) = (sum / n, var.sqrt() / n);
+            eprintln!("{material:?} channel {c}: {mean:.5} (SE {se:.1e}, worst pixel z {worst:.2})");
+            if is_lossless {
+                assert!((mean - l).abs() < 4.0 * se + 1e-5 * l, "{material}: {mean} vs {l}");
+                assert!(worst < 5.0, "{material}: a pixel is {worst} standard errors from L");
+            } else {
+                assert!(mean < l + 4.0 * se && worst < 5.0, "{material}: reflects more than it receives");
+                assert!(mean > 0.25 * l, "{material}: {mean} — the sphere renders nearly black");
+            }
+        }
+    }
+}

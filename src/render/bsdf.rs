@@ -1,5 +1,6 @@
-//! Reflectance models: Lambertian, normalised Blinn-Phong, and rough conductors with GGX or
-//! Beckmann microfacets (`render::microfacet`).
+//! Reflectance models: Lambertian, normalised Blinn-Phong, rough conductors with GGX or
+//! Beckmann microfacets (`render::microfacet`), and the smooth mirror and dielectric
+//! (`render::specular`).
 //!
 //! Blinn-Phong, the form photometric stereo fits:
 //!
@@ -17,6 +18,7 @@
 //! caller has turned to the side wo is on (surfaces are two-sided).
 
 use super::microfacet::{self, Distribution};
+use super::specular;
 use glam::Vec3A;
 use std::f32::consts::PI;
 
@@ -35,6 +37,18 @@ pub enum Bsdf {
         alpha: f32,
         eta: Vec3A,
         k: Vec3A,
+    },
+    /// A smooth conductor (`render::specular`): the conductor's Fresnel reflectance for the
+    /// complex index (η, k) per channel, or 1 (a perfect mirror) when `fresnel` is `None`;
+    /// the material's colour multiplies it.
+    Mirror {
+        fresnel: Option<(Vec3A, Vec3A)>,
+    },
+    /// A smooth dielectric interface (`render::specular`), `eta` = η_inside / η_outside for
+    /// light arriving on the side the surface normal points to; the material's colour tints
+    /// reflection and transmission alike.
+    Dielectric {
+        eta: f32,
     },
 }
 
@@ -62,11 +76,27 @@ pub fn cosine_hemisphere(n: Vec3A, u1: f32, u2: f32) -> Vec3A {
 }
 
 impl Bsdf {
+    /// Whether the model scatters into single directions (f and pdf are Dirac deltas).
+    #[inline]
+    pub fn is_delta(&self) -> bool {
+        matches!(self, Bsdf::Mirror { .. } | Bsdf::Dielectric { .. })
+    }
+
+    /// The model for a path arriving on the front (`true`, the side the surface normal points
+    /// to) or back of the surface: a dielectric seen from inside has the inverse index.
+    #[inline]
+    pub fn facing(self, front: bool) -> Bsdf {
+        match self {
+            Bsdf::Dielectric { eta } if !front => Bsdf::Dielectric { eta: 1.0 / eta },
+            b => b,
+        }
+    }
+
     /// Probability of sampling the specular lobe.
     fn specular_probability(&self, kd: Vec3A) -> f32 {
         match *self {
             Bsdf::Lambertian => 0.0,
-            Bsdf::Conductor { .. } => 1.0,
+            Bsdf::Conductor { .. } | Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } => 1.0,
             Bsdf::BlinnPhong { specular, .. } => {
                 let (d, s) = (luminance(kd), luminance(specular));
                 if s <= 0.0 {
@@ -80,7 +110,7 @@ impl Bsdf {
         }
     }
 
-    /// f(wo, wi) (without the cosine).
+    /// f(wo, wi) (without the cosine); 0 for the delta models.
     #[inline]
     pub fn eval(&self, kd: Vec3A, n: Vec3A, wo: Vec3A, wi: Vec3A) -> Vec3A {
         let (co, ci) = (n.dot(wo), n.dot(wi));
@@ -88,6 +118,7 @@ impl Bsdf {
             return Vec3A::ZERO;
         }
         match *self {
+            Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } => Vec3A::ZERO,
             Bsdf::Lambertian => kd / PI,
             Bsdf::BlinnPhong { specular, exponent } => {
                 let h = (wo + wi).normalize();
@@ -122,6 +153,7 @@ impl Bsdf {
         let ps = self.specular_probability(kd);
         let diffuse = ci / PI;
         match *self {
+            Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } => 0.0,
             Bsdf::Lambertian => diffuse,
             Bsdf::Conductor { distribution, alpha, .. } => {
                 let h = (wo + wi).normalize();
@@ -147,10 +179,30 @@ impl Bsdf {
     }
 
     /// Samples wi for wo; returns wi and the weight f·cos/pdf, or `None` when the sample
-    /// leaves below the surface (the path ends there).
+    /// leaves below the surface (the path ends there). Only a dielectric's refracted
+    /// direction goes below n.
     #[inline]
     pub fn sample(&self, kd: Vec3A, n: Vec3A, wo: Vec3A, u1: f32, u2: f32) -> Option<(Vec3A, Vec3A)> {
         match *self {
+            Bsdf::Mirror { fresnel } => {
+                let c = n.dot(wo);
+                let f = match fresnel {
+                    None => Vec3A::ONE,
+                    Some((eta, k)) => Vec3A::new(
+                        microfacet::fresnel_conductor(c, eta.x, k.x),
+                        microfacet::fresnel_conductor(c, eta.y, k.y),
+                        microfacet::fresnel_conductor(c, eta.z, k.z),
+                    ),
+                };
+                (c > 0.0).then(|| (specular::reflect(wo, n), kd * f))
+            }
+            Bsdf::Dielectric { eta } => {
+                if n.dot(wo) <= 0.0 {
+                    return None;
+                }
+                let (wi, w) = specular::sample_dielectric(n, wo, eta, u1);
+                Some((wi, kd * w))
+            }
             // f·cos/pdf = (kd/π)·cos/(cos/π) = kd.
             Bsdf::Lambertian => Some((cosine_hemisphere(n, u1, u2), kd)),
             Bsdf::Conductor { distribution, alpha, .. } => {

@@ -13,8 +13,11 @@
 //! directional lights, which BSDF sampling cannot hit, keep weight 1. A constant environment
 //! is sampled uniformly over the sphere (p_light = p_pick/4π) and, like an emitter, counted
 //! when a ray leaves the scene: on the camera ray, or after a glossy vertex with its MIS
-//! weight. Scenes without glossy materials do none of this bookkeeping. Surfaces are
-//! two-sided; emitters emit on their front side only.
+//! weight. Scenes without glossy materials do none of this bookkeeping. At a mirror or
+//! smooth dielectric (delta) vertex there is no light sample (it could not land on the one
+//! direction the vertex scatters into), and the emitter or environment the scattered ray
+//! reaches counts in full. Surfaces are two-sided; emitters emit on their front side only;
+//! a dielectric's inside is the side its normal points away from.
 //!
 //! Depth follows Mitsuba's convention: `max_depth` counts path segments, so 1 shows emitters
 //! seen directly and 2 is direct lighting only. Russian roulette starts after 5 segments (as in
@@ -167,28 +170,34 @@ impl Scene {
                 break;
             }
             // Two-sided surfaces: shade with the normal on the side the path arrived from.
-            let n = if surf.n.dot(wo) < 0.0 { -surf.n } else { surf.n };
+            let front = surf.n.dot(wo) >= 0.0;
+            let n = if front { surf.n } else { -surf.n };
             let albedo = self.albedo(surf.material, &hit, surf.p);
-            let origin = surf.p + n * epsilon(surf.p);
+            let eps = epsilon(surf.p);
+            let bsdf = mat.bsdf.facing(front);
 
-            let glossy = mat.bsdf != Bsdf::Lambertian;
+            let delta = bsdf.is_delta();
+            let glossy = bsdf != Bsdf::Lambertian && !delta;
             let (u_pick, u_light) = (s.next(), s.next2());
-            if let Some((li, wi, dist, p_light)) = self.sample_light(u_pick, u_light, surf.p) {
-                let cos = n.dot(wi);
-                if cos > 0.0 && self.unoccluded(origin, surf.p, wi, dist) {
-                    let w = match p_light {
-                        Some(p) if glossy => power_heuristic(p, mat.bsdf.pdf(albedo, n, wo, wi)),
-                        _ => 1.0,
-                    };
-                    l += beta * mat.bsdf.eval(albedo, n, wo, wi) * (cos * w) * li;
+            if !delta {
+                if let Some((li, wi, dist, p_light)) = self.sample_light(u_pick, u_light, surf.p) {
+                    let cos = n.dot(wi);
+                    if cos > 0.0 && self.unoccluded(surf.p + n * eps, surf.p, wi, dist) {
+                        let w = match p_light {
+                            Some(p) if glossy => power_heuristic(p, bsdf.pdf(albedo, n, wo, wi)),
+                            _ => 1.0,
+                        };
+                        l += beta * bsdf.eval(albedo, n, wo, wi) * (cos * w) * li;
+                    }
                 }
             }
 
             let (u1, u2) = s.next2();
-            let Some((wi, weight)) = mat.bsdf.sample(albedo, n, wo, u1, u2) else {
+            let Some((wi, weight)) = bsdf.sample(albedo, n, wo, u1, u2) else {
                 break;
             };
-            mis_pdf = glossy.then(|| mat.bsdf.pdf(albedo, n, wo, wi));
+            // After a delta vertex the emitter the ray reaches counts in full (weight 1).
+            mis_pdf = if delta { Some(f32::INFINITY) } else { glossy.then(|| bsdf.pdf(albedo, n, wo, wi)) };
             beta *= weight;
             let u_rr = s.next();
             if depth >= RR_START {
@@ -201,6 +210,8 @@ impl Scene {
             if beta == Vec3A::ZERO {
                 break;
             }
+            // Refracted rays leave from the far side.
+            let origin = surf.p + if n.dot(wi) >= 0.0 { n * eps } else { -n * eps };
             ray = Ray { origin, dir: wi };
         }
         l

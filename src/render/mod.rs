@@ -13,6 +13,7 @@ pub mod obj;
 pub mod sampler;
 pub mod scene;
 pub mod sensor;
+pub mod specular;
 pub mod surfaces;
 pub mod texture;
 pub mod truth;

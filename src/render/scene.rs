@@ -126,8 +126,12 @@ impl Default for RenderSpec {
 pub struct MaterialSpec {
     pub name: String,
     /// `"lambertian"`, `"blinn-phong"` (f = kd/π + ks·(e + 8)/(8π)·cosᵉθh, see
-    /// `render::bsdf`; kd is `albedo`) or `"conductor"` (a rough metal, `render::microfacet`;
-    /// `albedo` tints it, as Mitsuba's `specular_reflectance`).
+    /// `render::bsdf`; kd is `albedo`), `"conductor"` (a rough metal, `render::microfacet`;
+    /// `albedo` tints it, as Mitsuba's `specular_reflectance`), `"mirror"` (a smooth
+    /// conductor, Mitsuba's `conductor`: a perfect mirror tinted by `albedo`, or with the
+    /// Fresnel reflectance of `eta` and `k` when both are given) or `"dielectric"` (smooth
+    /// glass or water, Mitsuba's `dielectric`; `albedo` tints reflection and transmission,
+    /// [1, 1, 1] for clear glass; see `render::specular`).
     #[serde(rename = "type")]
     pub kind: String,
     pub albedo: TextureSpec,
@@ -139,11 +143,15 @@ pub struct MaterialSpec {
     pub distribution: Option<String>,
     /// Conductor only: roughness α in [0.001, 1] (Mitsuba's `alpha`; default 0.1).
     pub alpha: Option<f64>,
-    /// Conductor only: the real and imaginary parts of the complex index of refraction per
-    /// channel (default gold's at 650, 550, 450 nm: η = [0.143, 0.374, 1.442],
-    /// k = [3.983, 2.385, 1.603]).
+    /// Conductor and mirror only: the real and imaginary parts of the complex index of
+    /// refraction per channel (conductor default gold's at 650, 550, 450 nm:
+    /// η = [0.143, 0.374, 1.442], k = [3.983, 2.385, 1.603]; mirror default none: F = 1).
     pub eta: Option<[f64; 3]>,
     pub k: Option<[f64; 3]>,
+    /// Dielectric only: index of refraction of the inside relative to the outside (the side
+    /// the surface normal points to), in [1/4, 4]; default 1.5046 / 1.000277 (Mitsuba's BK7
+    /// glass in air).
+    pub ior: Option<f64>,
     /// Emitted radiance (linear RGB), one-sided along the surface normal: makes every shape
     /// with this material an area light.
     pub emission: Option<[f64; 3]>,
@@ -243,9 +251,21 @@ pub enum ShapeSpec {
 /// The reflectance model a material names, each field checked.
 fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error> {
     let blinn_phong = m.specular.is_some() || m.exponent.is_some();
-    let conductor = m.distribution.is_some() || m.alpha.is_some() || m.eta.is_some() || m.k.is_some();
+    let rough = m.distribution.is_some() || m.alpha.is_some();
+    let conductor = rough || m.eta.is_some() || m.k.is_some();
     let foreign = |kind: &str, other: &str| {
         field_err(path, field, format!("a {kind} material takes no {other} fields (check `type`)"))
+    };
+    if m.ior.is_some() && m.kind != "dielectric" {
+        return Err(field_err(path, &format!("{field}.ior"), "only a dielectric material takes `ior`"));
+    }
+    let complex_index = |eta: [f64; 3], k: [f64; 3]| {
+        let eta = non_negative3(path, &format!("{field}.eta"), eta)?;
+        let k = non_negative3(path, &format!("{field}.k"), k)?;
+        if eta.min_element() <= 0.0 {
+            return Err(field_err(path, &format!("{field}.eta"), "must be positive"));
+        }
+        Ok((eta, k))
     };
     match m.kind.as_str() {
         "lambertian" if blinn_phong => Err(field_err(
@@ -291,17 +311,41 @@ fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error>
             if !(0.001..=1.0).contains(&alpha) {
                 return Err(field_err(path, &format!("{field}.alpha"), format!("{alpha}: expected [0.001, 1]")));
             }
-            let eta = non_negative3(path, &format!("{field}.eta"), m.eta.unwrap_or([0.143, 0.374, 1.442]))?;
-            let k = non_negative3(path, &format!("{field}.k"), m.k.unwrap_or([3.983, 2.385, 1.603]))?;
-            if eta.min_element() <= 0.0 {
-                return Err(field_err(path, &format!("{field}.eta"), "must be positive"));
-            }
+            let (eta, k) = complex_index(
+                m.eta.unwrap_or([0.143, 0.374, 1.442]),
+                m.k.unwrap_or([3.983, 2.385, 1.603]),
+            )?;
             Ok(Bsdf::Conductor { distribution, alpha: alpha as f32, eta, k })
+        }
+        "mirror" if blinn_phong => Err(foreign("mirror", "blinn-phong")),
+        "mirror" if rough => Err(field_err(
+            path,
+            field,
+            "a mirror is smooth: it takes no `alpha` or `distribution` (use type = \"conductor\")",
+        )),
+        "mirror" => match (m.eta, m.k) {
+            (None, None) => Ok(Bsdf::Mirror { fresnel: None }),
+            (Some(eta), Some(k)) => Ok(Bsdf::Mirror { fresnel: Some(complex_index(eta, k)?) }),
+            _ => Err(field_err(path, field, "a mirror takes both `eta` and `k` or neither (a perfect mirror)")),
+        },
+        "dielectric" if blinn_phong || conductor => Err(foreign("dielectric", "blinn-phong or conductor")),
+        "dielectric" => {
+            let ior = m.ior.unwrap_or(1.5046 / 1.000277);
+            if !(0.25..=4.0).contains(&ior) {
+                return Err(field_err(
+                    path,
+                    &format!("{field}.ior"),
+                    format!("{ior}: expected a relative index in [0.25, 4]"),
+                ));
+            }
+            Ok(Bsdf::Dielectric { eta: ior as f32 })
         }
         other => Err(field_err(
             path,
             &format!("{field}.type"),
-            format!("'{other}' is not a known material (expected \"lambertian\", \"blinn-phong\" or \"conductor\")"),
+            format!(
+                "'{other}' is not a known material (expected \"lambertian\", \"blinn-phong\", \"conductor\", \"mirror\" or \"dielectric\")"
+            ),
         )),
     }
 }
