@@ -835,7 +835,8 @@ fn white_furnace_per_bsdf() {
         "type = \"mirror\"\nalbedo = [1.0, 1.0, 1.0]\neta = [0.143, 0.374, 1.442]\nk = [3.983, 2.385, 1.603]",
     ];
     let l = 2.0;
-    for (material, is_lossless) in lossless.iter().map(|m| (m, true)).chain(lossy.iter().map(|m| (m, false))) {
+    for (material, is_lossless) in lossless.iter().map(|m| (m, true)).chain(lossy.iter().map(|m| (m, false)))
+    {
         let text = format!(
             "[camera]\nwidth = 8\nheight = 8\nfx = 12.0\nfy = 12.0\ncx = 3.5\ncy = 3.5\nlook_at = {{ origin = [0.0, 0.0, 3.0], target = [0.0, 0.0, 0.0], up = [0.0, 1.0, 0.0] }}\n[[materials]]\nname = \"m\"\n{material}\n[[shapes]]\ntype = \"sphere\"\ncenter = [0.0, 0.0, 0.0]\nradius = 1.0\nmaterial = \"m\"\n[[lights]]\ntype = \"environment\"\nradiance = [{l}, {l}, {l}]\n"
         );

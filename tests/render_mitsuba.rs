@@ -58,3 +58,12 @@ fn sphere_light_matches_mitsuba() {
     // per-pixel variance estimate runs low (99.3 % pass); 1024 spp gives 99.8 %.
     matches_mitsuba(&references(), "sphere-light", "sphere-light", 1024, 6, 0.99);
 }
+
+/// A clear glass sphere, a smooth gold one and a diffuse one under a constant sky: the delta
+/// BSDFs (Fresnel, refraction, total internal reflection), the environment light and the
+/// light reaching the floor through the glass against Mitsuba 3's `dielectric`, `conductor`
+/// and `constant` (16384 spp).
+#[test]
+fn glass_environment_matches_mitsuba() {
+    matches_mitsuba(&references(), "glass-environment", "glass-environment", 256, 8, 0.99);
+}

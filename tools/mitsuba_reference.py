@@ -68,7 +68,25 @@ def sphere_light():
     }
 
 
-SCENES = {'glossy-spheres': glossy_spheres, 'sphere-light': sphere_light}
+def glass_environment():
+    scene = base([0, 0.4, 0]) | {
+        # lumen's `ior` is η_inside/η_outside: int_ior 1.5 in vacuum (ext_ior 1).
+        'glass': {'type': 'sphere', 'center': [-0.6, 0.5, 0.2], 'radius': 0.45,
+                  'bsdf': {'type': 'dielectric', 'int_ior': 1.5, 'ext_ior': 1.0}},
+        # lumen's `mirror` with η, k: Mitsuba's smooth `conductor`.
+        'gold': {'type': 'sphere', 'center': [0.55, 0.45, -0.3], 'radius': 0.45,
+                 'bsdf': {'type': 'conductor',
+                          'eta': rgb([0.143, 0.374, 1.442]), 'k': rgb([3.983, 2.385, 1.603])}},
+        'clay': {'type': 'sphere', 'center': [0.45, 0.25, 0.7], 'radius': 0.25,
+                 'bsdf': {'type': 'diffuse', 'reflectance': rgb([0.6, 0.3, 0.2])}},
+        'sky': {'type': 'constant', 'radiance': rgb([1.0, 0.9, 0.8])},
+    }
+    scene['integrator']['max_depth'] = 8
+    return scene
+
+
+SCENES = {'glossy-spheres': glossy_spheres, 'sphere-light': sphere_light,
+          'glass-environment': glass_environment}
 
 a = argparse.ArgumentParser()
 a.add_argument('scene', choices=sorted(SCENES))
