@@ -116,6 +116,17 @@ fn bad_values() {
     let env = "[[lights]]\ntype = \"environment\"\nradiance = [1.0, 1.0, 1.0]\n";
     let e = scene_error(&format!("{env}{env}"), &[]);
     assert!(e.contains("lights[1]") && e.contains("one environment"), "{e}");
+    let e = scene_error("[[lights]]\ntype = \"environment\"\nmap = \"sky.exr\"\n", &[]);
+    assert!(e.contains("sky.exr"), "{e}");
+    let e = scene_error("[[lights]]\ntype = \"environment\"\nmap = \"sky.png\"\n", &[("sky.png", "")]);
+    assert!(e.contains("lights[0].map") && e.contains("EXR"), "{e}");
+    let e =
+        scene_error("[[lights]]\ntype = \"environment\"\nmap = \"sky.exr\"\n", &[("sky.exr", "not an exr")]);
+    assert!(e.contains("sky.exr"), "{e}");
+    let e = scene_error(&format!("{env}map = \"sky.exr\"\n"), &[]);
+    assert!(e.contains("lights[0]") && e.contains("`radiance`") && e.contains("`map`"), "{e}");
+    let e = scene_error("[[lights]]\ntype = \"environment\"\nmap = \"sky.exr\"\nscale = -2.0\n", &[]);
+    assert!(e.contains("lights[0].scale") && e.contains("-2"), "{e}");
     let e = scene_error(&format!("{spot}cutoff_deg = 120.0\n"), &[]);
     assert!(e.contains("lights[0].cutoff_deg") && e.contains("120"), "{e}");
     let e = scene_error(&format!("{spot}cutoff_deg = 20.0\nbeam_width_deg = 30.0\n"), &[]);

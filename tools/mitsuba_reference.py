@@ -85,15 +85,50 @@ def glass_environment():
     return scene
 
 
+def write_sky(path):
+    """The 64 × 33 latitude-longitude sky of data/envmaps/sky.exr: a blue gradient, a sun of
+    peak 400 two texels wide at (u, v) = (0.3, 0.3), a dim brown ground below the horizon."""
+    w, h = 64, 33
+    u = np.arange(w)[None, :] / w
+    v = np.arange(h)[:, None] / (h - 1)
+    sky = np.stack([0.3 + 0.4 * v, 0.45 + 0.3 * v, 0.9 + 0 * v], -1) * np.ones((h, w, 1))
+    ground = np.array([0.12, 0.09, 0.06])
+    img = np.where((v > 0.5)[..., None], ground, sky)
+    du = np.minimum(np.abs(u - 0.3), 1 - np.abs(u - 0.3)) * w
+    dv = (v - 0.3) * (h - 1)
+    img = img + 400 * np.exp(-(du ** 2 + dv ** 2) / 2.0)[..., None] * np.array([1.0, 0.9, 0.75])
+    mi.Bitmap(img.astype(np.float32)).write(path)
+
+
+def envmap_spheres():
+    scene = base([0, 0.4, 0]) | {
+        # lumen's `map` + `scale`: Mitsuba's envmap, whose (u, v) convention lumen follows
+        # (render::envmap), world y up, no rotation.
+        'sky': {'type': 'envmap', 'filename': 'data/envmaps/sky.exr', 'scale': 0.5},
+        'copper': {'type': 'sphere', 'center': [-0.55, 0.45, 0], 'radius': 0.45,
+                   'bsdf': {'type': 'roughconductor', 'distribution': 'ggx', 'alpha': 0.25,
+                            'eta': rgb([0.2, 0.92, 1.1]), 'k': rgb([3.9, 2.45, 2.14])}},
+        'mirror': {'type': 'sphere', 'center': [0.55, 0.45, -0.2], 'radius': 0.45,
+                   'bsdf': {'type': 'conductor'}},
+        'clay': {'type': 'sphere', 'center': [0.2, 0.25, 0.75], 'radius': 0.25,
+                 'bsdf': {'type': 'diffuse', 'reflectance': rgb([0.6, 0.3, 0.2])}},
+    }
+    return scene
+
+
 SCENES = {'glossy-spheres': glossy_spheres, 'sphere-light': sphere_light,
-          'glass-environment': glass_environment}
+          'glass-environment': glass_environment, 'envmap-spheres': envmap_spheres}
 
 a = argparse.ArgumentParser()
 a.add_argument('scene', choices=sorted(SCENES))
 a.add_argument('--passes', type=int, default=32)
 a.add_argument('--spp', type=int, default=512)
 a.add_argument('--out', default='tests/data/mitsuba')
+a.add_argument('--write-sky', action='store_true', help='first write data/envmaps/sky.exr')
 o = a.parse_args()
+if o.write_sky:
+    os.makedirs('data/envmaps', exist_ok=True)
+    write_sky('data/envmaps/sky.exr')
 scene = mi.load_dict(SCENES[o.scene]())
 imgs = np.stack([np.array(mi.render(scene, spp=o.spp, seed=k + 1)) for k in range(o.passes)])
 mean, var = imgs.mean(axis=0), imgs.var(axis=0, ddof=1) / o.passes

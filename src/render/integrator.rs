@@ -11,9 +11,9 @@
 //! and an emitter the BSDF-sampled ray reaches counts with p_bsdf²/(p_light² + p_bsdf²), both
 //! densities in solid angle (p_light = p_pick·r²/(A·cos θ_light)); samples of point and
 //! directional lights, which BSDF sampling cannot hit, keep weight 1. A constant environment
-//! is sampled uniformly over the sphere (p_light = p_pick/4π) and, like an emitter, counted
-//! when a ray leaves the scene: on the camera ray, or after a glossy vertex with its MIS
-//! weight. Scenes without glossy materials do none of this bookkeeping. At a mirror or
+//! is sampled uniformly over the sphere (p_light = p_pick/4π), an image one by its luminance
+//! (`render::envmap`), and, like an emitter, counted when a ray leaves the scene: on the
+//! camera ray, or after a glossy vertex with its MIS weight. Scenes without glossy materials do none of this bookkeeping. At a mirror or
 //! smooth dielectric (delta) vertex there is no light sample (it could not land on the one
 //! direction the vertex scatters into), and the emitter or environment the scattered ray
 //! reaches counts in full. Surfaces are two-sided; emitters emit on their front side only;
@@ -144,11 +144,9 @@ impl Scene {
         for depth in 1..=max_depth {
             let Some(hit) = self.bvh.intersect(&ray, 0.0, f32::INFINITY) else {
                 // Leaving the scene: the environment, counted as emission is (module docs).
-                if let Some((le, p_pick)) = self.environment() {
-                    if depth == 1 {
-                        l += beta * le;
-                    } else if let Some(p_bsdf) = mis_pdf {
-                        l += beta * le * power_heuristic(p_bsdf, p_pick / (4.0 * PI));
+                if depth == 1 || mis_pdf.is_some() {
+                    if let Some((le, p_light)) = self.environment(ray.dir) {
+                        l += beta * le * mis_pdf.map_or(1.0, |p_bsdf| power_heuristic(p_bsdf, p_light));
                     }
                 }
                 break;
@@ -312,7 +310,12 @@ impl Scene {
             Light::Directional { to_light, irradiance } => {
                 Some((irradiance / p_pick, to_light, f32::INFINITY, None))
             }
-            Light::Environment { radiance } => {
+            Light::Environment { radiance, .. } => {
+                if let Some(map) = &self.environment_map {
+                    let (wi, pdf) = map.sample(u)?;
+                    let pdf = p_pick * pdf;
+                    return Some((radiance * map.eval(wi) / pdf, wi, f32::INFINITY, Some(pdf)));
+                }
                 // Uniform over the sphere of directions.
                 let z = 1.0 - 2.0 * u.0;
                 let r = (1.0 - z * z).max(0.0).sqrt();

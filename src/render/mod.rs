@@ -6,6 +6,7 @@
 
 pub mod bsdf;
 pub mod bvh;
+pub mod envmap;
 pub mod geometry;
 pub mod integrator;
 pub mod microfacet;

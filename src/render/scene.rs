@@ -419,9 +419,11 @@ pub enum LightSpec {
     /// Distant light from direction `to_light` (towards the light), `irradiance` in W/m² on a
     /// surface facing it.
     Directional { to_light: [f64; 3], irradiance: [f64; 3] },
-    /// Uniform light from every direction, `radiance` in W/(m²·sr), as Mitsuba's `constant`:
-    /// what a ray leaving the scene sees.
-    Environment { radiance: [f64; 3] },
+    /// Light from every direction, what a ray leaving the scene sees: uniform `radiance` in
+    /// W/(m²·sr), as Mitsuba's `constant`, or a latitude-longitude `map` (a linear RGB EXR
+    /// file, relative to the scene file; y up, see `render::envmap`) times `scale` (default 1),
+    /// as Mitsuba's `envmap`.
+    Environment { radiance: Option<[f64; 3]>, map: Option<String>, scale: Option<f64> },
     /// Spot light at `position` aimed at `target`, as Mitsuba's `spot`: `intensity` (W/sr) on
     /// the axis and out to `beam_width_deg`, falling linearly in angle to 0 at `cutoff_deg`
     /// (defaults 20° and ¾ of the cutoff).
@@ -456,9 +458,11 @@ pub enum Light {
         to_light: Vec3A,
         irradiance: Vec3A,
     },
-    /// Constant radiance from every direction.
+    /// Constant radiance from every direction, or (with the scene's `environment_map`) the
+    /// map's radiance times `radiance`; `mean` is the mean radiance over the sphere.
     Environment {
         radiance: Vec3A,
+        mean: Vec3A,
     },
     /// Angles in radians; `axis` is the unit direction the spot points along.
     Spot {
@@ -492,6 +496,8 @@ pub struct Scene {
     pub light_of_prim: Vec<u32>,
     /// The environment light's index in `lights`, if any (looked up on every escaping ray).
     pub environment_light: Option<usize>,
+    /// The environment light's image, when it has one.
+    pub environment_map: Option<super::envmap::EnvMap>,
     /// Object names by id (index 0 is the background).
     pub object_names: Vec<String>,
     /// Centre and radius of a sphere bounding the geometry.
@@ -782,6 +788,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
     let (bounds_center, bounds_radius) = bounding_sphere(&bvh.prims, t_world_cam.translation);
 
     let mut lights = Vec::new();
+    let mut environment_map = None;
     for (i, l) in file.lights.iter().enumerate() {
         let field = format!("lights[{i}]");
         lights.push(match l {
@@ -804,11 +811,49 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                     intensity,
                 }
             }
-            LightSpec::Environment { radiance } => {
+            LightSpec::Environment { radiance, map, scale } => {
                 if lights.iter().any(|l| matches!(l, Light::Environment { .. })) {
                     return Err(field_err(path, &field, "a scene takes one environment light"));
                 }
-                Light::Environment { radiance: non_negative3(path, &format!("{field}.radiance"), *radiance)? }
+                match (radiance, map) {
+                    (Some(r), None) if scale.is_none() => {
+                        let radiance = non_negative3(path, &format!("{field}.radiance"), *r)?;
+                        Light::Environment { radiance, mean: radiance }
+                    }
+                    (None, Some(m)) => {
+                        let scale = scale.unwrap_or(1.0);
+                        if !(scale.is_finite() && scale >= 0.0) {
+                            return Err(field_err(
+                                path,
+                                &format!("{field}.scale"),
+                                format!("{scale}: expected a finite number ≥ 0"),
+                            ));
+                        }
+                        let file = dir.join(m);
+                        if !file.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")) {
+                            return Err(field_err(
+                                path,
+                                &format!("{field}.map"),
+                                format!("{}: an environment map must be a linear EXR file", file.display()),
+                            ));
+                        }
+                        let img = crate::image::io::read(&file)?;
+                        let env = super::envmap::EnvMap::new(&img).map_err(|e| {
+                            field_err(path, &format!("{field}.map"), format!("{}: {e}", file.display()))
+                        })?;
+                        let radiance = Vec3A::splat(scale as f32);
+                        let mean = radiance * env.mean_radiance;
+                        environment_map = Some(env);
+                        Light::Environment { radiance, mean }
+                    }
+                    _ => {
+                        return Err(field_err(
+                            path,
+                            &field,
+                            "an environment light takes `radiance` = [r, g, b], or `map` = \"file.exr\" with an optional `scale`",
+                        ))
+                    }
+                }
             }
             LightSpec::Spot { position, target, intensity, cutoff_deg, beam_width_deg } => {
                 let p = finite3(path, &format!("{field}.position"), *position)?;
@@ -875,6 +920,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
         light_cdf,
         light_of_prim,
         environment_light,
+        environment_map,
         object_names,
         bounds_center,
         bounds_radius,
@@ -956,7 +1002,7 @@ pub fn light_power(l: &Light, scene_radius: f32) -> f32 {
             spot_power_per_intensity(cutoff, beam) * mean(intensity)
         }
         // The flux into the bounding sphere: 4πR² · πL.
-        Light::Environment { radiance } => 4.0 * pi * pi * scene_radius * scene_radius * mean(radiance),
+        Light::Environment { mean: m, .. } => 4.0 * pi * pi * scene_radius * scene_radius * mean(m),
     }
 }
 
@@ -1034,14 +1080,18 @@ impl Scene {
         (p > 0.0).then_some((i, p))
     }
 
-    /// The environment light's radiance and pick probability, when the scene has one.
+    /// The environment's radiance arriving along `-dir` (seen looking along `dir`) and the
+    /// solid-angle density with which light sampling picks `dir` (the light's pick probability
+    /// included), when the scene has an environment light.
     #[inline]
-    pub fn environment(&self) -> Option<(Vec3A, f32)> {
+    pub fn environment(&self, dir: Vec3A) -> Option<(Vec3A, f32)> {
         let i = self.environment_light?;
-        match self.lights[i] {
-            Light::Environment { radiance } => Some((radiance, self.pick_probability(i))),
-            _ => None,
-        }
+        let Light::Environment { radiance, .. } = self.lights[i] else { return None };
+        let p_pick = self.pick_probability(i);
+        Some(match &self.environment_map {
+            None => (radiance, p_pick / (4.0 * std::f32::consts::PI)),
+            Some(map) => (radiance * map.eval(dir), p_pick * map.pdf(dir)),
+        })
     }
 
     /// Probability that `pick_light` chooses light `i`.
