@@ -197,6 +197,13 @@ fn bad_camera() {
     let text = "[camera]\nwidth = 100000\nheight = 100000\nfov_deg = 40.0\nt_world_cam = { translation = [0.0, 0.0, 0.0] }\n";
     let e = common::scene(text, dir.path()).err().unwrap().to_string();
     assert!(e.contains("100000×100000"), "{e}");
+    let lens = "[camera]\nwidth = 8\nheight = 8\nfov_deg = 40.0\nt_world_cam = { translation = [0.0, 0.0, 0.0] }\naperture_radius = 0.1\n";
+    let e = common::scene(lens, dir.path()).err().unwrap().to_string();
+    assert!(e.contains("camera") && e.contains("focus_distance"), "{e}");
+    let e = common::scene(&format!("{lens}focus_distance = -2.0\n"), dir.path()).err().unwrap().to_string();
+    assert!(e.contains("camera.focus_distance") && e.contains("-2"), "{e}");
+    let e = common::scene(&lens.replace("0.1", "-0.1"), dir.path()).err().unwrap().to_string();
+    assert!(e.contains("camera.aperture_radius") && e.contains("-0.1"), "{e}");
 }
 
 fn lumen(args: &[&str]) -> (i32, String) {

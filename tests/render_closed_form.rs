@@ -520,7 +520,8 @@ fn sphere_light_irradiance() {
 }
 
 /// Pearson's χ² test of light sampling, as for the BSDFs: 10⁶ directions sampled from a point
-/// towards a sphere light (cone sampling) and towards a square light (area sampling), binned
+/// towards a sphere light (cone sampling), a square light (area sampling) and an emissive
+/// mesh (a triangle picked by power, then a uniform point on it), binned
 /// on a 16 × 32 grid over (cos θ ∈ [0.5, 1], φ); expected counts from the solid-angle density
 /// the integrator's MIS uses (`area_light_pdf`), integrated over each cell (64 × 64 rays).
 #[test]
@@ -531,13 +532,18 @@ fn chi_square_light_sampling() {
     let lights = [
         "type = \"sphere\"\ncenter = [0.2, 0.1, 2.0]\nradius = 0.9",
         "type = \"quad\"\ncorner = [-1.0, -0.8, 1.5]\nedge_u = [0.0, 1.6, 0.0]\nedge_v = [1.7, 0.0, 0.0]",
+        // An emissive mesh: the four sides of a pyramid pointing its apex at the point, every
+        // face in view (one light per triangle, picked by power, i.e. by area).
+        "type = \"mesh\"\nfile = \"pyramid.obj\"",
     ];
+    let pyramid = "v 0.1 0.05 1.5\nv -0.9 -0.8 2.2\nv 1.0 -0.7 2.2\nv 0.8 0.9 2.2\nv -0.7 1.0 2.2\nf 1 3 2\nf 1 4 3\nf 1 5 4\nf 1 2 5\n";
     let alpha = sidak_alpha(0.01, lights.len());
     for (case, shape) in lights.iter().enumerate() {
         let text = format!(
             "[camera]\nwidth = 4\nheight = 4\nfov_deg = 40.0\nlook_at = {{ origin = [0.0, 0.0, -1.0], target = [0.0, 0.0, 0.0], up = [0.0, 1.0, 0.0] }}\n[[materials]]\nname = \"lamp\"\ntype = \"lambertian\"\nalbedo = [0.0, 0.0, 0.0]\nemission = [1.0, 1.0, 1.0]\n[[shapes]]\n{shape}\nmaterial = \"lamp\"\n"
         );
         let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("pyramid.obj"), pyramid).unwrap();
         let scene = common::scene(&text, dir.path()).unwrap();
         let p = glam::Vec3A::ZERO;
         let (nt, np, c0) = (16usize, 32usize, 0.5f32);
@@ -998,5 +1004,111 @@ fn environment_map_lights_a_plane() {
             film.mean.data[c],
             want[c]
         );
+    }
+}
+
+/// The thin lens: a small emitting sphere on the axis at depth D (a uniform disk of radius
+/// s = fx·R/√(D² − R²) pixels in a pinhole image), seen through an aperture of radius r focused at F, spreads
+/// over the disk of radius ρ = fx·r·|1/F − 1/D| pixels around its pinhole projection (every
+/// lens point shifts the image by fx·a·(1/F − 1/D) for its offset a). The rendered spot's
+/// centroid, flux and second moments (over pixel centres: each pixel integrates its box)
+/// must match those of that disk-of-disks binned into pixels, by quadrature.
+#[test]
+fn thin_lens_defocus_blur() {
+    let (fx, r, depth, radius) = (200.0f64, 0.05f64, 4.0f64, 0.06f64);
+    let (x, y) = (0.0, 0.0);
+    let (px, py) = (31.5, 31.5);
+    let window = [20u32, 20, 44, 44];
+    // (flux, centroid x, y, variance x, y) of an image window.
+    let moments = |img: &dyn Fn(u32, u32) -> f64| {
+        let (mut s0, mut sx, mut sy, mut sxx, mut syy) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
+        for j in window[1]..window[3] {
+            for i in window[0]..window[2] {
+                let v = img(i, j);
+                let (a, b) = (i as f64, j as f64);
+                s0 += v;
+                sx += v * a;
+                sy += v * b;
+                sxx += v * a * a;
+                syy += v * b * b;
+            }
+        }
+        let (mx, my) = (sx / s0, sy / s0);
+        [s0, mx, my, sxx / s0 - mx * mx, syy / s0 - my * my]
+    };
+    let render_spot = |lens: &str| {
+        let text = format!(
+            "[camera]\nwidth = 64\nheight = 64\nfx = {fx}\nfy = {fx}\ncx = 31.5\ncy = 31.5\nt_world_cam = {{ translation = [0.0, 0.0, 0.0] }}\n{lens}\n[render]\nsampler = \"sobol\"\n[[materials]]\nname = \"lamp\"\ntype = \"lambertian\"\nalbedo = [0.0, 0.0, 0.0]\nemission = [1.0, 1.0, 1.0]\n[[shapes]]\ntype = \"sphere\"\ncenter = [{x}, {y}, {depth}]\nradius = {radius}\nmaterial = \"lamp\"\n"
+        );
+        let dir = tempfile::tempdir().unwrap();
+        let scene = common::scene(&text, dir.path()).unwrap();
+        let mut settings = common::settings(&scene, 4096, 1);
+        settings.crop = Some(window);
+        let film = render::render(&scene, &settings);
+        assert_eq!(film.dropped_samples, 0);
+        moments(&|i, j| film.mean.pixel(i - window[0], j - window[1])[0] as f64)
+    };
+    // The expected binned spot, per axis: the offset is the sum of independent offsets from
+    // the lens disk (radius ρ) and the sphere's disk (radius s), each with the disk's
+    // marginal density ∝ √(rad² − t²); binned into the pixel boxes [i − ½, i + ½) by a fine
+    // 1D quadrature. Returns (centroid, variance) for a spot centred at c.
+    let s = fx * radius / (depth * depth - radius * radius).sqrt();
+    let marginal = |rad: f64| -> Vec<(f64, f64)> {
+        if rad == 0.0 {
+            return vec![(0.0, 1.0)];
+        }
+        let n = (rad / 0.002) as usize;
+        (0..n)
+            .map(|k| {
+                let t = rad * (2.0 * (k as f64 + 0.5) / n as f64 - 1.0);
+                (t, (rad * rad - t * t).sqrt())
+            })
+            .collect()
+    };
+    let expected = |rho: f64, c: f64| {
+        let (lens, sphere) = (marginal(rho), marginal(s));
+        let mut bins = vec![0.0f64; 64];
+        for &(a, wa) in &lens {
+            for &(b, wb) in &sphere {
+                bins[(c + a + b).round() as usize] += wa * wb;
+            }
+        }
+        let total: f64 = bins.iter().sum();
+        let mean = bins.iter().enumerate().map(|(i, w)| i as f64 * w).sum::<f64>() / total;
+        let var = bins.iter().enumerate().map(|(i, w)| (i as f64 - mean).powi(2) * w).sum::<f64>() / total;
+        (mean, var)
+    };
+    let expected = |rho: f64| {
+        let ((mx, vx), (my, vy)) = (expected(rho, px), expected(rho, py));
+        [f64::NAN, mx, my, vx, vy]
+    };
+    let pinhole = render_spot("");
+    let want = expected(0.0);
+    eprintln!("pinhole: {pinhole:?}, expected {want:?}");
+    for k in 1..5 {
+        assert!((pinhole[k] - want[k]).abs() < 0.01, "pinhole moment {k}: {} vs {}", pinhole[k], want[k]);
+    }
+    for focus in [depth, 2.0, 1.2, 9.0] {
+        let lens = render_spot(&format!("aperture_radius = {r}\nfocus_distance = {focus}"));
+        let rho = fx * r * (1.0 / focus - 1.0 / depth).abs();
+        let want = expected(rho);
+        eprintln!("focus {focus} (ρ = {rho:.3} px): {lens:?}, expected {want:?}");
+        assert!((lens[0] / pinhole[0] - 1.0).abs() < 0.005, "flux {} vs {}", lens[0], pinhole[0]);
+        for k in 1..3 {
+            assert!(
+                (lens[k] - want[k]).abs() < 0.01,
+                "focus {focus}: centroid {k}: {} vs {}",
+                lens[k],
+                want[k]
+            );
+        }
+        for k in 3..5 {
+            assert!(
+                (lens[k] - want[k]).abs() < 0.01 * want[k].max(1.0),
+                "focus {focus}: variance {k}: {} vs {}",
+                lens[k],
+                want[k]
+            );
+        }
     }
 }

@@ -409,6 +409,24 @@ pub fn render(scene: &Scene, settings: &Settings) -> Film {
     Film { mean, variance, origin: [x0, y0], dropped_samples: dropped.into_inner() }
 }
 
+/// A thin-lens camera ray (camera frame) for the pinhole direction `d` (d.z > 0): from a
+/// point uniform on the aperture disk (Shirley–Chiu concentric map) towards the point where
+/// the pinhole ray meets the plane in focus, so that plane stays sharp and a point at depth D
+/// blurs into a disk of radius fx·r·|1/F − 1/D| pixels.
+fn lens_ray(lens: super::scene::ThinLens, d: glam::DVec3, u: (f32, f32)) -> (glam::DVec3, glam::DVec3) {
+    let (a, b) = (2.0 * u.0 as f64 - 1.0, 2.0 * u.1 as f64 - 1.0);
+    let (r, phi) = if a == 0.0 && b == 0.0 {
+        (0.0, 0.0)
+    } else if a.abs() > b.abs() {
+        (a, std::f64::consts::FRAC_PI_4 * (b / a))
+    } else {
+        (b, std::f64::consts::FRAC_PI_2 - std::f64::consts::FRAC_PI_4 * (a / b))
+    };
+    let o = glam::DVec3::new(r * phi.cos(), r * phi.sin(), 0.0) * lens.aperture_radius;
+    let focus = d * (lens.focus_distance / d.z);
+    (o, (focus - o).normalize())
+}
+
 /// Mean and variance of the mean of one pixel, and the number of non-finite samples dropped.
 fn render_pixel(scene: &Scene, settings: &Settings, x: u32, y: u32) -> ([f32; 3], [f32; 3], u64) {
     let pixel_index = y as u64 * scene.camera.width as u64 + x as u64;
@@ -423,8 +441,17 @@ fn render_pixel(scene: &Scene, settings: &Settings, x: u32, y: u32) -> ([f32; 3]
         let px = DVec2::new(x as f64 + jx as f64 - 0.5, y as f64 + jy as f64 - 0.5);
         let l = match scene.camera.pixel_ray(px) {
             Some(d) => {
-                let dir = Vec3A::from((rot * d).as_vec3());
-                scene.trace(Ray { origin, dir }, settings.max_depth, &mut s)
+                let ray = match scene.lens {
+                    Some(lens) if d.z > 0.0 => {
+                        let (lo, ld) = lens_ray(lens, d, s.next2());
+                        Ray {
+                            origin: origin + Vec3A::from((rot * lo).as_vec3()),
+                            dir: Vec3A::from((rot * ld).as_vec3()),
+                        }
+                    }
+                    _ => Ray { origin, dir: Vec3A::from((rot * d).as_vec3()) },
+                };
+                scene.trace(ray, settings.max_depth, &mut s)
             }
             None => Vec3A::ZERO, // beyond the fold of the distortion: no scene ray maps here
         };

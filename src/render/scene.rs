@@ -51,6 +51,19 @@ pub struct CameraSpec {
     pub distortion: Option<[f64; 5]>,
     pub look_at: Option<LookAt>,
     pub t_world_cam: Option<TransformSpec>,
+    /// Thin lens (depth of field, as Mitsuba's `thinlens`): radius of the aperture in scene
+    /// units (default 0, a pinhole) and the distance along the optical axis (camera z) of
+    /// the plane in focus, which a lens needs.
+    pub aperture_radius: Option<f64>,
+    pub focus_distance: Option<f64>,
+}
+
+/// A thin lens in the camera's optical frame: lens points on the disk of `aperture_radius`
+/// at z = 0, rays through the pixel's point on the plane z = `focus_distance`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ThinLens {
+    pub aperture_radius: f64,
+    pub focus_distance: f64,
 }
 
 #[derive(Debug, Deserialize)]
@@ -483,6 +496,8 @@ pub enum Light {
 pub struct Scene {
     pub camera: CameraModel,
     pub t_world_cam: Pose,
+    /// Depth of field; `None` for a pinhole (truth images always come from the pinhole).
+    pub lens: Option<ThinLens>,
     pub render: RenderSpec,
     pub sensor: Option<super::sensor::Sensor>,
     pub materials: Vec<Material>,
@@ -583,6 +598,7 @@ pub fn load(path: &Path) -> Result<Scene, Error> {
 pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     let (camera, t_world_cam) = build_camera(&file.camera, path)?;
+    let lens = build_lens(&file.camera, path)?;
     if file.render.spp == 0 {
         return Err(field_err(path, "render.spp", "must be at least 1"));
     }
@@ -911,6 +927,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
     Ok(Scene {
         camera,
         t_world_cam,
+        lens,
         render: file.render.clone(),
         sensor: file.sensor.clone(),
         materials,
@@ -925,6 +942,27 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
         bounds_center,
         bounds_radius,
     })
+}
+
+fn build_lens(c: &CameraSpec, path: &Path) -> Result<Option<ThinLens>, Error> {
+    let radius = c.aperture_radius.unwrap_or(0.0);
+    if !(radius.is_finite() && radius >= 0.0) {
+        return Err(field_err(
+            path,
+            "camera.aperture_radius",
+            format!("{radius}: expected a finite number ≥ 0"),
+        ));
+    }
+    match c.focus_distance {
+        _ if radius == 0.0 => Ok(None),
+        Some(f) if f.is_finite() && f > 0.0 => {
+            Ok(Some(ThinLens { aperture_radius: radius, focus_distance: f }))
+        }
+        Some(f) => {
+            Err(field_err(path, "camera.focus_distance", format!("{f}: expected a positive distance")))
+        }
+        None => Err(field_err(path, "camera", "a lens (aperture_radius > 0) needs `focus_distance`")),
+    }
 }
 
 fn build_camera(c: &CameraSpec, path: &Path) -> Result<(CameraModel, Pose), Error> {
