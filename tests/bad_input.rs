@@ -173,6 +173,13 @@ fn bad_values() {
     assert!(e.contains("materials[1] (g)") && e.contains("blinn-phong"), "{e}");
     let e = scene_error(&glossy("type = \"conductor\"\neta = [0.2, -1.0, 0.5]\n"), &[]);
     assert!(e.contains("materials[1] (g).eta"), "{e}");
+    let e = scene_error(
+        &glossy("type = \"conductor\"\nalpha = { checker = { squares = [2, 2], even = 0.0, odd = 0.5 } }\n"),
+        &[],
+    );
+    assert!(e.contains("materials[1] (g).alpha.checker.even") && e.contains("[0.001, 1]"), "{e}");
+    let e = scene_error(&glossy("type = \"conductor\"\nalpha = { texture = \"missing.png\" }\n"), &[]);
+    assert!(e.contains("missing.png"), "{e}");
     let e = scene_error(&glossy("type = \"mirror\"\neta = [0.2, 0.2, 0.5]\n"), &[]);
     assert!(e.contains("materials[1] (g)") && e.contains("both `eta` and `k`"), "{e}");
     let e = scene_error(&glossy("type = \"mirror\"\nalpha = 0.1\n"), &[]);

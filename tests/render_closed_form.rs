@@ -1112,3 +1112,37 @@ fn thin_lens_defocus_blur() {
         }
     }
 }
+
+/// A conductor floor whose roughness is a checkerboard (α = 0.05 and 0.5) under an area light,
+/// direct light only: every pixel whose footprint lies inside one square is bit for bit the
+/// pixel of the same floor with that α as a constant (same random streams, same path), and the
+/// two constants render differently.
+#[test]
+fn textured_roughness_is_looked_up_per_hit() {
+    let scene_with = |alpha: &str| {
+        let text = format!(
+            "[camera]\nwidth = 16\nheight = 16\nfx = 20.0\nfy = 20.0\ncx = 7.5\ncy = 7.5\nlook_at = {{ origin = [0.0, -1.0, 2.0], target = [0.0, 0.0, 0.0], up = [0.0, 1.0, 0.0] }}\n[[materials]]\nname = \"metal\"\ntype = \"conductor\"\nalbedo = [1.0, 1.0, 1.0]\nalpha = {alpha}\n[[materials]]\nname = \"lamp\"\ntype = \"lambertian\"\nalbedo = [0.0, 0.0, 0.0]\nemission = [5.0, 5.0, 5.0]\n[[shapes]]\ntype = \"quad\"\ncorner = [-2.0, -2.0, 0.0]\nedge_u = [4.0, 0.0, 0.0]\nedge_v = [0.0, 4.0, 0.0]\nmaterial = \"metal\"\n[[shapes]]\ntype = \"quad\"\ncorner = [-0.5, 0.5, 2.0]\nedge_u = [0.0, 1.0, 0.0]\nedge_v = [1.0, 0.0, 0.0]\nmaterial = \"lamp\"\n"
+        );
+        let dir = tempfile::tempdir().unwrap();
+        let scene = common::scene(&text, dir.path()).unwrap();
+        render::render(&scene, &common::settings(&scene, 16, 2)).mean
+    };
+    let checker = scene_with("{ checker = { squares = [2, 2], even = 0.05, odd = 0.5 } }");
+    let smooth = scene_with("0.05");
+    let rough = scene_with("0.5");
+    let (mut compared, mut differ) = (0, 0);
+    // Square boundaries fall between pixels 7 and 8 only near the image centre; keep away
+    // from them (the floor is tilted, so stay two pixels clear).
+    for j in (0..16u32).filter(|j| !(5..=10).contains(j)) {
+        for i in (0..16u32).filter(|i| !(6..=9).contains(i)) {
+            let (left, top) = (i < 8, j < 8);
+            // Even squares (u < ½, v < ½ and u ≥ ½, v ≥ ½) have α = 0.05; image up is +v.
+            let even = left != top;
+            let want = if even { smooth.pixel(i, j) } else { rough.pixel(i, j) };
+            assert_eq!(checker.pixel(i, j), want, "pixel ({i}, {j}), even = {even}");
+            compared += 1;
+            differ += (smooth.pixel(i, j) != rough.pixel(i, j)) as u32;
+        }
+    }
+    assert!(compared > 50 && differ > compared / 2, "{compared} pixels compared, {differ} differ");
+}

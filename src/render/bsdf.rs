@@ -82,6 +82,17 @@ impl Bsdf {
         matches!(self, Bsdf::Mirror { .. } | Bsdf::Dielectric { .. })
     }
 
+    /// The model with roughness α (conductors only; others are returned as they are).
+    #[inline]
+    pub fn with_alpha(self, a: f32) -> Bsdf {
+        match self {
+            Bsdf::Conductor { distribution, eta, k, .. } => {
+                Bsdf::Conductor { distribution, alpha: a, eta, k }
+            }
+            b => b,
+        }
+    }
+
     /// The model for a path arriving on the front (`true`, the side the surface normal points
     /// to) or back of the surface: a dielectric seen from inside has the inverse index.
     #[inline]

@@ -172,7 +172,10 @@ impl Scene {
             let n = if front { surf.n } else { -surf.n };
             let albedo = self.albedo(surf.material, &hit, surf.p);
             let eps = epsilon(surf.p);
-            let bsdf = mat.bsdf.facing(front);
+            let mut bsdf = mat.bsdf.facing(front);
+            if let Some(alpha) = &mat.roughness {
+                bsdf = bsdf.with_alpha(alpha.eval(self.uv(&hit, surf.p)).x);
+            }
 
             let delta = bsdf.is_delta();
             let glossy = bsdf != Bsdf::Lambertian && !delta;

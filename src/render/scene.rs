@@ -154,8 +154,9 @@ pub struct MaterialSpec {
     pub exponent: Option<f64>,
     /// Conductor only: `"ggx"` (default) or `"beckmann"`.
     pub distribution: Option<String>,
-    /// Conductor only: roughness α in [0.001, 1] (Mitsuba's `alpha`; default 0.1).
-    pub alpha: Option<f64>,
+    /// Conductor only: roughness α in [0.001, 1] (Mitsuba's `alpha`; default 0.1), a number
+    /// or a texture (`render::texture::Texture::build_roughness`).
+    pub alpha: Option<RoughnessSpec>,
     /// Conductor and mirror only: the real and imaginary parts of the complex index of
     /// refraction per channel (conductor default gold's at 650, 550, 450 nm:
     /// η = [0.143, 0.374, 1.442], k = [3.983, 2.385, 1.603]; mirror default none: F = 1).
@@ -179,6 +180,25 @@ pub enum TextureSpec {
     Constant([f64; 3]),
     Image { texture: String },
     Checker { checker: CheckerSpec },
+}
+
+/// A roughness: a number, a greyscale image `{ texture = "alpha.png" }` (first channel, taken
+/// as data: 8-bit values are v/255 with no sRGB decoding, and clamped to [0.001, 1]), or a
+/// checkerboard `{ checker = { squares = [nu, nv], even = a, odd = b } }`.
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+pub enum RoughnessSpec {
+    Constant(f64),
+    Image { texture: String },
+    Checker { checker: RoughnessCheckerSpec },
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RoughnessCheckerSpec {
+    pub squares: [u32; 2],
+    pub even: f64,
+    pub odd: f64,
 }
 
 #[derive(Debug, Deserialize)]
@@ -320,7 +340,11 @@ fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error>
                     ))
                 }
             };
-            let alpha = m.alpha.unwrap_or(0.1);
+            // A textured α is looked up per hit (Material::roughness); the model keeps 0.1.
+            let alpha = match m.alpha {
+                Some(RoughnessSpec::Constant(a)) => a,
+                _ => 0.1,
+            };
             if !(0.001..=1.0).contains(&alpha) {
                 return Err(field_err(path, &format!("{field}.alpha"), format!("{alpha}: expected [0.001, 1]")));
             }
@@ -459,6 +483,8 @@ pub struct Material {
     pub albedo: Texture,
     pub emission: Option<Vec3A>,
     pub bsdf: Bsdf,
+    /// A textured conductor roughness α (in the x channel), replacing the model's per hit.
+    pub roughness: Option<Texture>,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -619,7 +645,13 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
         let albedo = Texture::build(&m.albedo, &dir, path, &format!("{field}.albedo"))?;
         let emission =
             m.emission.map(|e| non_negative3(path, &format!("{field}.emission"), e)).transpose()?;
-        materials.push(Material { name: m.name.clone(), albedo, emission, bsdf });
+        let roughness = match &m.alpha {
+            Some(spec @ (RoughnessSpec::Image { .. } | RoughnessSpec::Checker { .. })) => {
+                Some(Texture::build_roughness(spec, &dir, path, &format!("{field}.alpha"))?)
+            }
+            _ => None,
+        };
+        materials.push(Material { name: m.name.clone(), albedo, emission, bsdf, roughness });
     }
     let material_index = |name: &str, field: &str| -> Result<u32, Error> {
         materials.iter().position(|m| m.name == name).map(|i| i as u32).ok_or_else(|| {

@@ -1,6 +1,7 @@
-//! Colour textures: constant, image (bilinear, wrapping) and procedural checkerboard.
+//! Textures of colour and roughness: constant, image (bilinear, wrapping) and procedural
+//! checkerboard.
 
-use super::scene::TextureSpec;
+use super::scene::{RoughnessSpec, TextureSpec};
 use super::Error;
 use glam::{Vec2, Vec3A};
 use std::path::Path;
@@ -56,6 +57,45 @@ impl Texture {
                         Vec3A::from(lin).clamp(Vec3A::ZERO, Vec3A::ONE)
                     })
                     .collect();
+                Texture::Image { width: img.width, height: img.height, texels }
+            }
+        })
+    }
+
+    /// A roughness texture (`RoughnessSpec`), its value in every channel, within [0.001, 1].
+    pub fn build_roughness(
+        spec: &RoughnessSpec,
+        dir: &Path,
+        path: &Path,
+        field: &str,
+    ) -> Result<Texture, Error> {
+        let check = |a: f64, field: String| {
+            if (0.001..=1.0).contains(&a) {
+                Ok(Vec3A::splat(a as f32))
+            } else {
+                Err(Error::Invalid { path: path.into(), field, message: format!("{a}: expected [0.001, 1]") })
+            }
+        };
+        Ok(match spec {
+            RoughnessSpec::Constant(a) => Texture::Constant(check(*a, field.into())?),
+            RoughnessSpec::Checker { checker } => {
+                if checker.squares.contains(&0) {
+                    return Err(Error::Invalid {
+                        path: path.into(),
+                        field: format!("{field}.checker.squares"),
+                        message: "must be at least 1 each".into(),
+                    });
+                }
+                Texture::Checker {
+                    squares: checker.squares,
+                    even: check(checker.even, format!("{field}.checker.even"))?,
+                    odd: check(checker.odd, format!("{field}.checker.odd"))?,
+                }
+            }
+            RoughnessSpec::Image { texture } => {
+                let img = crate::image::io::read(&dir.join(texture))?;
+                let c = img.channels as usize;
+                let texels = img.data.chunks_exact(c).map(|p| Vec3A::splat(p[0].clamp(0.001, 1.0))).collect();
                 Texture::Image { width: img.width, height: img.height, texels }
             }
         })
