@@ -170,10 +170,14 @@ impl Bsdf {
                 let h = (wo + wi).normalize();
                 let oh = wo.dot(h);
                 let ch = n.dot(h);
-                if oh > 0.0 {
-                    microfacet::d(distribution, alpha, ch) * ch / (4.0 * oh)
-                } else {
+                if oh <= 0.0 {
                     0.0
+                } else if distribution == Distribution::Ggx {
+                    // Visible normals: G1(wo)·D(h)·(wo·h)/cos θo, times 1/(4 wo·h).
+                    microfacet::g1(distribution, alpha, co, oh) * microfacet::d(distribution, alpha, ch)
+                        / (4.0 * co)
+                } else {
+                    microfacet::d(distribution, alpha, ch) * ch / (4.0 * oh)
                 }
             }
             Bsdf::BlinnPhong { exponent, .. } => {
@@ -217,7 +221,10 @@ impl Bsdf {
             // f·cos/pdf = (kd/π)·cos/(cos/π) = kd.
             Bsdf::Lambertian => Some((cosine_hemisphere(n, u1, u2), kd)),
             Bsdf::Conductor { distribution, alpha, .. } => {
-                let h = microfacet::sample_h(distribution, alpha, n, u1, u2);
+                let h = match distribution {
+                    Distribution::Ggx => microfacet::sample_visible_ggx(alpha, n, wo, u1, u2),
+                    Distribution::Beckmann => microfacet::sample_h(distribution, alpha, n, u1, u2),
+                };
                 let wi = 2.0 * wo.dot(h) * h - wo;
                 let ci = n.dot(wi);
                 let pdf = self.pdf(kd, n, wo, wi);

@@ -13,8 +13,10 @@
 //!
 //! with F the exact unpolarised Fresnel reflectance of a conductor of complex index η + ik
 //! (per RGB channel) and R the material's colour (Mitsuba's `specular_reflectance`, 1 by
-//! default). Sampling draws h from D(h)·cosθh (tan²θh = α²·u/(1 − u) for GGX,
-//! −α²·ln(1 − u) for Beckmann) and reflects wo about it: p(wi) = D(h)·cosθh / (4·|wo·h|).
+//! default). Sampling reflects wo about a drawn microfacet normal h. For GGX, h comes from the
+//! normals visible from wo (`sample_visible_ggx`, as Mitsuba's default): p(wi) = G1(wo)·D(h) /
+//! (4·cos θo), and the sample's weight f·cos/p = R·F·G1(wi) never exceeds R. For Beckmann, h
+//! comes from D(h)·cosθh (tan²θh = −α²·ln(1 − u)): p(wi) = D(h)·cosθh / (4·|wo·h|).
 
 use super::bsdf::basis;
 use glam::Vec3A;
@@ -86,6 +88,27 @@ pub fn sample_h(dist: Distribution, alpha: f32, n: Vec3A, u1: f32, u2: f32) -> V
     let phi = 2.0 * PI * u2;
     let (t, b) = basis(n);
     (t * (s * phi.cos()) + b * (s * phi.sin()) + n * c).normalize()
+}
+
+/// A GGX microfacet normal around `n` drawn from the distribution of normals visible from
+/// `wo`, D_wo(h) = G1(wo)·max(0, wo·h)·D(h) / cos θo (Heitz 2018, "Sampling the GGX
+/// Distribution of Visible Normals"): the view is stretched by α into the configuration of
+/// roughness 1, a point is drawn on the projected hemisphere, and the normal stretched back.
+#[inline]
+pub fn sample_visible_ggx(alpha: f32, n: Vec3A, wo: Vec3A, u1: f32, u2: f32) -> Vec3A {
+    let (t, b) = basis(n);
+    let v = Vec3A::new(alpha * wo.dot(t), alpha * wo.dot(b), wo.dot(n).max(0.0)).normalize();
+    let len2 = v.x * v.x + v.y * v.y;
+    let t1 = if len2 > 0.0 { Vec3A::new(-v.y, v.x, 0.0) / len2.sqrt() } else { Vec3A::X };
+    let t2 = v.cross(t1);
+    let r = u1.sqrt();
+    let phi = 2.0 * PI * u2;
+    let (p1, p2) = (r * phi.cos(), r * phi.sin());
+    let s = 0.5 * (1.0 + v.z);
+    let p2 = (1.0 - s) * (1.0 - p1 * p1).max(0.0).sqrt() + s * p2;
+    let nh = t1 * p1 + t2 * p2 + v * (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt();
+    let h = Vec3A::new(alpha * nh.x, alpha * nh.y, nh.z.max(1e-6)).normalize();
+    (t * h.x + b * h.y + n * h.z).normalize()
 }
 
 /// Unpolarised Fresnel reflectance of a conductor with index η + ik at incidence cos θ = `c`
