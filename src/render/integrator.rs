@@ -13,11 +13,13 @@
 //! directional lights, which BSDF sampling cannot hit, keep weight 1. A constant environment
 //! is sampled uniformly over the sphere (p_light = p_pick/4π), an image one by its luminance
 //! (`render::envmap`), and, like an emitter, counted when a ray leaves the scene: on the
-//! camera ray, or after a glossy vertex with its MIS weight. Scenes without glossy materials do none of this bookkeeping. At a mirror or
-//! smooth dielectric (delta) vertex there is no light sample (it could not land on the one
-//! direction the vertex scatters into), and the emitter or environment the scattered ray
-//! reaches counts in full. Surfaces are two-sided; emitters emit on their front side only;
-//! a dielectric's inside is the side its normal points away from.
+//! camera ray, or after a glossy vertex with its MIS weight. Scenes without glossy materials
+//! do none of this bookkeeping. At a mirror or smooth dielectric (delta) vertex there is no
+//! light sample (it could not land on the one direction the vertex scatters into), and the
+//! emitter or environment the scattered ray reaches counts in full. Surfaces are two-sided;
+//! emitters emit on their front side only; a dielectric's inside is the side its normal
+//! points away from. A thin lens, when the camera has one, moves each camera ray's origin
+//! over the aperture (`lens_ray`).
 //!
 //! Depth follows Mitsuba's convention: `max_depth` counts path segments, so 1 shows emitters
 //! seen directly and 2 is direct lighting only. Russian roulette starts after 5 segments (as in

@@ -25,24 +25,27 @@ fn albedo3(v: [f64; 3], path: &Path, field: &str) -> Result<Vec3A, Error> {
     }
 }
 
+/// A checkerboard's square counts, each at least 1.
+fn squares(squares: [u32; 2], path: &Path, field: &str) -> Result<[u32; 2], Error> {
+    if squares.contains(&0) {
+        return Err(Error::Invalid {
+            path: path.into(),
+            field: format!("{field}.checker.squares"),
+            message: "must be at least 1 each".into(),
+        });
+    }
+    Ok(squares)
+}
+
 impl Texture {
     pub fn build(spec: &TextureSpec, dir: &Path, path: &Path, field: &str) -> Result<Texture, Error> {
         Ok(match spec {
             TextureSpec::Constant(v) => Texture::Constant(albedo3(*v, path, field)?),
-            TextureSpec::Checker { checker } => {
-                if checker.squares.contains(&0) {
-                    return Err(Error::Invalid {
-                        path: path.into(),
-                        field: format!("{field}.checker.squares"),
-                        message: "must be at least 1 each".into(),
-                    });
-                }
-                Texture::Checker {
-                    squares: checker.squares,
-                    even: albedo3(checker.even, path, &format!("{field}.checker.even"))?,
-                    odd: albedo3(checker.odd, path, &format!("{field}.checker.odd"))?,
-                }
-            }
+            TextureSpec::Checker { checker } => Texture::Checker {
+                squares: squares(checker.squares, path, field)?,
+                even: albedo3(checker.even, path, &format!("{field}.checker.even"))?,
+                odd: albedo3(checker.odd, path, &format!("{field}.checker.odd"))?,
+            },
             TextureSpec::Image { texture } => {
                 let file = dir.join(texture);
                 let img = crate::image::io::read(&file)?;
@@ -78,20 +81,11 @@ impl Texture {
         };
         Ok(match spec {
             RoughnessSpec::Constant(a) => Texture::Constant(check(*a, field.into())?),
-            RoughnessSpec::Checker { checker } => {
-                if checker.squares.contains(&0) {
-                    return Err(Error::Invalid {
-                        path: path.into(),
-                        field: format!("{field}.checker.squares"),
-                        message: "must be at least 1 each".into(),
-                    });
-                }
-                Texture::Checker {
-                    squares: checker.squares,
-                    even: check(checker.even, format!("{field}.checker.even"))?,
-                    odd: check(checker.odd, format!("{field}.checker.odd"))?,
-                }
-            }
+            RoughnessSpec::Checker { checker } => Texture::Checker {
+                squares: squares(checker.squares, path, field)?,
+                even: check(checker.even, format!("{field}.checker.even"))?,
+                odd: check(checker.odd, format!("{field}.checker.odd"))?,
+            },
             RoughnessSpec::Image { texture } => {
                 let img = crate::image::io::read(&dir.join(texture))?;
                 let c = img.channels as usize;
