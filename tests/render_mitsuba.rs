@@ -75,3 +75,10 @@ fn glass_environment_matches_mitsuba() {
 fn envmap_spheres_match_mitsuba() {
     matches_mitsuba(&references(), "envmap-spheres", "envmap-spheres", 256, 6, 0.99);
 }
+
+/// The image-sky scene through a thin lens focused on the clay sphere: aperture sampling and
+/// the plane in focus against Mitsuba 3's `thinlens` (16384 spp).
+#[test]
+fn depth_of_field_matches_mitsuba() {
+    matches_mitsuba(&references(), "depth-of-field", "depth-of-field", 256, 6, 0.99);
+}

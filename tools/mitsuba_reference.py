@@ -116,8 +116,19 @@ def envmap_spheres():
     return scene
 
 
+def depth_of_field():
+    # envmap-spheres through a thin lens focused on the clay sphere: lumen's aperture_radius
+    # and focus_distance (along the optical axis) are Mitsuba's thinlens parameters.
+    scene = envmap_spheres()
+    scene['sensor']['type'] = 'thinlens'
+    scene['sensor']['aperture_radius'] = 0.08
+    scene['sensor']['focus_distance'] = 3.3
+    return scene
+
+
 SCENES = {'glossy-spheres': glossy_spheres, 'sphere-light': sphere_light,
-          'glass-environment': glass_environment, 'envmap-spheres': envmap_spheres}
+          'glass-environment': glass_environment, 'envmap-spheres': envmap_spheres,
+          'depth-of-field': depth_of_field}
 
 a = argparse.ArgumentParser()
 a.add_argument('scene', choices=sorted(SCENES))
