@@ -73,21 +73,21 @@ fn invert(cdf: &[f32], u: f32) -> Option<(usize, f32)> {
 }
 
 impl EnvMap {
-    /// Builds the map from a linear RGB image of at least 2 × 2 texels. Errors name the
-    /// problem: too small, or a negative or non-finite texel.
+    /// Builds the map from a linear RGB (or grey) image of at least 2 × 2 texels. Errors name
+    /// the problem: too small, or a negative or non-finite texel.
     pub fn new(img: &Image) -> Result<EnvMap, String> {
         let (w, h) = (img.width as usize, img.height as usize);
         if w < 2 || h < 2 {
             return Err(format!("{w}×{h}: a latitude-longitude map needs at least 2×2 texels"));
         }
-        if img.channels < 3 {
-            return Err(format!("{} channel(s): expected RGB", img.channels));
+        if img.channels == 2 {
+            return Err("2 channels: expected RGB (or one grey channel)".into());
         }
         let mut texels = Vec::with_capacity(w * h);
         for y in 0..h {
             for x in 0..w {
                 let c = img.pixel(x as u32, y as u32);
-                let v = Vec3A::new(c[0], c[1], c[2]);
+                let v = if c.len() >= 3 { Vec3A::new(c[0], c[1], c[2]) } else { Vec3A::splat(c[0]) };
                 if !v.is_finite() || v.min_element() < 0.0 {
                     return Err(format!("texel ({x}, {y}) is {v}: expected finite, non-negative radiance"));
                 }
@@ -300,6 +300,10 @@ mod tests {
     #[test]
     fn bad_maps_are_refused() {
         assert!(EnvMap::new(&Image::new(1, 4, 3)).unwrap_err().contains("2×2"));
+        assert!(EnvMap::new(&Image::new(4, 4, 2)).unwrap_err().contains("RGB"));
+        let mut grey = Image::new(4, 4, 1);
+        grey.data.fill(0.5);
+        assert_eq!(EnvMap::new(&grey).unwrap().mean_radiance, Vec3A::splat(0.5));
         let mut img = Image::new(4, 4, 3);
         img.data[7] = -1.0;
         assert!(EnvMap::new(&img).unwrap_err().contains("texel (2, 0)"));
