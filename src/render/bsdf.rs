@@ -172,12 +172,9 @@ impl Bsdf {
                 let ch = n.dot(h);
                 if oh <= 0.0 {
                     0.0
-                } else if distribution == Distribution::Ggx {
-                    // Visible normals: G1(wo)·D(h)·(wo·h)/cos θo, times 1/(4 wo·h).
-                    microfacet::g1(distribution, alpha, co, oh) * microfacet::d(distribution, alpha, ch)
-                        / (4.0 * co)
                 } else {
-                    microfacet::d(distribution, alpha, ch) * ch / (4.0 * oh)
+                    // Visible normals: G1(wo)·D(h)·(wo·h)/cos θo, times 1/(4 wo·h).
+                    microfacet::visible_pdf(distribution, alpha, co, ch)
                 }
             }
             Bsdf::BlinnPhong { exponent, .. } => {
@@ -223,7 +220,7 @@ impl Bsdf {
             Bsdf::Conductor { distribution, alpha, .. } => {
                 let h = match distribution {
                     Distribution::Ggx => microfacet::sample_visible_ggx(alpha, n, wo, u1, u2),
-                    Distribution::Beckmann => microfacet::sample_h(distribution, alpha, n, u1, u2),
+                    Distribution::Beckmann => microfacet::sample_visible_beckmann(alpha, n, wo, u1, u2),
                 };
                 let wi = 2.0 * wo.dot(h) * h - wo;
                 let ci = n.dot(wi);
