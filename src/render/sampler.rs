@@ -48,9 +48,10 @@ pub struct Sampler {
     sobol: Option<Sobol>,
 }
 
-/// Where a Sobol stream stands: its sample index, the (seed, pixel) hash and the dimension.
+/// Where a Sobol stream stands: its sample index (bit-reversed, the form the index shuffle
+/// takes), the (seed, pixel) hash and the dimension.
 struct Sobol {
-    index: u32,
+    index_reversed: u32,
     key: u64,
     dim: u64,
 }
@@ -130,7 +131,11 @@ impl Sampler {
             SamplerKind::Independent => Sampler::new(seed, pixel, sample),
             SamplerKind::Sobol => Sampler {
                 state: 0,
-                sobol: Some(Sobol { index: sample as u32, key: mix64(seed ^ mix64(pixel)), dim: 0 }),
+                sobol: Some(Sobol {
+                    index_reversed: (sample as u32).reverse_bits(),
+                    key: mix64(seed ^ mix64(pixel)),
+                    dim: 0,
+                }),
             },
         }
     }
@@ -150,7 +155,7 @@ impl Sampler {
             let (hi, hx, _) = Self::sobol_seeds(sb);
             // The shuffled index (a nested uniform scramble of the index's digits), then the
             // scrambled van der Corput point, whose reversed form is the index itself.
-            let i = lk_hash(sb.index.reverse_bits(), hi).reverse_bits();
+            let i = lk_hash(sb.index_reversed, hi).reverse_bits();
             return to_unit(lk_hash(i, hx).reverse_bits());
         }
         let old = self.state;
@@ -163,7 +168,7 @@ impl Sampler {
     pub fn next2(&mut self) -> (f32, f32) {
         if let Some(sb) = &mut self.sobol {
             let (hi, hx, hy) = Self::sobol_seeds(sb);
-            let i = lk_hash(sb.index.reverse_bits(), hi).reverse_bits();
+            let i = lk_hash(sb.index_reversed, hi).reverse_bits();
             return (
                 to_unit(lk_hash(i, hx).reverse_bits()),
                 to_unit(lk_hash(sobol_dim1_reversed(i), hy).reverse_bits()),
