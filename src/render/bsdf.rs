@@ -52,7 +52,8 @@ pub enum Bsdf {
     },
 }
 
-fn luminance(c: Vec3A) -> f32 {
+/// Rec. 709 luminance of linear RGB.
+pub fn luminance(c: Vec3A) -> f32 {
     0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
 }
 
@@ -222,7 +223,7 @@ impl Bsdf {
                     Distribution::Ggx => microfacet::sample_visible_ggx(alpha, n, wo, u1, u2),
                     Distribution::Beckmann => microfacet::sample_visible_beckmann(alpha, n, wo, u1, u2),
                 };
-                let wi = 2.0 * wo.dot(h) * h - wo;
+                let wi = specular::reflect(wo, h);
                 let ci = n.dot(wi);
                 let pdf = self.pdf(kd, n, wo, wi);
                 if ci <= 0.0 || !(pdf > 0.0) {
@@ -240,7 +241,7 @@ impl Bsdf {
                     let phi = 2.0 * PI * u2;
                     let (t, b) = basis(n);
                     let h = t * (sin_h * phi.cos()) + b * (sin_h * phi.sin()) + n * cos_h;
-                    2.0 * wo.dot(h) * h - wo
+                    specular::reflect(wo, h)
                 } else {
                     let u = ((u1 - ps) / (1.0 - ps)).min(1.0 - f32::EPSILON);
                     cosine_hemisphere(n, u, u2)

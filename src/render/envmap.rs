@@ -41,10 +41,6 @@ pub struct EnvMap {
     pub mean_radiance: Vec3A,
 }
 
-fn luminance(c: Vec3A) -> f64 {
-    (0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z) as f64
-}
-
 /// (u, v) of a unit direction (module docs).
 #[inline]
 pub fn direction_to_uv(d: Vec3A) -> (f32, f32) {
@@ -108,7 +104,7 @@ impl EnvMap {
                     + texels[j * w + i1]
                     + texels[(j + 1) * w + i]
                     + texels[(j + 1) * w + i1];
-                weight[j * w + i] = 0.25 * luminance(corners) * omega.max(0.0);
+                weight[j * w + i] = 0.25 * super::bsdf::luminance(corners) as f64 * omega.max(0.0);
                 for c in 0..3 {
                     sum_radiance[c] += 0.25 * corners[c] as f64 * omega;
                 }
