@@ -1,34 +1,47 @@
 //! Bounding volume hierarchy: a binned surface-area-heuristic build (Wald 2007), collapsed to
-//! four children per node for traversal.
+//! four or eight children per node for traversal.
 //!
 //! Build: at each node, primitive centroids are binned into 16 buckets along each axis and the
 //! split with the lowest SAH cost C = C_trav + Σ (A_child / A_node)·N_child is taken, or a leaf
-//! is made when that is not cheaper than intersecting every primitive (or there are ≤ 4). The
-//! binary tree is then collapsed to a 4-wide one by repeatedly opening the largest interior
-//! child, so one SIMD slab test checks four child boxes; children are visited nearest first
-//! and a popped node farther than the best hit is skipped.
+//! is made when that is not cheaper than intersecting every primitive (or there are no more
+//! than one block's worth). The binary tree is then collapsed to a wide one by repeatedly
+//! opening the largest interior child, so one SIMD slab test checks all child boxes; children
+//! are visited nearest first and a popped node farther than the best hit is skipped.
 //!
-//! Leaves hold up to four primitives; a leaf of triangles is stored again as a structure-of-
-//! arrays block and tested by one 4-wide Möller–Trumbore. Leaves with spheres are tested one
-//! primitive at a time.
+//! Leaves of triangles are stored again as structure-of-arrays blocks and tested by one SIMD
+//! Möller–Trumbore per block. Leaves with spheres are tested one primitive at a time.
+//!
+//! Width: eight (AVX2, `avx2` module) where the processor has it, checked at run time, else
+//! four (SSE through glam). Both compute the same per-lane arithmetic, so they find the same
+//! hits. Eight is worth its code: the Cornell box's 36 triangles become one node of seven
+//! leaves, and bigger meshes need half the node visits.
 //!
 //! Written here rather than taken from a crate so that leaves hold lumen's own primitive enum
 //! (triangles and spheres) in place, and shadow rays get an any-hit traversal. Measured against
 //! obvhs 0.4 (a PLOC-built, compressed 8-wide BVH; `cargo run --release --example
-//! bvh_vs_obvhs`: same triangles, 2 M incoherent rays, one thread, closest hit, both agreeing
-//! on 99.9998 % of hits), in one run on the 2-core development machine:
+//! bvh_vs_obvhs`: same triangles, 2 M incoherent rays from inside the scene's box, one thread,
+//! all three agreeing on every hit), in one run on the 2-core development machine, M rays/s:
 //!
-//! | scene                          | triangles | lumen (M rays/s) | obvhs CWBVH (M rays/s) |
-//! |--------------------------------|----------:|-----------------:|-----------------------:|
-//! | Cornell box                    |        36 |             8.38 |                   6.89 |
-//! | icosphere, subdivided 6 times  |    81 920 |             1.25 |                   1.19 |
+//! | scene                          | triangles | lumen 4-wide | lumen 8-wide | obvhs CWBVH | lumen any-hit 4 / 8 |
+//! |--------------------------------|----------:|-------------:|-------------:|------------:|--------------------:|
+//! | Cornell box                    |        36 |         4.54 |         9.02 |        4.29 |        6.90 / 13.32 |
+//! | icosphere, subdivided 6 times  |    81 920 |         0.63 |         1.52 |        0.81 |         1.92 / 2.71 |
 //!
-//! lumen's is the faster of the two on both, by 22 % on the small scenes every stage renders
-//! and by 5 % on a large mesh; so obvhs is not used. (Machine noise moves both figures by up
-//! to ±30 % between runs; the two columns come from the same run.)
+//! lumen's 8-wide tree is about twice as fast as obvhs on both, so obvhs is not used. (The
+//! machine's speed moves all figures by up to a factor of two between runs; the columns of a
+//! row come from the same run.)
 
 use super::geometry::{Hit, Prim, Ray};
 use glam::{Vec3A, Vec4};
+
+#[cfg(target_arch = "x86_64")]
+mod avx2;
+#[cfg(not(target_arch = "x86_64"))]
+mod avx2 {
+    pub fn available() -> bool {
+        false
+    }
+}
 
 /// 32 bytes. An interior node's left child follows it directly; `offset` is the right child.
 /// A leaf has `count > 0` primitives starting at `offset`.
@@ -48,16 +61,31 @@ const BINS: usize = 16;
 const MAX_DEPTH: u32 = 60;
 
 pub struct Bvh {
-    /// The binary SAH tree the 4-wide one is collapsed from (kept for its statistics).
+    /// The binary SAH tree the wide one is collapsed from (kept for its statistics).
     nodes: Vec<Node>,
-    /// The same tree collapsed to 4 children per node, which traversal uses.
-    wide: Vec<Node4>,
-    /// Leaf triangles in blocks of four, for the 4-wide triangle test.
-    blocks: Vec<Tri4>,
+    /// The same tree collapsed to 4 or 8 children per node, which traversal uses.
+    tree: Tree,
     /// Primitives in leaf order.
     pub prims: Vec<Prim>,
     /// `order[i]` is the index, in the caller's list, of `prims[i]`.
     pub order: Vec<u32>,
+}
+
+/// How many children a node of the traversed tree has (and how many triangles one leaf test
+/// checks at once).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Width {
+    /// SSE: every x86-64 and (through glam's scalar fallback) every other target.
+    Four,
+    /// AVX2, chosen at run time where the processor has it.
+    Eight,
+}
+
+enum Tree {
+    /// Leaf triangles in blocks of four, for the 4-wide triangle test.
+    Four { nodes: Vec<Node4>, blocks: Vec<Tri4> },
+    #[cfg(target_arch = "x86_64")]
+    Eight(avx2::Tree8),
 }
 
 #[derive(Clone, Copy)]
@@ -86,12 +114,32 @@ struct BuildPrim {
 }
 
 impl Bvh {
+    /// Builds the widest tree this processor can traverse.
     pub fn build(prims: &[Prim]) -> Bvh {
-        Bvh::build_capped(prims, MAX_DEPTH)
+        Bvh::build_width(prims, Width::Eight)
+    }
+
+    /// Builds a tree of the given width, or of width four where the processor lacks AVX2.
+    pub fn build_width(prims: &[Prim], width: Width) -> Bvh {
+        Bvh::build_capped(prims, MAX_DEPTH, width)
+    }
+
+    /// The width traversal uses.
+    pub fn width(&self) -> Width {
+        match self.tree {
+            Tree::Four { .. } => Width::Four,
+            #[cfg(target_arch = "x86_64")]
+            Tree::Eight(_) => Width::Eight,
+        }
     }
 
     /// Builds with the binary tree at most `max_depth` (≤ MAX_DEPTH) levels below the root.
-    fn build_capped(prims: &[Prim], max_depth: u32) -> Bvh {
+    fn build_capped(prims: &[Prim], max_depth: u32, width: Width) -> Bvh {
+        let width = if width == Width::Eight && avx2::available() { Width::Eight } else { Width::Four };
+        let leaf_size = match width {
+            Width::Four => 4,
+            Width::Eight => 8,
+        };
         let mut items: Vec<BuildPrim> = prims
             .iter()
             .enumerate()
@@ -102,16 +150,23 @@ impl Bvh {
             .collect();
         let mut nodes = Vec::with_capacity(2 * prims.len().max(1));
         if !items.is_empty() {
-            build_node(&mut items, 0, max_depth.min(MAX_DEPTH), &mut nodes);
+            build_node(&mut items, 0, max_depth.min(MAX_DEPTH), leaf_size, &mut nodes);
         }
         let order: Vec<u32> = items.iter().map(|b| b.index).collect();
         let prims: Vec<Prim> = order.iter().map(|&i| prims[i as usize]).collect();
-        let mut wide = Vec::with_capacity(nodes.len() / 2 + 1);
-        let mut blocks = Vec::new();
-        if !nodes.is_empty() {
-            collapse(&nodes, 0, &prims, &mut wide, &mut blocks);
-        }
-        Bvh { nodes, wide, blocks, prims, order }
+        let tree = match width {
+            #[cfg(target_arch = "x86_64")]
+            Width::Eight => Tree::Eight(avx2::Tree8::collapse(&nodes, &prims)),
+            _ => {
+                let mut wide = Vec::with_capacity(nodes.len() / 2 + 1);
+                let mut blocks = Vec::new();
+                if !nodes.is_empty() {
+                    collapse(&nodes, 0, &prims, &mut wide, &mut blocks);
+                }
+                Tree::Four { nodes: wide, blocks }
+            }
+        };
+        Bvh { nodes, tree, prims, order }
     }
 
     pub fn depth(&self) -> usize {
@@ -218,26 +273,45 @@ impl Tri4 {
     }
 }
 
-/// Collapses the binary subtree at `i` (an interior node, or the root) into 4-wide nodes by
-/// repeatedly opening the largest interior child, and returns the new node's index.
-fn collapse(nodes: &[Node], i: usize, prims: &[Prim], wide: &mut Vec<Node4>, blocks: &mut Vec<Tri4>) -> u32 {
-    let is_leaf = |k: usize| nodes[k].count_axis & COUNT_MASK > 0;
+impl Node {
+    fn is_leaf(&self) -> bool {
+        self.count_axis & COUNT_MASK > 0
+    }
+
+    /// Leaf: (first primitive, count).
+    fn leaf(&self) -> Option<(u32, u32)> {
+        self.is_leaf().then_some((self.offset, self.count_axis & COUNT_MASK))
+    }
+}
+
+/// The up to `width` binary nodes that become the children of one wide node standing for the
+/// binary subtree at `i` (an interior node, or the root): its two children, with the interior
+/// one of largest surface area opened until there are `width` or only leaves.
+fn wide_children(nodes: &[Node], i: usize, width: usize) -> Vec<usize> {
     let area = |k: usize| {
         let n = &nodes[k];
         Aabb { lo: n.lo.into(), hi: n.hi.into() }.half_area()
     };
-    let mut kids: Vec<usize> = if is_leaf(i) { vec![i] } else { vec![i + 1, nodes[i].offset as usize] };
-    while kids.len() < 4 {
+    let mut kids: Vec<usize> =
+        if nodes[i].is_leaf() { vec![i] } else { vec![i + 1, nodes[i].offset as usize] };
+    while kids.len() < width {
         let open = kids
             .iter()
             .enumerate()
-            .filter(|(_, &k)| !is_leaf(k))
+            .filter(|(_, &k)| !nodes[k].is_leaf())
             .max_by(|a, b| area(*a.1).total_cmp(&area(*b.1)));
         let Some((slot, &k)) = open else { break };
         kids.swap_remove(slot);
         kids.push(k + 1);
         kids.push(nodes[k].offset as usize);
     }
+    kids
+}
+
+/// Collapses the binary subtree at `i` (an interior node, or the root) into 4-wide nodes
+/// (`wide_children`), and returns the new node's index.
+fn collapse(nodes: &[Node], i: usize, prims: &[Prim], wide: &mut Vec<Node4>, blocks: &mut Vec<Tri4>) -> u32 {
+    let kids = wide_children(nodes, i, 4);
     let index = wide.len();
     let inf = Vec4::splat(f32::INFINITY);
     wide.push(Node4 {
@@ -250,10 +324,9 @@ fn collapse(nodes: &[Node], i: usize, prims: &[Prim], wide: &mut Vec<Node4>, blo
     });
     for (lane, &k) in kids.iter().enumerate() {
         let n = nodes[k];
-        let (child, count) = if is_leaf(k) {
-            (n.offset, n.count_axis & COUNT_MASK)
-        } else {
-            (collapse(nodes, k, prims, wide, blocks), 0)
+        let (child, count) = match n.leaf() {
+            Some(leaf) => leaf,
+            None => (collapse(nodes, k, prims, wide, blocks), 0),
         };
         if count > 0 {
             let leaf = &prims[child as usize..(child + count) as usize];
@@ -274,23 +347,24 @@ fn collapse(nodes: &[Node], i: usize, prims: &[Prim], wide: &mut Vec<Node4>, blo
     index as u32
 }
 
-/// The traversal stack. Left uninitialised: zeroing a few hundred bytes per ray costs more
-/// than a shadow ray's whole box tests in small scenes. The binary tree is at most MAX_DEPTH
-/// deep, so its 4-wide collapse pushes at most 3 entries for each of ≤ MAX_DEPTH levels.
-struct Stack<T: Copy> {
-    items: [std::mem::MaybeUninit<T>; 3 * MAX_DEPTH as usize],
+/// The traversal stack of a tree `W` wide. Left uninitialised: zeroing a few hundred bytes per
+/// ray costs more than a shadow ray's whole box tests in small scenes. The binary tree is at
+/// most MAX_DEPTH + 1 levels deep, so its W-wide collapse pushes at most W − 1 entries for each
+/// of ≤ MAX_DEPTH + 1 levels, plus the root.
+struct Stack<T: Copy, const W: usize> {
+    items: [[std::mem::MaybeUninit<T>; W]; MAX_DEPTH as usize + 2],
     len: usize,
 }
 
-impl<T: Copy> Stack<T> {
+impl<T: Copy, const W: usize> Stack<T, W> {
     #[inline(always)]
     fn new() -> Self {
-        Stack { items: [std::mem::MaybeUninit::uninit(); 3 * MAX_DEPTH as usize], len: 0 }
+        Stack { items: [[std::mem::MaybeUninit::uninit(); W]; MAX_DEPTH as usize + 2], len: 0 }
     }
 
     #[inline(always)]
     fn push(&mut self, v: T) {
-        self.items[self.len] = std::mem::MaybeUninit::new(v);
+        self.items[self.len / W][self.len % W] = std::mem::MaybeUninit::new(v);
         self.len += 1;
     }
 
@@ -301,7 +375,7 @@ impl<T: Copy> Stack<T> {
         }
         self.len -= 1;
         // SAFETY: every slot below `len` was written by `push`.
-        Some(unsafe { self.items[self.len].assume_init() })
+        Some(unsafe { self.items[self.len / W][self.len % W].assume_init() })
     }
 }
 
@@ -343,109 +417,146 @@ impl Query4 {
 impl Bvh {
     /// Closest hit within (t_min, t_max). `Hit::prim` indexes `self.prims` (leaf order).
     #[inline]
-    pub fn intersect(&self, ray: &Ray, t_min: f32, mut t_max: f32) -> Option<Hit> {
-        if self.wide.is_empty() {
-            return None;
+    pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Hit> {
+        match &self.tree {
+            Tree::Four { nodes, blocks } => intersect4(nodes, blocks, &self.prims, ray, t_min, t_max),
+            // SAFETY: an 8-wide tree is only built where the processor has AVX2.
+            #[cfg(target_arch = "x86_64")]
+            Tree::Eight(tree) => unsafe { tree.intersect(&self.prims, ray, t_min, t_max) },
         }
-        let q = Query4::new(ray);
-        let mut best: Option<Hit> = None;
-        // (node, entry distance): popped nodes farther than the best hit so far are skipped.
-        let mut stack = Stack::<(u32, f32)>::new();
-        stack.push((0, t_min));
-        while let Some((index, t_enter)) = stack.pop() {
-            if t_enter > t_max {
-                continue;
-            }
-            let node = &self.wide[index as usize];
-            let (near, mut mask) = q.enter(node, t_min, t_max);
-            // Interior children are pushed farthest first, so the nearest is popped next.
-            let mut pending = [(0u32, 0.0f32); 4];
-            let mut np = 0;
-            while mask != 0 {
-                let lane = mask.trailing_zeros() as usize;
-                mask &= mask - 1;
-                let count = node.count[lane];
-                if count > 0 {
-                    let first = node.child[lane] as usize;
-                    let block = node.block[lane];
-                    if block != NO_BLOCK {
-                        let nb = count.div_ceil(4);
-                        for (k, b) in self.blocks[block as usize..(block + nb) as usize].iter().enumerate() {
-                            if let Some((l, t, b1, b2)) = b.intersect(&q, t_min, t_max) {
-                                t_max = t;
-                                best = Some(Hit { t, prim: (first + 4 * k + l) as u32, b1, b2 });
-                            }
-                        }
-                    } else {
-                        for (k, prim) in self.prims[first..first + count as usize].iter().enumerate() {
-                            if let Some((t, b1, b2)) = prim.intersect(ray, t_min, t_max) {
-                                t_max = t;
-                                best = Some(Hit { t, prim: (first + k) as u32, b1, b2 });
-                            }
-                        }
-                    }
-                } else {
-                    let entry = (node.child[lane], near[lane]);
-                    let mut j = np;
-                    while j > 0 && pending[j - 1].1 < entry.1 {
-                        pending[j] = pending[j - 1];
-                        j -= 1;
-                    }
-                    pending[j] = entry;
-                    np += 1;
-                }
-            }
-            for &e in &pending[..np] {
-                stack.push(e);
-            }
-        }
-        best
     }
 
     /// Whether anything lies within (t_min, t_max): the shadow-ray query.
     #[inline]
     pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
-        if self.wide.is_empty() {
-            return false;
+        match &self.tree {
+            Tree::Four { nodes, blocks } => occluded4(nodes, blocks, &self.prims, ray, t_min, t_max),
+            // SAFETY: as in `intersect`.
+            #[cfg(target_arch = "x86_64")]
+            Tree::Eight(tree) => unsafe { tree.occluded(&self.prims, ray, t_min, t_max) },
         }
-        let q = Query4::new(ray);
-        let mut stack = Stack::<u32>::new();
-        stack.push(0);
-        while let Some(index) = stack.pop() {
-            let node = &self.wide[index as usize];
-            let (_, mut mask) = q.enter(node, t_min, t_max);
-            while mask != 0 {
-                let lane = mask.trailing_zeros() as usize;
-                mask &= mask - 1;
-                let count = node.count[lane];
-                if count > 0 {
-                    let first = node.child[lane] as usize;
-                    let block = node.block[lane];
-                    let hit = if block != NO_BLOCK {
-                        let nb = count.div_ceil(4);
-                        self.blocks[block as usize..(block + nb) as usize]
-                            .iter()
-                            .any(|b| b.intersect(&q, t_min, t_max).is_some())
-                    } else {
-                        self.prims[first..first + count as usize]
-                            .iter()
-                            .any(|p| p.intersect(ray, t_min, t_max).is_some())
-                    };
-                    if hit {
-                        return true;
+    }
+}
+
+/// Closest hit in a 4-wide tree.
+#[inline]
+fn intersect4(
+    wide: &[Node4],
+    blocks: &[Tri4],
+    prims: &[Prim],
+    ray: &Ray,
+    t_min: f32,
+    mut t_max: f32,
+) -> Option<Hit> {
+    if wide.is_empty() {
+        return None;
+    }
+    let q = Query4::new(ray);
+    let mut best: Option<Hit> = None;
+    // (node, entry distance): popped nodes farther than the best hit so far are skipped.
+    let mut stack = Stack::<(u32, f32), 4>::new();
+    stack.push((0, t_min));
+    while let Some((index, t_enter)) = stack.pop() {
+        if t_enter > t_max {
+            continue;
+        }
+        let node = &wide[index as usize];
+        let (near, mut mask) = q.enter(node, t_min, t_max);
+        // Interior children are pushed farthest first, so the nearest is popped next.
+        let mut pending = [(0u32, 0.0f32); 4];
+        let mut np = 0;
+        while mask != 0 {
+            let lane = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            let count = node.count[lane];
+            if count > 0 {
+                let first = node.child[lane] as usize;
+                let block = node.block[lane];
+                if block != NO_BLOCK {
+                    let nb = count.div_ceil(4);
+                    for (k, b) in blocks[block as usize..(block + nb) as usize].iter().enumerate() {
+                        if let Some((l, t, b1, b2)) = b.intersect(&q, t_min, t_max) {
+                            t_max = t;
+                            best = Some(Hit { t, prim: (first + 4 * k + l) as u32, b1, b2 });
+                        }
                     }
                 } else {
-                    stack.push(node.child[lane]);
+                    for (k, prim) in prims[first..first + count as usize].iter().enumerate() {
+                        if let Some((t, b1, b2)) = prim.intersect(ray, t_min, t_max) {
+                            t_max = t;
+                            best = Some(Hit { t, prim: (first + k) as u32, b1, b2 });
+                        }
+                    }
                 }
+            } else {
+                let entry = (node.child[lane], near[lane]);
+                let mut j = np;
+                while j > 0 && pending[j - 1].1 < entry.1 {
+                    pending[j] = pending[j - 1];
+                    j -= 1;
+                }
+                pending[j] = entry;
+                np += 1;
             }
         }
-        false
+        for &e in &pending[..np] {
+            stack.push(e);
+        }
     }
+    best
+}
+
+/// Any hit in a 4-wide tree.
+#[inline]
+fn occluded4(wide: &[Node4], blocks: &[Tri4], prims: &[Prim], ray: &Ray, t_min: f32, t_max: f32) -> bool {
+    if wide.is_empty() {
+        return false;
+    }
+    let q = Query4::new(ray);
+    let mut stack = Stack::<u32, 4>::new();
+    stack.push(0);
+    while let Some(index) = stack.pop() {
+        let node = &wide[index as usize];
+        let (_, mut mask) = q.enter(node, t_min, t_max);
+        while mask != 0 {
+            let lane = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            let count = node.count[lane];
+            if count > 0 {
+                let first = node.child[lane] as usize;
+                let block = node.block[lane];
+                let hit = if block != NO_BLOCK {
+                    let nb = count.div_ceil(4);
+                    blocks[block as usize..(block + nb) as usize]
+                        .iter()
+                        .any(|b| b.intersect(&q, t_min, t_max).is_some())
+                } else {
+                    prims[first..first + count as usize]
+                        .iter()
+                        .any(|p| p.intersect(ray, t_min, t_max).is_some())
+                };
+                if hit {
+                    return true;
+                }
+            } else {
+                stack.push(node.child[lane]);
+            }
+        }
+    }
+    false
 }
 
 /// Builds the subtree for `items` (which it reorders) and returns its node index.
 /// `levels` is how many more levels may be split below this node.
-fn build_node(items: &mut [BuildPrim], first: usize, levels: u32, nodes: &mut Vec<Node>) -> u32 {
+/// Leaves hold at most `leaf_size` primitives, or up to twice that when splitting them costs
+/// more than testing them all.
+fn build_node(
+    items: &mut [BuildPrim],
+    first: usize,
+    levels: u32,
+    leaf_size: usize,
+    nodes: &mut Vec<Node>,
+) -> u32 {
     let mut bounds = Aabb::EMPTY;
     let mut cbounds = Aabb::EMPTY;
     for it in items.iter() {
@@ -460,7 +571,7 @@ fn build_node(items: &mut [BuildPrim], first: usize, levels: u32, nodes: &mut Ve
         count_axis: items.len() as u32,
     });
     // Traversal stacks are sized for depth ≤ 64: a leaf is forced before that.
-    if items.len() <= 4 || levels == 0 {
+    if items.len() <= leaf_size || levels == 0 {
         return index;
     }
     let leaf_cost = items.len() as f32;
@@ -505,7 +616,7 @@ fn build_node(items: &mut [BuildPrim], first: usize, levels: u32, nodes: &mut Ve
     let Some((cost, axis, split)) = best else {
         return index;
     };
-    if cost >= leaf_cost && items.len() <= 8 {
+    if cost >= leaf_cost && items.len() <= 2 * leaf_size {
         return index;
     }
     let mut mid = partition(items, |it| it.centroid[axis] < split);
@@ -513,8 +624,8 @@ fn build_node(items: &mut [BuildPrim], first: usize, levels: u32, nodes: &mut Ve
         mid = items.len() / 2; // all centroids fell in one bin by rounding: split by count
     }
     let (left, right) = items.split_at_mut(mid);
-    build_node(left, first, levels - 1, nodes);
-    let right_index = build_node(right, first + mid, levels - 1, nodes);
+    build_node(left, first, levels - 1, leaf_size, nodes);
+    let right_index = build_node(right, first + mid, levels - 1, leaf_size, nodes);
     nodes[index as usize].offset = right_index;
     nodes[index as usize].count_axis = (axis as u32) << AXIS_SHIFT;
     index
@@ -541,11 +652,17 @@ mod tests {
     /// leaves behind.
     #[test]
     fn depth_is_capped() {
+        for width in [Width::Four, Width::Eight] {
+            depth_is_capped_at(width);
+        }
+    }
+
+    fn depth_is_capped_at(width: Width) {
         let prims: Vec<Prim> = (0..64)
             .map(|i| Prim::Sphere { center: Vec3A::new(4f32.powi(i), 0.0, 0.0), radius: 1e-3 * 4f32.powi(i) })
             .collect();
-        assert!(Bvh::build(&prims).depth() > 20, "the case is not deep enough to test the cap");
-        let bvh = Bvh::build_capped(&prims, 8);
+        assert!(Bvh::build_width(&prims, width).depth() > 20, "the case is not deep enough to test the cap");
+        let bvh = Bvh::build_capped(&prims, 8, width);
         assert_eq!(bvh.depth(), 9);
         // Up to 4^27, where r² still fits in an f32.
         for i in 0..28 {
@@ -557,16 +674,23 @@ mod tests {
         }
         // A ray running inside the plane of a box face (0 · ∞ in the slab test).
         let tri = [Prim::Triangle { v0: Vec3A::ZERO, e1: Vec3A::X, e2: Vec3A::Y }];
-        let flat = Bvh::build(&tri);
+        let flat = Bvh::build_width(&tri, width);
         let ray = Ray { origin: Vec3A::new(0.2, -1.0, 0.0), dir: Vec3A::Y };
         assert!(flat.intersect(&ray, 0.0, f32::INFINITY).is_none()); // parallel: no hit, no NaN trap
         let ray = Ray { origin: Vec3A::new(0.2, 0.2, 1.0), dir: -Vec3A::Z };
         assert!(flat.intersect(&ray, 0.0, f32::INFINITY).is_some());
     }
 
-    /// The BVH must find exactly the hits a brute-force loop finds.
+    /// The BVH must find exactly the hits a brute-force loop finds, at either width.
     #[test]
     fn matches_brute_force() {
+        assert!(!avx2::available() || Bvh::build(&[]).width() == Width::Eight);
+        for width in [Width::Four, Width::Eight] {
+            matches_brute_force_at(width);
+        }
+    }
+
+    fn matches_brute_force_at(width: Width) {
         let mut s = Sampler::new(1, 2, 3);
         let mut r = || Vec3A::new(s.next(), s.next(), s.next());
         let mut prims = Vec::new();
@@ -578,9 +702,28 @@ mod tests {
                 prims.push(Prim::Triangle { v0, e1: (r() - 0.5) * 0.5, e2: (r() - 0.5) * 0.5 });
             }
         }
-        let bvh = Bvh::build(&prims);
-        for _ in 0..2000 {
-            let ray = Ray { origin: r() * 6.0 - 3.0, dir: (r() - 0.5).normalize() };
+        // 12 triangles tilted by different amounts about one point, far from the rest: their
+        // boxes share a centre, so no split separates them and they stay one leaf of more
+        // triangles than one block tests at once.
+        let c = Vec3A::splat(10.0);
+        for k in 0..12 {
+            let h = 0.1 * (k + 1) as f32;
+            let v0 = c + Vec3A::new(-2.0, -2.0, -h);
+            let (v1, v2) = (c + Vec3A::new(2.0, -2.0, h), c + Vec3A::new(0.0, 2.0, 0.0));
+            prims.push(Prim::Triangle { v0, e1: v1 - v0, e2: v2 - v0 });
+        }
+        let bvh = Bvh::build_width(&prims, width);
+        for i in 0..3000 {
+            let ray = if i < 2000 {
+                Ray { origin: r() * 6.0 - 3.0, dir: (r() - 0.5).normalize() }
+            } else {
+                // Down into the stack or up into it from below, at a slant.
+                let p = c + (r() - 0.5) * Vec3A::new(4.0, 4.0, 0.5);
+                Ray {
+                    origin: p,
+                    dir: (Vec3A::new(0.5, 0.5, 0.0) - r() + Vec3A::Z * (i % 2) as f32 * 2.0).normalize(),
+                }
+            };
             let brute = prims
                 .iter()
                 .filter_map(|p| p.intersect(&ray, 1e-4, f32::INFINITY).map(|h| h.0))
