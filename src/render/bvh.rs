@@ -237,40 +237,68 @@ impl Tri4 {
         Some(b)
     }
 
-    /// Möller–Trumbore on four triangles at once: the nearest hit within (t_min, t_max) as
-    /// (lane, t, b1, b2).
+    /// Möller–Trumbore on four triangles at once, dividing by the determinant only for lanes
+    /// hit (as `avx2`): the mask of lanes hit within (t_min, t_max), and per lane the
+    /// determinant and the numerators of b1, b2, t.
     #[inline(always)]
-    fn intersect(&self, q: &Query4, t_min: f32, t_max: f32) -> Option<(usize, f32, f32, f32)> {
+    fn hits(&self, q: &Query4, t_min: f32, t_max: f32) -> (u32, [Vec4; 4]) {
         let [dx, dy, dz] = q.dir;
         let [e1x, e1y, e1z] = self.e1;
         let [e2x, e2y, e2z] = self.e2;
         // p = d × e2, det = e1 · p
         let (px, py, pz) = (dy * e2z - dz * e2y, dz * e2x - dx * e2z, dx * e2y - dy * e2x);
         let det = e1x * px + e1y * py + e1z * pz;
-        let inv = Vec4::ONE / det;
         let (sx, sy, sz) = (q.origin[0] - self.v0[0], q.origin[1] - self.v0[1], q.origin[2] - self.v0[2]);
-        let b1 = (sx * px + sy * py + sz * pz) * inv;
+        let n1 = sx * px + sy * py + sz * pz;
         // q = s × e1
         let (qx, qy, qz) = (sy * e1z - sz * e1y, sz * e1x - sx * e1z, sx * e1y - sy * e1x);
-        let b2 = (dx * qx + dy * qy + dz * qz) * inv;
-        let t = (e2x * qx + e2y * qy + e2z * qz) * inv;
-        let ok = det.abs().cmpge(Vec4::splat(1e-12))
-            & b1.cmpge(Vec4::ZERO)
-            & b2.cmpge(Vec4::ZERO)
-            & (b1 + b2).cmple(Vec4::ONE)
-            & t.cmpgt(Vec4::splat(t_min))
-            & t.cmplt(Vec4::splat(t_max));
-        let mut mask = ok.bitmask();
-        let mut best: Option<(usize, f32, f32, f32)> = None;
-        while mask != 0 {
-            let lane = mask.trailing_zeros() as usize;
-            mask &= mask - 1;
-            if best.is_none_or(|b| t[lane] < b.1) {
-                best = Some((lane, t[lane], b1[lane], b2[lane]));
-            }
-        }
-        best
+        let n2 = dx * qx + dy * qy + dz * qz;
+        let nt = e2x * qx + e2y * qy + e2z * qz;
+        // Multiplying by ±1 is exact: the numerators' signs become those of b1, b2, t.
+        let sign = Vec4::ONE.copysign(det);
+        let abs_det = det.abs();
+        let (u, v, t) = (n1 * sign, n2 * sign, nt * sign);
+        let ok = abs_det.cmpge(Vec4::splat(1e-12))
+            & u.cmpge(Vec4::ZERO)
+            & v.cmpge(Vec4::ZERO)
+            & (u + v).cmple(abs_det)
+            & t.cmpgt(Vec4::splat(t_min) * abs_det)
+            & t.cmplt(Vec4::splat(t_max) * abs_det);
+        (ok.bitmask(), [det, n1, n2, nt])
     }
+
+    /// The nearest of the four triangles hit within (t_min, t_max), as (lane, t, b1, b2).
+    #[inline(always)]
+    fn intersect(&self, q: &Query4, t_min: f32, t_max: f32) -> Option<(usize, f32, f32, f32)> {
+        let (mask, [det, n1, n2, nt]) = self.hits(q, t_min, t_max);
+        if mask == 0 {
+            return None;
+        }
+        nearest_lane(mask, [det, n1, n2, nt].map(|v| v.to_array()), t_min, t_max)
+    }
+}
+
+/// Among the lanes of `mask` (triangles a block test found hit), the nearest, as (lane, t, b1,
+/// b2): the divisions the block test saved, done for these lanes only, and t checked against
+/// the range once more as the divided value (the block compared t·|det| with it).
+#[inline(always)]
+fn nearest_lane<const N: usize>(
+    mut mask: u32,
+    [det, n1, n2, nt]: [[f32; N]; 4],
+    t_min: f32,
+    t_max: f32,
+) -> Option<(usize, f32, f32, f32)> {
+    let mut best: Option<(usize, f32, f32, f32)> = None;
+    while mask != 0 {
+        let lane = mask.trailing_zeros() as usize;
+        mask &= mask - 1;
+        let inv = 1.0 / det[lane];
+        let t = nt[lane] * inv;
+        if t > t_min && t < best.map_or(t_max, |b| b.1) {
+            best = Some((lane, t, n1[lane] * inv, n2[lane] * inv));
+        }
+    }
+    best
 }
 
 impl Node {
@@ -529,7 +557,7 @@ fn occluded4(wide: &[Node4], blocks: &[Tri4], prims: &[Prim], ray: &Ray, t_min: 
                     let nb = count.div_ceil(4);
                     blocks[block as usize..(block + nb) as usize]
                         .iter()
-                        .any(|b| b.intersect(&q, t_min, t_max).is_some())
+                        .any(|b| b.hits(&q, t_min, t_max).0 != 0)
                 } else {
                     prims[first..first + count as usize]
                         .iter()
