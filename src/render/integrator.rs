@@ -143,7 +143,8 @@ impl Scene {
         // The solid-angle density of the BSDF sample that made `ray`, when its vertex was
         // glossy (module docs).
         let mut mis_pdf: Option<f32> = None;
-        for depth in 1..=max_depth {
+        // A half-open range: `1..=max_depth` costs a check per vertex.
+        for depth in 1..max_depth.saturating_add(1) {
             let Some(hit) = self.bvh.intersect(&ray, 0.0, f32::INFINITY) else {
                 // Leaving the scene: the environment, counted as emission is (module docs).
                 if depth == 1 || mis_pdf.is_some() {
@@ -342,10 +343,16 @@ impl Scene {
                     let pdf = p_pick * pdf;
                     return Some((radiance / pdf, wi, dist, Some(pdf)));
                 }
-                let (y, mut ny) = self.bvh.prims[prim as usize].sample_area(u.0, u.1);
-                if self.info[prim as usize].reverse {
-                    ny = -ny;
-                }
+                let shape = &self.bvh.prims[prim as usize];
+                let info = &self.info[prim as usize];
+                let (y, ny) = match shape {
+                    // The stored unit normal, reversal applied.
+                    Prim::Triangle { .. } => (shape.sample_area(u.0, u.1).0, info.normal),
+                    Prim::Sphere { .. } => {
+                        let (y, ny) = shape.sample_area(u.0, u.1);
+                        (y, if info.reverse { -ny } else { ny })
+                    }
+                };
                 let d = y - p;
                 let r2 = d.length_squared();
                 let r = r2.sqrt();
