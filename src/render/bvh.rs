@@ -444,7 +444,7 @@ impl Query4 {
 
 impl Bvh {
     /// Closest hit within (t_min, t_max). `Hit::prim` indexes `self.prims` (leaf order).
-    #[inline]
+    #[inline(always)]
     pub fn intersect(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<Hit> {
         match &self.tree {
             Tree::Four { nodes, blocks } => intersect4(nodes, blocks, &self.prims, ray, t_min, t_max),
@@ -455,7 +455,7 @@ impl Bvh {
     }
 
     /// Whether anything lies within (t_min, t_max): the shadow-ray query.
-    #[inline]
+    #[inline(always)]
     pub fn occluded(&self, ray: &Ray, t_min: f32, t_max: f32) -> bool {
         match &self.tree {
             Tree::Four { nodes, blocks } => occluded4(nodes, blocks, &self.prims, ray, t_min, t_max),
@@ -466,8 +466,10 @@ impl Bvh {
     }
 }
 
-/// Closest hit in a 4-wide tree.
-#[inline]
+/// Closest hit in a 4-wide tree. Not inlined, like the 8-wide traversal (which cannot be:
+/// it is compiled for AVX2), so that `Bvh::intersect` inlines into its callers as one branch
+/// and a call.
+#[inline(never)]
 fn intersect4(
     wide: &[Node4],
     blocks: &[Tri4],
@@ -534,8 +536,8 @@ fn intersect4(
     best
 }
 
-/// Any hit in a 4-wide tree.
-#[inline]
+/// Any hit in a 4-wide tree (not inlined, as `intersect4`).
+#[inline(never)]
 fn occluded4(wide: &[Node4], blocks: &[Tri4], prims: &[Prim], ray: &Ray, t_min: f32, t_max: f32) -> bool {
     if wide.is_empty() {
         return false;
