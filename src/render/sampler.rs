@@ -1,32 +1,25 @@
 //! Sample streams keyed by (seed, pixel, sample, dimension): independent random numbers, or
-//! scrambled Sobol points.
+//! Owen-scrambled Sobol points.
 //!
-//! **Independent.** Each (seed, pixel, sample) triple owns its own stream, started from a hash of the triple and
+//! **Independent.** //! Each (seed, pixel, sample) triple owns its own stream, started from a hash of the triple and
 //! never shared with another pixel or thread; the dimension is the position in that stream. So
 //! an image does not depend on how pixels are divided among threads: one thread and many give
 //! bit-identical results. The hash is the SplitMix64 finaliser (Steele et al. 2014); the stream
 //! is PCG32 (O'Neill 2014, XSH-RR output), one multiply-add per number.
 //!
-//! **Sobol** (padded, as pbrt-v4's `PaddedSobolSampler`, with the index shuffle of Burley 2020,
-//! "Practical Hash-based Owen Scrambling"). Every request — one number or a pair — is its own
+//! **Sobol** (padded, Owen-scrambled; Burley 2020, "Practical Hash-based Owen Scrambling", as
+//! pbrt-v4's `PaddedSobolSampler`). Every request — one number or a pair — is its own
 //! "dimension" d of the path. A pair is the first two Sobol dimensions (van der Corput and its
 //! Pascal-matrix partner, together a (0, 2)-sequence in base 2) at a shuffled index, each
-//! coordinate then XORed with its own random 32 bits (a random digital shift), all seeds
-//! hashed from (seed, pixel, d); a single number is the shifted van der Corput coordinate
-//! alone. The index shuffle is a nested uniform scramble, which maps the first 2^m samples onto
-//! one aligned block of 2^m, so with a power-of-two sample count the pixel's samples of every
-//! pair form a (0, m, 2)-net: each elementary interval of area 2^−m holds exactly one (a
-//! digital shift keeps that). Pixel-edge coverage, soft shadows and the first bounce then
-//! converge faster than N^(−½) where the integrand allows. Dimensions are scrambled
-//! independently of each other, so a path's dimensions are not jointly stratified (padding),
-//! but each is as random as an independent sample across pixels. The film's per-sample
-//! variance ignores the stratification and overestimates the error of the mean.
-//!
-//! Why a digital shift and not Burley's Owen scrambling of the coordinates too: on the Cornell
-//! box against Mitsuba's reference (`lumen bench convergence`) the two give the same RMSE
-//! (Owen / shift at 16, 64, 256 spp: 0.0267 / 0.0263, 0.0102 / 0.0099, 0.0048 / 0.0049), but
-//! each Owen-scrambled coordinate costs a hash and two bit reversals: with them a Sobol path
-//! took 23 % more instructions than an independent one, with the shift 7 %.
+//! coordinate Owen-scrambled with its own seed hashed from (seed, pixel, d); a single number is
+//! the scrambled van der Corput coordinate alone. The index shuffle is itself a nested uniform
+//! scramble, which maps the first 2^m samples onto one aligned block of 2^m, so with a
+//! power-of-two sample count the pixel's samples of every pair form a (0, m, 2)-net: each
+//! elementary interval of area 2^−m holds exactly one. Pixel-edge coverage, soft shadows and
+//! the first bounce then converge faster than N^(−½) where the integrand allows. Dimensions are
+//! scrambled independently of each other, so a path's dimensions are not jointly stratified
+//! (padding), but each is as random as an independent sample across pixels. The film's
+//! per-sample variance ignores the stratification and overestimates the error of the mean.
 
 /// SplitMix64's finaliser: a bijective 64-bit mixer.
 #[inline]
@@ -76,17 +69,15 @@ fn lk_hash(mut x: u32, seed: u32) -> u32 {
     x
 }
 
-/// The second Sobol dimension (generator matrix: Pascal's triangle mod 2) as a function of
-/// the bit-reversed index j (the first dimension's point, van der Corput's radical inverse):
-/// a linear map over GF(2), tabulated a byte of j at a time. Entry [b][v] is the XOR of the
-/// point's bits for the bits set in v, for bits 8b..8b+8 of j.
-const PASCAL_OF_REVERSED: [[u32; 256]; 4] = {
-    // Column k: the point (fraction bits, most significant first) of index 2^k.
+/// The second Sobol dimension's generator matrix (Pascal's triangle mod 2), bit-reversed and
+/// tabulated a byte of the index at a time: entry [b][v] is the XOR of the columns of the bits
+/// set in v, for index bits 8b..8b+8.
+const PASCAL_REVERSED: [[u32; 256]; 4] = {
     let mut cols = [0u32; 32];
     let mut v = 1u32;
     let mut k = 0;
     while k < 32 {
-        cols[k] = v.reverse_bits();
+        cols[k] = v;
         v ^= v << 1;
         k += 1;
     }
@@ -96,13 +87,12 @@ const PASCAL_OF_REVERSED: [[u32; 256]; 4] = {
         let mut byte = 0;
         while byte < 256 {
             let mut acc = 0;
-            let mut t = 0;
-            while t < 8 {
-                if (byte >> t) & 1 == 1 {
-                    // Bit p = 8b + t of j is bit 31 − p of the index.
-                    acc ^= cols[31 - (8 * b + t)];
+            let mut j = 0;
+            while j < 8 {
+                if (byte >> j) & 1 == 1 {
+                    acc ^= cols[8 * b + j];
                 }
-                t += 1;
+                j += 1;
             }
             table[b][byte] = acc;
             byte += 1;
@@ -112,14 +102,14 @@ const PASCAL_OF_REVERSED: [[u32; 256]; 4] = {
     table
 };
 
-/// The second Sobol dimension's point (fraction bits) for the bit-reversed index j.
+/// The second Sobol dimension at index i, bit-reversed (the form `lk_hash` takes).
 #[inline]
-fn sobol_dim1(j: u32) -> u32 {
-    let t = &PASCAL_OF_REVERSED;
-    t[0][(j & 255) as usize]
-        ^ t[1][((j >> 8) & 255) as usize]
-        ^ t[2][((j >> 16) & 255) as usize]
-        ^ t[3][(j >> 24) as usize]
+fn sobol_dim1_reversed(i: u32) -> u32 {
+    let t = &PASCAL_REVERSED;
+    t[0][(i & 255) as usize]
+        ^ t[1][((i >> 8) & 255) as usize]
+        ^ t[2][((i >> 16) & 255) as usize]
+        ^ t[3][(i >> 24) as usize]
 }
 
 #[inline]
@@ -163,9 +153,10 @@ impl Sampler {
     pub fn next(&mut self) -> f32 {
         if let Some(sb) = &mut self.sobol {
             let (hi, hx, _) = Self::sobol_seeds(sb);
-            // The hash of the reversed index is the shuffled index (a nested uniform scramble
-            // of its digits) reversed, which read as a fraction is its van der Corput point.
-            return to_unit(lk_hash(sb.index_reversed, hi) ^ hx);
+            // The shuffled index (a nested uniform scramble of the index's digits), then the
+            // scrambled van der Corput point, whose reversed form is the index itself.
+            let i = lk_hash(sb.index_reversed, hi).reverse_bits();
+            return to_unit(lk_hash(i, hx).reverse_bits());
         }
         let old = self.state;
         self.state = old.wrapping_mul(PCG_MUL).wrapping_add(PCG_INC);
@@ -177,8 +168,11 @@ impl Sampler {
     pub fn next2(&mut self) -> (f32, f32) {
         if let Some(sb) = &mut self.sobol {
             let (hi, hx, hy) = Self::sobol_seeds(sb);
-            let j = lk_hash(sb.index_reversed, hi);
-            return (to_unit(j ^ hx), to_unit(sobol_dim1(j) ^ hy));
+            let i = lk_hash(sb.index_reversed, hi).reverse_bits();
+            return (
+                to_unit(lk_hash(i, hx).reverse_bits()),
+                to_unit(lk_hash(sobol_dim1_reversed(i), hy).reverse_bits()),
+            );
         }
         (self.next(), self.next())
     }
