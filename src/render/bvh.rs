@@ -223,18 +223,26 @@ struct Tri4 {
     e2: [Vec4; 3],
 }
 
-impl Tri4 {
-    fn new(tris: &[Prim]) -> Option<Tri4> {
-        let mut b = Tri4 { v0: [Vec4::ZERO; 3], e1: [Vec4::ZERO; 3], e2: [Vec4::ZERO; 3] };
-        for (lane, p) in tris.iter().enumerate() {
-            let Prim::Triangle { v0, e1, e2 } = *p else { return None };
+/// Vertex 0 and the edges e1 = v1 − v0, e2 = v2 − v0 of up to N triangles as lanes,
+/// indexed [vector][axis][lane]: the layout of the 4- and 8-wide blocks. Unused lanes stay
+/// zero. `None` when a primitive is not a triangle.
+fn tri_lanes<const N: usize>(tris: &[Prim]) -> Option<[[[f32; N]; 3]; 3]> {
+    let mut b = [[[0.0; N]; 3]; 3];
+    for (lane, p) in tris.iter().enumerate() {
+        let Prim::Triangle { v0, e1, e2 } = *p else { return None };
+        for (k, v) in [v0, e1, e2].into_iter().enumerate() {
             for a in 0..3 {
-                b.v0[a][lane] = v0[a];
-                b.e1[a][lane] = e1[a];
-                b.e2[a][lane] = e2[a];
+                b[k][a][lane] = v[a];
             }
         }
-        Some(b)
+    }
+    Some(b)
+}
+
+impl Tri4 {
+    fn new(tris: &[Prim]) -> Option<Tri4> {
+        let [v0, e1, e2] = tri_lanes::<4>(tris)?.map(|v| v.map(Vec4::from_array));
+        Some(Tri4 { v0, e1, e2 })
     }
 
     /// Möller–Trumbore on four triangles at once, dividing by the determinant only for lanes

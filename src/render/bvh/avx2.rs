@@ -43,16 +43,8 @@ struct Tri8 {
 
 impl Tri8 {
     fn new(tris: &[Prim]) -> Option<Tri8> {
-        let mut b = Tri8 { v0: [[0.0; 8]; 3], e1: [[0.0; 8]; 3], e2: [[0.0; 8]; 3] };
-        for (lane, p) in tris.iter().enumerate() {
-            let Prim::Triangle { v0, e1, e2 } = *p else { return None };
-            for a in 0..3 {
-                b.v0[a][lane] = v0[a];
-                b.e1[a][lane] = e1[a];
-                b.e2[a][lane] = e2[a];
-            }
-        }
-        Some(b)
+        let [v0, e1, e2] = super::tri_lanes::<8>(tris)?;
+        Some(Tri8 { v0, e1, e2 })
     }
 }
 
