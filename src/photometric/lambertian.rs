@@ -10,6 +10,9 @@
 //! saturation), judged against the median absolute residual (threshold 3·1.4826·MAD, at least
 //! 2 % of the pixel's predicted brightness), and refits until the set settles (≤ 10 rounds).
 //! Saturated observations (any channel at the top code value) are never used by it.
+//! Black observations (≤ 1 % of the pixel's brightest) are never used while three others
+//! remain: ρ·max(0, l·n) = 0 says only l·n ≤ 0. A refit whose set cannot be solved keeps the
+//! fit before it.
 //! A pixel with fewer than 3 usable observations, or whose used lights are nearly coplanar
 //! (condition number of the 3×3 normal matrix above 10⁶), gets no normal.
 
@@ -89,6 +92,13 @@ pub fn solve_plain(lights: &[DVec3], obs: &[[f32; 3]]) -> Option<Pixel> {
 /// (not saturated).
 pub fn solve_robust(lights: &[DVec3], obs: &[[f32; 3]], valid: &[bool]) -> Option<Pixel> {
     let g = grey(obs);
+    // Black observations (≤ 1 % of the brightest) are left out: ρ·max(0, l·n) = 0 says only
+    // l·n ≤ 0, so each is an attached shadow (never fitted anyway) or a cast shadow (an
+    // outlier, and deep in a hole the majority, which the MAD test cannot reject). Unless
+    // fewer than three others remain.
+    let brightest = g.iter().zip(valid).filter(|(_, &ok)| ok).fold(0.0f64, |m, (&v, _)| m.max(v));
+    let lit: Vec<bool> = g.iter().zip(valid).map(|(&v, &ok)| ok && v > 0.01 * brightest).collect();
+    let valid: &[bool] = if lit.iter().filter(|&&u| u).count() >= 3 { &lit } else { valid };
     // Start from the middle of the pixel's brightness ranking: the darkest quarter (shadows)
     // and the brightest tenth (highlights) are the commonest outliers.
     let mut order: Vec<usize> = (0..g.len()).filter(|&j| valid[j]).collect();
@@ -128,7 +138,8 @@ pub fn solve_robust(lights: &[DVec3], obs: &[[f32; 3]], valid: &[bool]) -> Optio
                 ok && s > 0.05 && (v - pred).abs() <= (3.0 * 1.4826 * mad).max(0.02 * pred)
             })
             .collect();
-        let nb = fit(lights, &g, &next)?;
+        // A set the model cannot be fitted to (too few or coplanar lights) keeps the last fit.
+        let Some(nb) = fit(lights, &g, &next) else { break };
         let settled = next == use_it;
         use_it = next;
         b = nb;
@@ -190,6 +201,24 @@ mod tests {
         assert!(plain > 5.0, "plain error {plain}°");
         assert!(err < 1e-3, "robust error {err}°");
         assert!((robust.albedo[0] - 0.5).abs() < 1e-4);
+    }
+
+    /// Deep in a hole most lights are cast in shadow: with 16 of 24 observations black, the
+    /// start must not fit the zeros (a pixel like this once got no normal at all).
+    #[test]
+    fn mostly_black_pixel_keeps_its_normal() {
+        let l = lights();
+        let n = DVec3::new(0.2, -0.1, 1.0).normalize();
+        let mut obs = render(&l, n, [0.4, 0.4, 0.4]);
+        for (j, o) in obs.iter_mut().enumerate() {
+            if j % 3 != 0 {
+                *o = [0.0; 3];
+            }
+        }
+        let p = solve_robust(&l, &obs, &vec![true; l.len()]).expect("a normal");
+        let err = p.normal.angle_between(n).to_degrees();
+        assert!(err < 1e-3, "error {err}°");
+        assert_eq!(p.used, 8);
     }
 
     /// Too few or coplanar lights: no normal rather than a made-up one.
