@@ -140,41 +140,57 @@ impl Sampler {
         }
     }
 
-    /// The next Sobol dimension's scramble seeds: index shuffle, x and y.
-    #[inline]
-    fn sobol_seeds(sb: &mut Sobol) -> (u32, u32, u32) {
-        let h = mix64(sb.key ^ sb.dim.wrapping_mul(0x9e37_79b9_7f4a_7c15));
-        sb.dim += 1;
-        (h as u32, (h >> 32) as u32, mix64(h) as u32)
+    /// A uniform number in [0, 1) with 24 random bits. PCG inlines into its callers; a Sobol
+    /// point is a call.
+    #[inline(always)]
+    pub fn next(&mut self) -> f32 {
+        match &mut self.sobol {
+            Some(sb) => sb.next(),
+            None => self.pcg(),
+        }
     }
 
-    /// A uniform number in [0, 1) with 24 random bits.
-    #[inline]
-    pub fn next(&mut self) -> f32 {
-        if let Some(sb) = &mut self.sobol {
-            let (hi, hx, _) = Self::sobol_seeds(sb);
-            // The shuffled index (a nested uniform scramble of the index's digits), then the
-            // scrambled van der Corput point, whose reversed form is the index itself.
-            let i = lk_hash(sb.index_reversed, hi).reverse_bits();
-            return to_unit(lk_hash(i, hx).reverse_bits());
+    #[inline(always)]
+    pub fn next2(&mut self) -> (f32, f32) {
+        match &mut self.sobol {
+            Some(sb) => sb.next2(),
+            None => (self.pcg(), self.pcg()),
         }
+    }
+
+    #[inline(always)]
+    fn pcg(&mut self) -> f32 {
         let old = self.state;
         self.state = old.wrapping_mul(PCG_MUL).wrapping_add(PCG_INC);
         let xorshifted = (((old >> 18) ^ old) >> 27) as u32;
         let out = xorshifted.rotate_right((old >> 59) as u32);
         (out >> 8) as f32 * (1.0 / (1u32 << 24) as f32)
     }
+}
 
-    pub fn next2(&mut self) -> (f32, f32) {
-        if let Some(sb) = &mut self.sobol {
-            let (hi, hx, hy) = Self::sobol_seeds(sb);
-            let i = lk_hash(sb.index_reversed, hi).reverse_bits();
-            return (
-                to_unit(lk_hash(i, hx).reverse_bits()),
-                to_unit(lk_hash(sobol_dim1_reversed(i), hy).reverse_bits()),
-            );
-        }
-        (self.next(), self.next())
+impl Sobol {
+    /// The next dimension's scramble seeds: index shuffle, x and y.
+    #[inline]
+    fn seeds(&mut self) -> (u32, u32, u32) {
+        let h = mix64(self.key ^ self.dim.wrapping_mul(0x9e37_79b9_7f4a_7c15));
+        self.dim += 1;
+        (h as u32, (h >> 32) as u32, mix64(h) as u32)
+    }
+
+    #[inline(never)]
+    fn next(&mut self) -> f32 {
+        let (hi, hx, _) = self.seeds();
+        // The shuffled index (a nested uniform scramble of the index's digits), then the
+        // scrambled van der Corput point, whose reversed form is the index itself.
+        let i = lk_hash(self.index_reversed, hi).reverse_bits();
+        to_unit(lk_hash(i, hx).reverse_bits())
+    }
+
+    #[inline(never)]
+    fn next2(&mut self) -> (f32, f32) {
+        let (hi, hx, hy) = self.seeds();
+        let i = lk_hash(self.index_reversed, hi).reverse_bits();
+        (to_unit(lk_hash(i, hx).reverse_bits()), to_unit(lk_hash(sobol_dim1_reversed(i), hy).reverse_bits()))
     }
 }
 

@@ -189,7 +189,7 @@ impl Tree8 {
                         let nb = count.div_ceil(8);
                         self.blocks[block as usize..(block + nb) as usize]
                             .iter()
-                            .any(|b| q.hits(b, t_min, t_max).0 != 0)
+                            .any(|b| _mm256_movemask_ps(q.hits(b, t_min, t_max).0) != 0)
                     } else {
                         prims[first..first + count as usize]
                             .iter()
@@ -254,11 +254,12 @@ impl Query8 {
     }
 
     /// Möller–Trumbore on eight triangles, without dividing by the determinant until a lane is
-    /// known to be hit (the division is the slowest instruction of the test): the mask of lanes
-    /// hit within (t_min, t_max), and per lane the determinant and the numerators of b1, b2, t.
+    /// known to be hit (the division is the slowest instruction of the test): the lanes hit
+    /// within (t_min, t_max) (all bits set), and per lane the determinant and the numerators
+    /// of b1, b2, t.
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn hits(&self, b: &Tri8, t_min: f32, t_max: f32) -> (u32, [__m256; 4]) {
+    fn hits(&self, b: &Tri8, t_min: f32, t_max: f32) -> (__m256, [__m256; 4]) {
         let [dx, dy, dz] = self.dir;
         let [e1x, e1y, e1z] = [load(&b.e1[0]), load(&b.e1[1]), load(&b.e1[2])];
         let [e2x, e2y, e2z] = [load(&b.e2[0]), load(&b.e2[1]), load(&b.e2[2])];
@@ -297,17 +298,39 @@ impl Query8 {
                 _mm256_cmp_ps::<_CMP_LT_OQ>(t, mul(_mm256_set1_ps(t_max), abs_det)),
             ),
         );
-        (_mm256_movemask_ps(ok) as u32, [det, n1, n2, nt])
+        (ok, [det, n1, n2, nt])
     }
 
-    /// The nearest of the eight triangles hit within (t_min, t_max), as (lane, t, b1, b2).
+    /// The nearest of the eight triangles hit within (t_min, t_max), as (lane, t, b1, b2):
+    /// the same numbers `nearest_lane` computes lane by lane (t = n_t · (1/det), and so on),
+    /// here for all eight lanes at once and reduced to the smallest t without a branch per
+    /// lane, whose count is as unpredictable as the ray.
     #[target_feature(enable = "avx2")]
     #[inline]
     fn nearest(&self, b: &Tri8, t_min: f32, t_max: f32) -> Option<(usize, f32, f32, f32)> {
-        let (mask, [det, n1, n2, nt]) = self.hits(b, t_min, t_max);
+        let (ok, [det, n1, n2, nt]) = self.hits(b, t_min, t_max);
+        if _mm256_movemask_ps(ok) == 0 {
+            return None;
+        }
+        let inv = _mm256_div_ps(_mm256_set1_ps(1.0), det);
+        let t = _mm256_mul_ps(nt, inv);
+        let inside = _mm256_and_ps(
+            _mm256_cmp_ps::<_CMP_GT_OQ>(t, _mm256_set1_ps(t_min)),
+            _mm256_cmp_ps::<_CMP_LT_OQ>(t, _mm256_set1_ps(t_max)),
+        );
+        let valid = _mm256_and_ps(ok, inside);
+        let mask = _mm256_movemask_ps(valid) as u32;
         if mask == 0 {
             return None;
         }
-        super::nearest_lane(mask, [lanes(det), lanes(n1), lanes(n2), lanes(nt)], t_min, t_max)
+        // Lanes not hit become +∞, then the minimum is spread to every lane.
+        let tm = _mm256_blendv_ps(_mm256_set1_ps(f32::INFINITY), t, valid);
+        let m = _mm256_min_ps(tm, _mm256_permute2f128_ps::<1>(tm, tm));
+        let m = _mm256_min_ps(m, _mm256_permute_ps::<0b0100_1110>(m));
+        let m = _mm256_min_ps(m, _mm256_permute_ps::<0b1011_0001>(m));
+        let lane =
+            (_mm256_movemask_ps(_mm256_cmp_ps::<_CMP_EQ_OQ>(tm, m)) as u32 & mask).trailing_zeros() as usize;
+        let (inv, n1, n2) = (lanes(inv), lanes(n1), lanes(n2));
+        Some((lane, _mm256_cvtss_f32(m), n1[lane] * inv[lane], n2[lane] * inv[lane]))
     }
 }
