@@ -531,7 +531,8 @@ pub struct Scene {
     /// Per primitive, in the BVH's leaf order.
     pub info: Vec<PrimInfo>,
     pub lights: Vec<Light>,
-    /// Cumulative light-selection probabilities, proportional to power.
+    /// Cumulative light-selection probabilities, proportional to power, with a leading 0
+    /// (`lights.len() + 1` entries).
     pub light_cdf: Vec<f32>,
     /// Per primitive (BVH order), the index of its area light in `lights`, or `u32::MAX`.
     pub light_of_prim: Vec<u32>,
@@ -1123,16 +1124,18 @@ fn light_of_prim(lights: &[Light], prims: usize) -> Vec<u32> {
     map
 }
 
+/// The cumulative pick probabilities with a leading 0: light i is picked for u in
+/// [cdf[i], cdf[i + 1]). The leading 0 spares `pick_probability` a branch on i == 0, which
+/// the processor would mispredict as often as the pick is random.
 fn light_cdf(lights: &[Light], scene_radius: f32) -> Vec<f32> {
     let powers: Vec<f64> = lights.iter().map(|l| light_power(l, scene_radius) as f64).collect();
     let total: f64 = powers.iter().sum();
     let mut acc = 0.0;
-    powers
-        .iter()
-        .map(|p| {
+    std::iter::once(0.0)
+        .chain(powers.iter().map(|p| {
             acc += if total > 0.0 { p / total } else { 1.0 / lights.len() as f64 };
             acc as f32
-        })
+        }))
         .collect()
 }
 
@@ -1140,13 +1143,12 @@ impl Scene {
     /// Picks a light in proportion to its power: (index, probability).
     #[inline]
     pub fn pick_light(&self, u: f32) -> Option<(usize, f32)> {
-        let n = self.light_cdf.len();
+        let n = self.lights.len();
         if n == 0 {
             return None;
         }
-        let i = self.light_cdf.partition_point(|&c| c <= u).min(n - 1);
-        let prev = if i == 0 { 0.0 } else { self.light_cdf[i - 1] };
-        let p = self.light_cdf[i] - prev;
+        let i = self.light_cdf[1..].partition_point(|&c| c <= u).min(n - 1);
+        let p = self.pick_probability(i);
         (p > 0.0).then_some((i, p))
     }
 
@@ -1167,8 +1169,7 @@ impl Scene {
     /// Probability that `pick_light` chooses light `i`.
     #[inline]
     pub fn pick_probability(&self, i: usize) -> f32 {
-        let prev = if i == 0 { 0.0 } else { self.light_cdf[i - 1] };
-        self.light_cdf[i] - prev
+        self.light_cdf[i + 1] - self.light_cdf[i]
     }
 
     /// World-space ray origin and unit direction through OpenCV pixel coordinates `px`.
