@@ -175,13 +175,22 @@ impl Scene {
             let n = if front { surf.n } else { -surf.n };
             let albedo = self.albedo(surf.material, &hit, surf.p);
             let eps = epsilon(surf.p);
-            let mut bsdf = mat.bsdf.facing(front);
-            if let Some(alpha) = &mat.roughness {
-                bsdf = bsdf.with_alpha(alpha.eval(self.uv(&hit, surf.p)).x);
-            }
+            // The material's model by reference: a copy of the enum per vertex is measurable.
+            let changed;
+            let bsdf = match (&mat.bsdf, &mat.roughness) {
+                (Bsdf::Dielectric { .. }, _) if !front => {
+                    changed = mat.bsdf.facing(front);
+                    &changed
+                }
+                (_, Some(alpha)) => {
+                    changed = mat.bsdf.with_alpha(alpha.eval(self.uv(&hit, surf.p)).x);
+                    &changed
+                }
+                (b, None) => b,
+            };
 
             let delta = bsdf.is_delta();
-            let glossy = bsdf != Bsdf::Lambertian && !delta;
+            let glossy = !matches!(bsdf, Bsdf::Lambertian) && !delta;
             let (u_pick, u_light) = (s.next(), s.next2());
             if !delta {
                 if let Some((li, wi, dist, p_light)) = self.sample_light(u_pick, u_light, surf.p) {
