@@ -20,6 +20,14 @@
 //! scrambled independently of each other, so a path's dimensions are not jointly stratified
 //! (padding), but each is as random as an independent sample across pixels. The film's
 //! per-sample variance ignores the stratification and overestimates the error of the mean.
+//!
+//! Only the first `SOBOL_DIMENSIONS` (9) requests of a path are Sobol points: the pixel
+//! position and the light pick, light sample, BSDF sample and roulette number of the first
+//! two vertices (one fewer with a thin lens, whose sample comes second). Later requests come
+//! from the (seed, pixel, sample) PCG stream, as with the independent sampler. Deeper
+//! vertices carry little of the error a stratified point removes: on the Cornell box at 256
+//! spp, Sobol for every request gives RMSE 0.00475 at 30 % more instructions per path than
+//! independent numbers, the first 9 give 0.00478 at 18 % (`lumen bench convergence`, callgrind).
 
 /// SplitMix64's finaliser: a bijective 64-bit mixer.
 #[inline]
@@ -117,6 +125,10 @@ fn to_unit(bits: u32) -> f32 {
     (bits >> 8) as f32 * (1.0 / (1u32 << 24) as f32)
 }
 
+/// Requests of a path served by Sobol points; later ones come from the PCG stream (module
+/// docs).
+pub const SOBOL_DIMENSIONS: u64 = 9;
+
 const PCG_MUL: u64 = 6_364_136_223_846_793_005;
 const PCG_INC: u64 = 1_442_695_040_888_963_407;
 
@@ -130,7 +142,7 @@ impl Sampler {
         match kind {
             SamplerKind::Independent => Sampler::new(seed, pixel, sample),
             SamplerKind::Sobol => Sampler {
-                state: 0,
+                state: Sampler::new(seed, pixel, sample).state,
                 sobol: Some(Sobol {
                     index_reversed: (sample as u32).reverse_bits(),
                     key: mix64(seed ^ mix64(pixel)),
@@ -145,16 +157,16 @@ impl Sampler {
     #[inline(always)]
     pub fn next(&mut self) -> f32 {
         match &mut self.sobol {
-            Some(sb) => sb.next(),
-            None => self.pcg(),
+            Some(sb) if sb.dim < SOBOL_DIMENSIONS => sb.next(),
+            _ => self.pcg(),
         }
     }
 
     #[inline(always)]
     pub fn next2(&mut self) -> (f32, f32) {
         match &mut self.sobol {
-            Some(sb) => sb.next2(),
-            None => (self.pcg(), self.pcg()),
+            Some(sb) if sb.dim < SOBOL_DIMENSIONS => sb.next2(),
+            _ => (self.pcg(), self.pcg()),
         }
     }
 
@@ -259,7 +271,8 @@ mod tests {
         for pixel in [0u64, 1, 77, 123_456] {
             let mut samplers: Vec<Sampler> =
                 (0..n as u64).map(|k| Sampler::with_kind(SamplerKind::Sobol, 9, pixel, k)).collect();
-            for dim in 0..12 {
+            // Requests 0..9: pair, pair, single, pair, pair, single, pair, pair, single.
+            for dim in 0..SOBOL_DIMENSIONS as usize {
                 let pts: Vec<(f32, f32)> = samplers
                     .iter_mut()
                     .map(|s| if dim % 3 == 2 { (s.next(), 0.5) } else { s.next2() })
@@ -283,12 +296,12 @@ mod tests {
     }
 
     /// Sobol streams of neighbouring pixels are uncorrelated in every early dimension, and the
-    /// numbers are uniform over many pixels.
+    /// numbers are uniform over many pixels, on both sides of the switch to PCG numbers.
     #[test]
     fn sobol_pixels_are_uncorrelated() {
         let n = 20_000u64;
         let sobol = |pixel| Sampler::with_kind(SamplerKind::Sobol, 5, pixel, 3);
-        for dim in 0..8 {
+        for dim in 0..2 * SOBOL_DIMENSIONS as usize {
             let (mean, corr) = mean_and_correlation(n, dim, |i| (sobol(i), sobol(i + 1)));
             let nf = n as f64;
             assert!((mean - 0.5).abs() < 5.0 / (12.0 * nf).sqrt(), "dimension {dim}: mean {mean}");
