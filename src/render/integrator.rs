@@ -212,10 +212,9 @@ impl Scene {
             // After a delta vertex the emitter the ray reaches counts in full (weight 1).
             mis_pdf = if delta { Some(f32::INFINITY) } else { glossy.then(|| bsdf.pdf(albedo, n, wo, wi)) };
             beta *= weight;
-            let u_rr = s.next();
             if depth >= RR_START {
                 let q = beta.max_element().min(0.95);
-                if u_rr >= q {
+                if s.next() >= q {
                     break;
                 }
                 beta /= q;
