@@ -24,10 +24,10 @@
 //!
 //! | scene                          | triangles | lumen 4-wide | lumen 8-wide | obvhs CWBVH | lumen any-hit 4 / 8 |
 //! |--------------------------------|----------:|-------------:|-------------:|------------:|--------------------:|
-//! | Cornell box                    |        36 |         4.54 |         9.02 |        4.29 |        6.90 / 13.32 |
-//! | icosphere, subdivided 6 times  |    81 920 |         0.63 |         1.52 |        0.81 |         1.92 / 2.71 |
+//! | Cornell box                    |        36 |         6.39 |         9.46 |        4.41 |        6.90 / 13.96 |
+//! | icosphere, subdivided 6 times  |    81 920 |         0.53 |         1.70 |        0.72 |         2.06 / 2.91 |
 //!
-//! lumen's 8-wide tree is about twice as fast as obvhs on both, so obvhs is not used. (The
+//! lumen's 8-wide tree is 2.1–2.4× as fast as obvhs on both, so obvhs is not used. (The
 //! machine's speed moves all figures by up to a factor of two between runs; the columns of a
 //! row come from the same run.)
 
