@@ -48,7 +48,8 @@ pub enum SamplerKind {
     /// Independent uniform numbers (the default; its variance estimate is exact).
     #[default]
     Independent,
-    /// Padded Owen-scrambled Sobol points; best with a power-of-two sample count.
+    /// Padded Owen-scrambled Sobol points for the first `SOBOL_DIMENSIONS` requests of a path,
+    /// PCG numbers after; best with a power-of-two sample count.
     Sobol,
 }
 
