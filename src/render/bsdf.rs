@@ -297,6 +297,7 @@ impl Bsdf {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::render::sampler::{Sampler, SamplerKind};
 
     /// Cosine-weighted directions come out unit length (they are not renormalised) and in the
     /// upper hemisphere, for normals all over the sphere, the poles included.
@@ -327,7 +328,6 @@ mod tests {
         }
         assert!(worst < 1.5e-7, "worst error {worst}");
     }
-    use crate::render::sampler::{Sampler, SamplerKind};
 
     fn dir(theta_deg: f32, phi_deg: f32) -> Vec3A {
         let (t, p) = (theta_deg.to_radians(), phi_deg.to_radians());
