@@ -286,13 +286,13 @@ impl Tri4 {
     }
 }
 
-/// Among the lanes of `mask` (triangles a block test found hit), the nearest, as (lane, t, b1,
-/// b2): the divisions the block test saved, done for these lanes only, and t checked against
-/// the range once more as the divided value (the block compared t·|det| with it).
+/// Among the lanes of `mask` (triangles a 4-wide block test found hit), the nearest, as (lane,
+/// t, b1, b2): the divisions the block test saved, done for these lanes only, and t checked
+/// against the range once more as the divided value (the block compared t·|det| with it).
 #[inline(always)]
-fn nearest_lane<const N: usize>(
+fn nearest_lane(
     mut mask: u32,
-    [det, n1, n2, nt]: [[f32; N]; 4],
+    [det, n1, n2, nt]: [[f32; 4]; 4],
     t_min: f32,
     t_max: f32,
 ) -> Option<(usize, f32, f32, f32)> {
