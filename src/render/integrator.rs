@@ -194,9 +194,9 @@ impl Scene {
             // let LLVM call `Bsdf::pdf` on every Lambertian vertex and throw the result away
             // (6 % of a Cornell path's instructions).
             let glossy = matches!(bsdf, Bsdf::BlinnPhong { .. } | Bsdf::Conductor { .. });
-            let (u_pick, u_light) = (s.next(), s.next2());
+            let u_light = s.next2();
             if !delta {
-                if let Some((li, wi, dist, p_light)) = self.sample_light(u_pick, u_light, surf.p) {
+                if let Some((li, wi, dist, p_light)) = self.sample_light(u_light, surf.p) {
                     let cos = n.dot(wi);
                     if cos > 0.0 && self.unoccluded(surf.p + n * eps, surf.p, wi, dist) {
                         let w = match p_light {
@@ -306,17 +306,14 @@ impl Scene {
         self.pick_probability(i as usize) * r2 / (area * cos_light)
     }
 
-    /// One light sample seen from `p`: (incident radiance divided by every pdf, unit direction
+    /// One light sample seen from `p`, the light picked by `u.0` (`pick_light`) and its point
+    /// drawn with what is left of `u.0` and `u.1`: (incident radiance divided by every pdf, unit direction
     /// towards the light, distance, solid-angle density of the sample, `None` for point and
     /// directional lights). `None` when the sample carries nothing.
     #[inline]
-    pub fn sample_light(
-        &self,
-        u_pick: f32,
-        u: (f32, f32),
-        p: Vec3A,
-    ) -> Option<(Vec3A, Vec3A, f32, Option<f32>)> {
-        let (i, p_pick) = self.pick_light(u_pick)?;
+    pub fn sample_light(&self, u: (f32, f32), p: Vec3A) -> Option<(Vec3A, Vec3A, f32, Option<f32>)> {
+        let (i, p_pick, u0) = self.pick_light(u.0)?;
+        let u = (u0, u.1);
         match self.lights[i] {
             Light::Point { position, intensity } => {
                 let d = position - p;

@@ -1140,16 +1140,24 @@ fn light_cdf(lights: &[Light], scene_radius: f32) -> Vec<f32> {
 }
 
 impl Scene {
-    /// Picks a light in proportion to its power: (index, probability).
+    /// Picks a light in proportion to its power: (index, probability, `u` stretched over the
+    /// light's share of [0, 1)). The stretched number is again uniform on [0, 1) and
+    /// independent of the pick, so light sampling reuses it as its point's first coordinate:
+    /// one stratified pair then covers pick and point together (the two triangles of a quad
+    /// light are one stratified square), and no number is spent on the pick alone.
     #[inline]
-    pub fn pick_light(&self, u: f32) -> Option<(usize, f32)> {
+    pub fn pick_light(&self, u: f32) -> Option<(usize, f32, f32)> {
         let n = self.lights.len();
         if n == 0 {
             return None;
         }
         let i = self.light_cdf[1..].partition_point(|&c| c <= u).min(n - 1);
         let p = self.pick_probability(i);
-        (p > 0.0).then_some((i, p))
+        if !(p > 0.0) {
+            return None;
+        }
+        let reused = ((u - self.light_cdf[i]) / p).clamp(0.0, 1.0 - f32::EPSILON / 2.0);
+        Some((i, p, reused))
     }
 
     /// The environment's radiance arriving along `-dir` (seen looking along `dir`) and the
