@@ -60,7 +60,8 @@ pub fn luminance(c: Vec3A) -> f32 {
 /// An orthonormal basis (t, b) completing n (Duff et al. 2017).
 #[inline]
 pub fn basis(n: Vec3A) -> (Vec3A, Vec3A) {
-    let s = if n.z >= 0.0 { 1.0 } else { -1.0 };
+    // As in the paper: a sign copy, not a compare and a branch (n.z = −0 takes −1, also fine).
+    let s = 1.0f32.copysign(n.z);
     let a = -1.0 / (s + n.z);
     let b = n.x * n.y * a;
     (Vec3A::new(1.0 + s * n.x * n.x * a, s * b, -s * n.x), Vec3A::new(b, s + n.y * n.y * a, -n.y))
@@ -85,8 +86,12 @@ pub fn cosine_hemisphere(n: Vec3A, u1: f32, u2: f32) -> Vec3A {
 #[inline]
 pub fn unit_circle(u: f32) -> (f32, f32) {
     let v = 4.0 * u;
-    let q = (v + 0.5) as u32;
-    let t = (v - q as f32) * std::f32::consts::FRAC_PI_2;
+    // Adding 2²³ rounds v to the nearest integer, which then sits in the low mantissa bits:
+    // two additions instead of a saturating float-to-integer conversion. Only q's low two bits
+    // are used.
+    let shifted = v + 8_388_608.0;
+    let q = shifted.to_bits();
+    let t = (v - (shifted - 8_388_608.0)) * std::f32::consts::FRAC_PI_2;
     let t2 = t * t;
     let sin =
         t * (1.0 + t2 * (-1.0 / 6.0 + t2 * (1.0 / 120.0 + t2 * (-1.0 / 5040.0 + t2 * (1.0 / 362_880.0)))));

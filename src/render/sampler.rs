@@ -66,7 +66,11 @@ pub enum SamplerKind {
 /// The random stream of one (pixel, sample) pair; `next` walks its dimensions.
 pub struct Sampler {
     state: u64,
-    sobol: Option<Sobol>,
+    /// Sobol requests left before the PCG stream takes over: 0 for independent numbers. A
+    /// counter the hot path tests, rather than an `Option` and a dimension, costs half the
+    /// instructions per request.
+    sobol_left: u32,
+    sobol: Sobol,
 }
 
 /// Where a Sobol stream stands: its sample index (bit-reversed, the form the index shuffle
@@ -147,7 +151,11 @@ const PCG_INC: u64 = 1_442_695_040_888_963_407;
 
 impl Sampler {
     pub fn new(seed: u64, pixel: u64, sample: u64) -> Sampler {
-        Sampler { state: mix64(seed ^ mix64(pixel ^ mix64(sample.wrapping_add(0x5851_f42d)))), sobol: None }
+        Sampler {
+            state: mix64(seed ^ mix64(pixel ^ mix64(sample.wrapping_add(0x5851_f42d)))),
+            sobol_left: 0,
+            sobol: Sobol { index_reversed: 0, key: 0, dim: 0 },
+        }
     }
 
     /// Sample `sample` of pixel `pixel` from the chosen kind of stream.
@@ -156,11 +164,12 @@ impl Sampler {
             SamplerKind::Independent => Sampler::new(seed, pixel, sample),
             SamplerKind::Sobol => Sampler {
                 state: Sampler::new(seed, pixel, sample).state,
-                sobol: Some(Sobol {
+                sobol_left: SOBOL_DIMENSIONS as u32,
+                sobol: Sobol {
                     index_reversed: (sample as u32).reverse_bits(),
                     key: mix64(seed ^ mix64(pixel)),
                     dim: 0,
-                }),
+                },
             },
         }
     }
@@ -169,17 +178,21 @@ impl Sampler {
     /// point is a call.
     #[inline(always)]
     pub fn next(&mut self) -> f32 {
-        match &mut self.sobol {
-            Some(sb) if sb.dim < SOBOL_DIMENSIONS => sb.next(),
-            _ => self.pcg(),
+        if self.sobol_left > 0 {
+            self.sobol_left -= 1;
+            self.sobol.next()
+        } else {
+            self.pcg()
         }
     }
 
     #[inline(always)]
     pub fn next2(&mut self) -> (f32, f32) {
-        match &mut self.sobol {
-            Some(sb) if sb.dim < SOBOL_DIMENSIONS => sb.next2(),
-            _ => (self.pcg(), self.pcg()),
+        if self.sobol_left > 0 {
+            self.sobol_left -= 1;
+            self.sobol.next2()
+        } else {
+            (self.pcg(), self.pcg())
         }
     }
 
