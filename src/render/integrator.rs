@@ -307,9 +307,9 @@ impl Scene {
     }
 
     /// One light sample seen from `p`, the light picked by `u.0` (`pick_light`) and its point
-    /// drawn with what is left of `u.0` and `u.1`: (incident radiance divided by every pdf, unit direction
-    /// towards the light, distance, solid-angle density of the sample, `None` for point and
-    /// directional lights). `None` when the sample carries nothing.
+    /// drawn with what is left of `u.0` and `u.1`: (incident radiance divided by every pdf,
+    /// unit direction towards the light, distance, solid-angle density of the sample, `None`
+    /// for point and directional lights). `None` when the sample carries nothing.
     #[inline]
     pub fn sample_light(&self, u: (f32, f32), p: Vec3A) -> Option<(Vec3A, Vec3A, f32, Option<f32>)> {
         let (i, p_pick, u0) = self.pick_light(u.0)?;
