@@ -51,6 +51,9 @@ pub struct Settings {
     /// Worker threads; all available cores when `None`.
     pub threads: Option<usize>,
     pub progress: bool,
+    /// Trace eight paths at once where the scene allows it (`render::lanes`; the image is the
+    /// same either way). False forces the one-path loop, for comparisons.
+    pub lanes: bool,
 }
 
 impl Settings {
@@ -63,6 +66,7 @@ impl Settings {
             crop: None,
             threads: None,
             progress: false,
+            lanes: true,
         }
     }
 }
@@ -77,7 +81,8 @@ pub struct Film {
     pub dropped_samples: u64,
 }
 
-const RR_START: u32 = 5;
+/// Segments after which Russian roulette starts (module docs).
+pub(super) const RR_START: u32 = 5;
 
 /// Offset for spawning rays off a surface, scaled with the coordinates' magnitude.
 #[inline]
@@ -399,6 +404,7 @@ pub fn render(scene: &Scene, settings: &Settings) -> Film {
     let mut variance = Image::new(fw, fh, 3);
     let bar = super::progress_bar(fh as u64, "render", settings.progress);
     let dropped = std::sync::atomic::AtomicU64::new(0);
+    let lanes = settings.lanes && super::lanes::supported(scene, settings);
     let mut work = || {
         let (mean, variance) = (&mut mean, &mut variance);
         mean.data
@@ -408,12 +414,19 @@ pub fn render(scene: &Scene, settings: &Settings) -> Film {
             .for_each(|(row, (mrow, vrow))| {
                 let y = y0 + row as u32;
                 let mut lost = 0;
-                for i in 0..fw as usize {
-                    let x = x0 + i as u32;
-                    let (m, v, d) = render_pixel(scene, settings, x, y);
+                let mut put = |i: usize, (m, v, d): ([f32; 3], [f32; 3], u64)| {
                     mrow[3 * i..3 * i + 3].copy_from_slice(&m);
                     vrow[3 * i..3 * i + 3].copy_from_slice(&v);
                     lost += d;
+                };
+                if lanes {
+                    for (i, px) in super::lanes::render_row(scene, settings, y, x0, x1).into_iter().enumerate() {
+                        put(i, px);
+                    }
+                } else {
+                    for i in 0..fw as usize {
+                        put(i, render_pixel(scene, settings, x0 + i as u32, y));
+                    }
                 }
                 if lost > 0 {
                     dropped.fetch_add(lost, std::sync::atomic::Ordering::Relaxed);
@@ -449,32 +462,41 @@ fn lens_ray(lens: super::scene::ThinLens, d: glam::DVec3, u: (f32, f32)) -> (gla
 
 /// Mean and variance of the mean of one pixel, and the number of non-finite samples dropped.
 fn render_pixel(scene: &Scene, settings: &Settings, x: u32, y: u32) -> ([f32; 3], [f32; 3], u64) {
+    pixel_stats((0..settings.spp).map(|k| {
+        let (mut s, ray) = camera_path(scene, settings, x, y, k);
+        ray.map_or(Vec3A::ZERO, |ray| scene.trace(ray, settings.max_depth, &mut s))
+    }))
+}
+
+/// The start of sample `k` of pixel (x, y): its sampler, after the pixel position (and a thin
+/// lens's sample) were drawn, and the camera ray, `None` beyond the fold of the distortion
+/// (no scene ray maps there; the sample is black).
+pub(super) fn camera_path(scene: &Scene, settings: &Settings, x: u32, y: u32, k: u32) -> (Sampler, Option<Ray>) {
     let pixel_index = y as u64 * scene.camera.width as u64 + x as u64;
+    let mut s = Sampler::with_kind(settings.sampler, settings.seed, pixel_index, k as u64);
+    let (jx, jy) = s.next2();
+    let px = DVec2::new(x as f64 + jx as f64 - 0.5, y as f64 + jy as f64 - 0.5);
+    let Some(d) = scene.camera.pixel_ray(px) else { return (s, None) };
+    let origin = Vec3A::from(scene.t_world_cam.translation.as_vec3());
+    let rot = scene.t_world_cam.rotation;
+    let ray = match scene.lens {
+        Some(lens) if d.z > 0.0 => {
+            let (lo, ld) = lens_ray(lens, d, s.next2());
+            Ray { origin: origin + Vec3A::from((rot * lo).as_vec3()), dir: Vec3A::from((rot * ld).as_vec3()) }
+        }
+        _ => Ray { origin, dir: Vec3A::from((rot * d).as_vec3()) },
+    };
+    (s, Some(ray))
+}
+
+/// Mean and variance of the mean of a pixel's samples, in sample order, and the number of
+/// non-finite samples dropped.
+pub(super) fn pixel_stats(samples: impl ExactSizeIterator<Item = Vec3A>) -> ([f32; 3], [f32; 3], u64) {
+    let spp = samples.len() as u64;
     let mut sum = [0.0f64; 3];
     let mut sum2 = [0.0f64; 3];
     let mut dropped = 0;
-    let origin = Vec3A::from(scene.t_world_cam.translation.as_vec3());
-    let rot = scene.t_world_cam.rotation;
-    for k in 0..settings.spp {
-        let mut s = Sampler::with_kind(settings.sampler, settings.seed, pixel_index, k as u64);
-        let (jx, jy) = s.next2();
-        let px = DVec2::new(x as f64 + jx as f64 - 0.5, y as f64 + jy as f64 - 0.5);
-        let l = match scene.camera.pixel_ray(px) {
-            Some(d) => {
-                let ray = match scene.lens {
-                    Some(lens) if d.z > 0.0 => {
-                        let (lo, ld) = lens_ray(lens, d, s.next2());
-                        Ray {
-                            origin: origin + Vec3A::from((rot * lo).as_vec3()),
-                            dir: Vec3A::from((rot * ld).as_vec3()),
-                        }
-                    }
-                    _ => Ray { origin, dir: Vec3A::from((rot * d).as_vec3()) },
-                };
-                scene.trace(ray, settings.max_depth, &mut s)
-            }
-            None => Vec3A::ZERO, // beyond the fold of the distortion: no scene ray maps here
-        };
+    for l in samples {
         if !l.is_finite() {
             dropped += 1;
             continue;
@@ -485,7 +507,7 @@ fn render_pixel(scene: &Scene, settings: &Settings, x: u32, y: u32) -> ([f32; 3]
             sum2[c] += v * v;
         }
     }
-    let n = (settings.spp as u64 - dropped).max(1) as f64;
+    let n = (spp - dropped).max(1) as f64;
     let mut mean = [0.0f32; 3];
     let mut var = [0.0f32; 3];
     for c in 0..3 {

@@ -9,6 +9,7 @@ pub mod bvh;
 pub mod envmap;
 pub mod geometry;
 pub mod integrator;
+pub mod lanes;
 pub mod microfacet;
 pub mod obj;
 pub mod sampler;

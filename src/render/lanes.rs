@@ -1,0 +1,649 @@
+//! Eight paths at once: `Scene::trace` for scenes of Lambertian surfaces lit by triangle area
+//! lights, point lights and directional lights (the Cornell box, the calibration and
+//! photometric scenes), with the shading between hits done for eight paths in the lanes of
+//! AVX2 registers.
+//!
+//! Rays are still traced one at a time (the BVH's 8-wide tests already use the lanes for one
+//! ray). What the lanes take over is everything between two hits: the light sample, the
+//! shadow ray's set-up, the Lambertian contribution, the cosine-weighted bounce (Malley's
+//! method with `bsdf::unit_circle`'s polynomials), the throughput and Russian roulette. A lane
+//! whose path ends takes the next (pixel, sample) of its group of pixels at once, so the lanes
+//! stay full while paths of different lengths run side by side.
+//!
+//! Every lane performs the scalar loop's floating-point operations in the same order, draws
+//! the same numbers from its own (pixel, sample) sampler, and the film sums each pixel's
+//! samples in sample order, so the image is bit-identical to the scalar loop's (tested). Scenes
+//! with anything else (glossy or delta materials, textured roughness, spot, sphere or
+//! environment lights) and processors without AVX2 take the scalar loop.
+
+use super::bsdf::Bsdf;
+use super::geometry::{Prim, Ray};
+use super::integrator::{camera_path, pixel_stats, Settings, RR_START};
+use super::sampler::Sampler;
+use super::scene::{Light, Scene};
+use glam::Vec3A;
+
+/// Whether `render` may draw this scene eight paths at a time.
+pub fn supported(scene: &Scene, settings: &Settings) -> bool {
+    simd::available()
+        && settings.max_depth >= 1
+        && scene.environment_light.is_none()
+        && scene.materials.iter().all(|m| matches!(m.bsdf, Bsdf::Lambertian) && m.roughness.is_none())
+        && scene.lights.iter().all(|l| match *l {
+            Light::Point { .. } | Light::Directional { .. } => true,
+            Light::Area { prim, .. } => matches!(scene.bvh.prims[prim as usize], Prim::Triangle { .. }),
+            _ => false,
+        })
+}
+
+/// Samples per group of pixels whose paths share the lanes: enough that the group's last,
+/// longest paths leave the lanes idle for a small share of the time.
+const GROUP_SAMPLES: usize = 4096;
+
+/// Mean, variance of the mean and dropped samples of the pixels x0..x1 of row y, as
+/// `integrator::render_pixel` gives them. Only for scenes `supported` accepts.
+pub fn render_row(scene: &Scene, settings: &Settings, y: u32, x0: u32, x1: u32) -> Vec<([f32; 3], [f32; 3], u64)> {
+    let spp = settings.spp as usize;
+    let group = (GROUP_SAMPLES / spp.max(1)).max(1) as u32;
+    let mut out = Vec::with_capacity((x1 - x0) as usize);
+    let mut radiance = Vec::new();
+    let mut gx = x0;
+    while gx < x1 {
+        let gx1 = (gx + group).min(x1);
+        radiance.clear();
+        radiance.resize((gx1 - gx) as usize * spp, Vec3A::ZERO);
+        // SAFETY: `supported` checked that the processor has AVX2.
+        unsafe { simd::trace_group(scene, settings, y, gx, gx1, &mut radiance) };
+        out.extend(radiance.chunks(spp.max(1)).map(|c| pixel_stats(c.iter().copied())));
+        gx = gx1;
+    }
+    if spp == 0 {
+        out = (x0..x1).map(|_| pixel_stats(std::iter::empty())).collect();
+    }
+    out
+}
+
+/// The light a lane's vertex sampled, as the lanes' arithmetic needs it: a triangle (v0, e1,
+/// e2, unit normal, area), a point (position in v0) or a direction (towards the light, in v0).
+#[derive(Clone, Copy, Default)]
+struct LaneLight {
+    v0: Vec3A,
+    e1: Vec3A,
+    e2: Vec3A,
+    n: Vec3A,
+    /// Radiance (area light), intensity (point light) or irradiance (directional light).
+    power: Vec3A,
+    area: f32,
+    kind: Kind,
+}
+
+#[derive(Clone, Copy, Default, PartialEq, Eq)]
+enum Kind {
+    #[default]
+    Triangle,
+    Point,
+    Directional,
+}
+
+fn lane_lights(scene: &Scene) -> Vec<LaneLight> {
+    scene
+        .lights
+        .iter()
+        .map(|l| match *l {
+            Light::Point { position, intensity } => {
+                LaneLight { v0: position, power: intensity, kind: Kind::Point, ..Default::default() }
+            }
+            Light::Directional { to_light, irradiance } => {
+                LaneLight { v0: to_light, power: irradiance, kind: Kind::Directional, ..Default::default() }
+            }
+            Light::Area { prim, radiance, area } => match scene.bvh.prims[prim as usize] {
+                Prim::Triangle { v0, e1, e2 } => LaneLight {
+                    v0,
+                    e1,
+                    e2,
+                    n: scene.info[prim as usize].normal,
+                    power: radiance,
+                    area,
+                    kind: Kind::Triangle,
+                },
+                Prim::Sphere { .. } => LaneLight::default(),
+            },
+            _ => LaneLight::default(),
+        })
+        .collect()
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+mod simd {
+    pub fn available() -> bool {
+        false
+    }
+    pub unsafe fn trace_group(
+        _: &super::Scene,
+        _: &super::Settings,
+        _: u32,
+        _: u32,
+        _: u32,
+        _: &mut [super::Vec3A],
+    ) {
+        unreachable!("supported() is false without AVX2")
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod simd {
+    use super::*;
+    use std::arch::x86_64::*;
+    use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
+
+    pub fn available() -> bool {
+        is_x86_feature_detected!("avx2")
+    }
+
+    /// Eight f32 lanes. The operators are IEEE single operations lane by lane, as the scalar
+    /// code's; they are inlined into the AVX2 function that uses them.
+    #[derive(Clone, Copy)]
+    struct F(__m256);
+
+    /// A lane mask: all bits set where true.
+    #[derive(Clone, Copy)]
+    struct M(__m256);
+
+    macro_rules! binop {
+        ($trait:ident, $f:ident, $intr:ident) => {
+            impl $trait for F {
+                type Output = F;
+                #[inline(always)]
+                fn $f(self, o: F) -> F {
+                    // SAFETY: only reached inside `trace_group`, which requires AVX2.
+                    F(unsafe { $intr(self.0, o.0) })
+                }
+            }
+        };
+    }
+    binop!(Add, add, _mm256_add_ps);
+    binop!(Sub, sub, _mm256_sub_ps);
+    binop!(Mul, mul, _mm256_mul_ps);
+    binop!(Div, div, _mm256_div_ps);
+
+    impl Neg for F {
+        type Output = F;
+        #[inline(always)]
+        fn neg(self) -> F {
+            // SAFETY: as in `binop`.
+            F(unsafe { _mm256_xor_ps(self.0, _mm256_set1_ps(-0.0)) })
+        }
+    }
+
+    impl BitAnd for M {
+        type Output = M;
+        #[inline(always)]
+        fn bitand(self, o: M) -> M {
+            // SAFETY: as in `binop`.
+            M(unsafe { _mm256_and_ps(self.0, o.0) })
+        }
+    }
+
+    impl BitOr for M {
+        type Output = M;
+        #[inline(always)]
+        fn bitor(self, o: M) -> M {
+            // SAFETY: as in `binop`.
+            M(unsafe { _mm256_or_ps(self.0, o.0) })
+        }
+    }
+
+    impl Not for M {
+        type Output = M;
+        #[inline(always)]
+        fn not(self) -> M {
+            // SAFETY: as in `binop`.
+            M(unsafe { _mm256_xor_ps(self.0, _mm256_castsi256_ps(_mm256_set1_epi32(-1))) })
+        }
+    }
+
+    macro_rules! cmp {
+        ($f:ident, $pred:ident) => {
+            #[inline(always)]
+            fn $f(self, o: F) -> M {
+                // SAFETY: as in `binop`.
+                M(unsafe { _mm256_cmp_ps::<$pred>(self.0, o.0) })
+            }
+        };
+    }
+
+    impl F {
+        #[inline(always)]
+        fn splat(v: f32) -> F {
+            // SAFETY: as in `binop`.
+            F(unsafe { _mm256_set1_ps(v) })
+        }
+        #[inline(always)]
+        fn load(v: &[f32; 8]) -> F {
+            // SAFETY: reads the eight floats of `v`; as in `binop` otherwise.
+            F(unsafe { _mm256_loadu_ps(v.as_ptr()) })
+        }
+        #[inline(always)]
+        fn store(self, v: &mut [f32; 8]) {
+            // SAFETY: writes the eight floats of `v`; as in `binop` otherwise.
+            unsafe { _mm256_storeu_ps(v.as_mut_ptr(), self.0) }
+        }
+        #[inline(always)]
+        fn sqrt(self) -> F {
+            // SAFETY: as in `binop`.
+            F(unsafe { _mm256_sqrt_ps(self.0) })
+        }
+        /// `f32::min` / `max` for numbers (SSE's operand order, which glam's `max_element`
+        /// also uses).
+        #[inline(always)]
+        fn min(self, o: F) -> F {
+            // SAFETY: as in `binop`.
+            F(unsafe { _mm256_min_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn max(self, o: F) -> F {
+            // SAFETY: as in `binop`.
+            F(unsafe { _mm256_max_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn abs(self) -> F {
+            // SAFETY: as in `binop`.
+            F(unsafe { _mm256_andnot_ps(_mm256_set1_ps(-0.0), self.0) })
+        }
+        #[inline(always)]
+        fn bits(self) -> __m256i {
+            // SAFETY: as in `binop`.
+            unsafe { _mm256_castps_si256(self.0) }
+        }
+        #[inline(always)]
+        fn from_bits(v: __m256i) -> F {
+            // SAFETY: as in `binop`.
+            F(unsafe { _mm256_castsi256_ps(v) })
+        }
+        cmp!(le, _CMP_LE_OQ);
+        cmp!(gt, _CMP_GT_OQ);
+        cmp!(ge, _CMP_GE_OQ);
+        cmp!(eq, _CMP_EQ_OQ);
+    }
+
+    impl M {
+        /// `a` where true, `b` elsewhere.
+        #[inline(always)]
+        fn select(self, a: F, b: F) -> F {
+            // SAFETY: as in `binop`.
+            F(unsafe { _mm256_blendv_ps(b.0, a.0, self.0) })
+        }
+        #[inline(always)]
+        fn bits(self) -> u32 {
+            // SAFETY: as in `binop`.
+            unsafe { _mm256_movemask_ps(self.0) as u32 }
+        }
+        #[inline(always)]
+        fn from_bits(bits: u32) -> M {
+            let lanes: [i32; 8] = std::array::from_fn(|i| -(((bits >> i) & 1) as i32));
+            // SAFETY: as in `binop`.
+            M(unsafe { _mm256_castsi256_ps(_mm256_loadu_si256(lanes.as_ptr().cast())) })
+        }
+    }
+
+    /// Eight 3-vectors, one per lane.
+    #[derive(Clone, Copy)]
+    struct V {
+        x: F,
+        y: F,
+        z: F,
+    }
+
+    impl V {
+        #[inline(always)]
+        fn load(v: &[[f32; 8]; 3]) -> V {
+            V { x: F::load(&v[0]), y: F::load(&v[1]), z: F::load(&v[2]) }
+        }
+        #[inline(always)]
+        fn store(self, v: &mut [[f32; 8]; 3]) {
+            self.x.store(&mut v[0]);
+            self.y.store(&mut v[1]);
+            self.z.store(&mut v[2]);
+        }
+        /// glam's `Vec3A::dot` order: (x·x' + y·y') + z·z'.
+        #[inline(always)]
+        fn dot(self, o: V) -> F {
+            self.x * o.x + self.y * o.y + self.z * o.z
+        }
+        #[inline(always)]
+        fn add(self, o: V) -> V {
+            V { x: self.x + o.x, y: self.y + o.y, z: self.z + o.z }
+        }
+        #[inline(always)]
+        fn sub(self, o: V) -> V {
+            V { x: self.x - o.x, y: self.y - o.y, z: self.z - o.z }
+        }
+        #[inline(always)]
+        fn mul(self, o: V) -> V {
+            V { x: self.x * o.x, y: self.y * o.y, z: self.z * o.z }
+        }
+        #[inline(always)]
+        fn scale(self, s: F) -> V {
+            V { x: self.x * s, y: self.y * s, z: self.z * s }
+        }
+        #[inline(always)]
+        fn div(self, s: F) -> V {
+            V { x: self.x / s, y: self.y / s, z: self.z / s }
+        }
+        #[inline(always)]
+        fn neg(self) -> V {
+            V { x: -self.x, y: -self.y, z: -self.z }
+        }
+        #[inline(always)]
+        fn select(m: M, a: V, b: V) -> V {
+            V { x: m.select(a.x, b.x), y: m.select(a.y, b.y), z: m.select(a.z, b.z) }
+        }
+        /// glam's `Vec3A::max_element` order: max(max(x, z), y).
+        #[inline(always)]
+        fn max_element(self) -> F {
+            self.x.max(self.z).max(self.y)
+        }
+    }
+
+    /// `bsdf::unit_circle`, lane by lane.
+    #[inline(always)]
+    fn unit_circle(u: F) -> (F, F) {
+        let v = F::splat(4.0) * u;
+        let shifted = v + F::splat(8_388_608.0);
+        let q = shifted.bits();
+        let t = (v - (shifted - F::splat(8_388_608.0))) * F::splat(std::f32::consts::FRAC_PI_2);
+        let t2 = t * t;
+        let c = |x: f32| F::splat(x);
+        let sin = t
+            * (c(1.0)
+                + t2 * (c(-1.0 / 6.0) + t2 * (c(1.0 / 120.0) + t2 * (c(-1.0 / 5040.0) + t2 * c(1.0 / 362_880.0)))));
+        let cos = c(1.0) + t2 * (c(-0.5) + t2 * (c(1.0 / 24.0) + t2 * (c(-1.0 / 720.0) + t2 * c(1.0 / 40_320.0))));
+        // SAFETY: as in `binop`.
+        unsafe {
+            let one = _mm256_set1_epi32(1);
+            let two = _mm256_set1_epi32(2);
+            let swap = M(_mm256_castsi256_ps(_mm256_cmpeq_epi32(_mm256_and_si256(q, one), one)));
+            let (cb, sb) = (swap.select(sin, cos).bits(), swap.select(cos, sin).bits());
+            let c_sign = _mm256_slli_epi32::<30>(_mm256_and_si256(_mm256_add_epi32(q, one), two));
+            let s_sign = _mm256_slli_epi32::<30>(_mm256_and_si256(q, two));
+            (F::from_bits(_mm256_xor_si256(cb, c_sign)), F::from_bits(_mm256_xor_si256(sb, s_sign)))
+        }
+    }
+
+    /// `bsdf::basis`, lane by lane.
+    #[inline(always)]
+    fn basis(n: V) -> (V, V) {
+        // SAFETY: as in `binop`.
+        let s = F(unsafe { _mm256_or_ps(_mm256_and_ps(n.z.0, _mm256_set1_ps(-0.0)), _mm256_set1_ps(1.0)) });
+        let a = F::splat(-1.0) / (s + n.z);
+        let b = n.x * n.y * a;
+        (
+            V { x: F::splat(1.0) + s * n.x * n.x * a, y: s * b, z: -s * n.x },
+            V { x: b, y: s + n.y * n.y * a, z: -n.y },
+        )
+    }
+
+    /// The state of the eight lanes' paths, structure of arrays.
+    struct Lanes {
+        origin: [[f32; 8]; 3],
+        dir: [[f32; 8]; 3],
+        beta: [[f32; 8]; 3],
+        l: [[f32; 8]; 3],
+        depth: [u32; 8],
+        /// Index of the lane's sample in the group's radiance buffer.
+        slot: [usize; 8],
+        sampler: [Sampler; 8],
+        active: u32,
+    }
+
+    /// What a vertex's shading needs from the hit and the sampler, per lane.
+    #[derive(Default)]
+    struct Vertex {
+        p: [[f32; 8]; 3],
+        n: [[f32; 8]; 3],
+        albedo: [[f32; 8]; 3],
+        u_light: [[f32; 8]; 2],
+        u_bsdf: [[f32; 8]; 2],
+        u_rr: [f32; 8],
+        /// Picked light per lane (`LaneLight`), its pick probability (0: no light) and the
+        /// reused pick number.
+        light_v0: [[f32; 8]; 3],
+        light_e1: [[f32; 8]; 3],
+        light_e2: [[f32; 8]; 3],
+        light_n: [[f32; 8]; 3],
+        light_power: [[f32; 8]; 3],
+        light_area: [f32; 8],
+        /// Lanes whose light is a point, or a direction.
+        light_point: u32,
+        light_directional: u32,
+        p_pick: [f32; 8],
+        u_pick: [f32; 8],
+    }
+
+    #[inline(always)]
+    fn put(a: &mut [[f32; 8]; 3], lane: usize, v: Vec3A) {
+        a[0][lane] = v.x;
+        a[1][lane] = v.y;
+        a[2][lane] = v.z;
+    }
+
+    #[inline(always)]
+    fn get(a: &[[f32; 8]; 3], lane: usize) -> Vec3A {
+        Vec3A::new(a[0][lane], a[1][lane], a[2][lane])
+    }
+
+    /// Traces every sample of the pixels gx0..gx1 of row y into `radiance` (pixel-major,
+    /// sample order within a pixel).
+    ///
+    /// # Safety
+    /// The processor must have AVX2 (`available()`).
+    #[target_feature(enable = "avx2")]
+    pub unsafe fn trace_group(
+        scene: &Scene,
+        settings: &Settings,
+        y: u32,
+        gx0: u32,
+        gx1: u32,
+        radiance: &mut [Vec3A],
+    ) {
+        let spp = settings.spp;
+        let max_depth = settings.max_depth;
+        let lights = lane_lights(scene);
+        let mut jobs = (gx0..gx1).flat_map(|x| (0..spp).map(move |k| (x, k))).enumerate();
+        let mut lanes = Lanes {
+            origin: [[0.0; 8]; 3],
+            dir: [[0.0; 8]; 3],
+            beta: [[0.0; 8]; 3],
+            l: [[0.0; 8]; 3],
+            depth: [0; 8],
+            slot: [0; 8],
+            sampler: std::array::from_fn(|_| Sampler::new(0, 0, 0)),
+            active: 0,
+        };
+        let mut v = Vertex::default();
+        loop {
+            // Empty lanes take the next samples.
+            for lane in 0..8 {
+                if lanes.active & (1 << lane) != 0 {
+                    continue;
+                }
+                for (slot, (x, k)) in jobs.by_ref() {
+                    let (s, ray) = camera_path(scene, settings, x, y, k);
+                    let Some(ray) = ray else { continue }; // black, as the buffer already is
+                    lanes.sampler[lane] = s;
+                    lanes.slot[lane] = slot;
+                    lanes.depth[lane] = 1;
+                    put(&mut lanes.origin, lane, ray.origin);
+                    put(&mut lanes.dir, lane, ray.dir);
+                    put(&mut lanes.beta, lane, Vec3A::ONE);
+                    put(&mut lanes.l, lane, Vec3A::ZERO);
+                    lanes.active |= 1 << lane;
+                    break;
+                }
+            }
+            if lanes.active == 0 {
+                return;
+            }
+            // Hits, emission seen from the camera, and what shading needs, lane by lane.
+            let mut shade = 0u32;
+            v.light_point = 0;
+            v.light_directional = 0;
+            let mut mask = lanes.active;
+            while mask != 0 {
+                let lane = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                let ray = Ray { origin: get(&lanes.origin, lane), dir: get(&lanes.dir, lane) };
+                let depth = lanes.depth[lane];
+                let Some(hit) = scene.bvh.intersect(&ray, 0.0, f32::INFINITY) else {
+                    radiance[lanes.slot[lane]] = get(&lanes.l, lane);
+                    lanes.active &= !(1 << lane);
+                    continue;
+                };
+                let surf = scene.surface(&ray, &hit);
+                let mat = &scene.materials[surf.material as usize];
+                if let Some(le) = mat.emission {
+                    if depth == 1 && surf.n.dot(-ray.dir) > 0.0 {
+                        let l = get(&lanes.l, lane) + get(&lanes.beta, lane) * le;
+                        put(&mut lanes.l, lane, l);
+                    }
+                }
+                if depth == max_depth {
+                    radiance[lanes.slot[lane]] = get(&lanes.l, lane);
+                    lanes.active &= !(1 << lane);
+                    continue;
+                }
+                shade |= 1 << lane;
+                put(&mut v.p, lane, surf.p);
+                put(&mut v.n, lane, surf.n);
+                put(&mut v.albedo, lane, scene.albedo(surf.material, &hit, surf.p));
+                let s = &mut lanes.sampler[lane];
+                let u_light = s.next2();
+                let u_bsdf = s.next2();
+                v.u_rr[lane] = if depth >= RR_START { s.next() } else { 0.0 };
+                (v.u_light[0][lane], v.u_light[1][lane]) = u_light;
+                (v.u_bsdf[0][lane], v.u_bsdf[1][lane]) = u_bsdf;
+                v.p_pick[lane] = 0.0;
+                if let Some((i, p_pick, u0)) = scene.pick_light(u_light.0) {
+                    let ll = &lights[i];
+                    v.p_pick[lane] = p_pick;
+                    v.u_pick[lane] = u0;
+                    put(&mut v.light_v0, lane, ll.v0);
+                    put(&mut v.light_e1, lane, ll.e1);
+                    put(&mut v.light_e2, lane, ll.e2);
+                    put(&mut v.light_n, lane, ll.n);
+                    put(&mut v.light_power, lane, ll.power);
+                    v.light_area[lane] = ll.area;
+                    v.light_point |= ((ll.kind == Kind::Point) as u32) << lane;
+                    v.light_directional |= ((ll.kind == Kind::Directional) as u32) << lane;
+                }
+            }
+            if shade == 0 {
+                continue;
+            }
+            let shading = M::from_bits(shade);
+
+            // The light sample and its shadow ray (`Scene::sample_light`, `unoccluded`).
+            let p = V::load(&v.p);
+            let wo = V::load(&lanes.dir).neg();
+            let surf_n = V::load(&v.n);
+            let front = surf_n.dot(wo).ge(F::splat(0.0));
+            let n = V::select(front, surf_n, surf_n.neg());
+            let eps = F::splat(1e-4) * (F::splat(1.0) + p.x.abs().max(p.z.abs()).max(p.y.abs()));
+            let zero = F::splat(0.0);
+            let p_pick = F::load(&v.p_pick);
+            let point = M::from_bits(v.light_point);
+            let directional = M::from_bits(v.light_directional);
+            // Triangle: y = v0 + b1·e1 + b2·e2 with b1 = √u(1 − v), b2 = √u·v.
+            let su = F::load(&v.u_pick).sqrt();
+            let uv = F::load(&v.u_light[1]);
+            let (b1, b2) = (su * (F::splat(1.0) - uv), su * uv);
+            let v0 = V::load(&v.light_v0);
+            let tri_y = v0.add(V::load(&v.light_e1).scale(b1)).add(V::load(&v.light_e2).scale(b2));
+            let d = V::select(point, v0, tri_y).sub(p);
+            let r2 = d.dot(d);
+            let r = r2.sqrt();
+            let wi = V::select(directional, v0, d.div(r));
+            let cos_light = -V::load(&v.light_n).dot(wi);
+            let power = V::load(&v.light_power);
+            // Point: intensity / (r²·p_pick). Triangle: radiance / pdf, pdf = p_pick·r² / (A·cos θ_light).
+            let li_point = power.div(r2 * p_pick);
+            let pdf = p_pick * r2 / (F::load(&v.light_area) * cos_light);
+            let li_tri = power.div(pdf);
+            // Directional: irradiance / p_pick, along the direction itself.
+            let li_directional = power.div(p_pick);
+            let li = V::select(point, li_point, V::select(directional, li_directional, li_tri));
+            let tri_ok = !(cos_light.le(zero) | r2.eq(zero));
+            let cos = n.dot(wi);
+            let origin = p.add(n.scale(eps));
+            let to = p.add(wi.scale(r)).sub(origin);
+            let len = to.dot(to).sqrt();
+            let sdir = V::select(directional, wi, to.div(len));
+            let t_max = directional.select(F::splat(f32::INFINITY), len * F::splat(1.0 - 1e-4) - eps);
+            let lit = shading
+                & p_pick.gt(zero)
+                & (point | directional | tri_ok)
+                & cos.gt(zero)
+                & (directional | len.gt(zero));
+            let mut ray_o = [[0.0f32; 8]; 3];
+            let mut ray_d = [[0.0f32; 8]; 3];
+            let mut ray_t = [0.0f32; 8];
+            origin.store(&mut ray_o);
+            sdir.store(&mut ray_d);
+            t_max.store(&mut ray_t);
+            let mut visible = 0u32;
+            let mut mask = lit.bits();
+            while mask != 0 {
+                let lane = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                let ray = Ray { origin: get(&ray_o, lane), dir: get(&ray_d, lane) };
+                if !scene.bvh.occluded(&ray, 0.0, ray_t[lane]) {
+                    visible |= 1 << lane;
+                }
+            }
+
+            // Lambertian: f = kd/π where n·wo > 0 and n·wi > 0.
+            let albedo = V::load(&v.albedo);
+            let beta = V::load(&lanes.beta);
+            let f_on = n.dot(wo).gt(zero) & cos.gt(zero);
+            let none = V { x: zero, y: zero, z: zero };
+            let f = V::select(f_on, albedo.scale(F::splat(std::f32::consts::FRAC_1_PI)), none);
+            let l = V::load(&lanes.l);
+            let l = V::select(M::from_bits(visible), l.add(beta.mul(f).scale(cos).mul(li)), l);
+            l.store(&mut lanes.l);
+
+            // The bounce (`bsdf::cosine_hemisphere`): weight kd.
+            let u1 = F::load(&v.u_bsdf[0]);
+            let radius = u1.sqrt();
+            let (c, s) = unit_circle(F::load(&v.u_bsdf[1]));
+            let (t, b) = basis(n);
+            let z = (F::splat(1.0) - u1).max(zero).sqrt();
+            let wi = t.scale(radius * c).add(b.scale(radius * s)).add(n.scale(z));
+            let mut beta = beta.mul(albedo);
+            // Russian roulette after RR_START segments: survive with q = min(max β, 0.95).
+            let depth: [f32; 8] = std::array::from_fn(|i| lanes.depth[i] as f32);
+            let roulette = F::load(&depth).ge(F::splat(RR_START as f32));
+            let q = beta.max_element().min(F::splat(0.95));
+            let killed = roulette & F::load(&v.u_rr).ge(q);
+            beta = V::select(roulette, beta.div(q), beta);
+            let black = beta.x.eq(zero) & beta.y.eq(zero) & beta.z.eq(zero);
+            let alive = shading & !killed & !black;
+            let away = n.dot(wi).ge(zero);
+            let off = n.scale(eps);
+            let origin = p.add(V::select(away, off, off.neg()));
+            beta.store(&mut lanes.beta);
+            origin.store(&mut lanes.origin);
+            wi.store(&mut lanes.dir);
+            let alive = alive.bits();
+            let mut ended = shade & !alive;
+            while ended != 0 {
+                let lane = ended.trailing_zeros() as usize;
+                ended &= ended - 1;
+                radiance[lanes.slot[lane]] = get(&lanes.l, lane);
+                lanes.active &= !(1 << lane);
+            }
+            for lane in 0..8 {
+                lanes.depth[lane] += (alive >> lane) & 1;
+            }
+        }
+    }
+}
