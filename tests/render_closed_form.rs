@@ -319,8 +319,9 @@ fn one_and_two_threads_are_bit_identical() {
     assert!(a.mean.data.iter().any(|&v| v > 0.0));
 }
 
-/// Lambertian surfaces, textured or not, spheres and triangles, under area, point and
-/// directional lights together, all lit and shadowed.
+/// Lambertian surfaces, textured or not, spheres and triangles, under area lights (a quad, and
+/// a torus of 144 triangles, so the light pick searches), point and directional lights
+/// together.
 const MIXED_LIGHTS: &str = r#"
 [camera]
 width = 40
@@ -357,6 +358,13 @@ corner = [-0.95, 1.6, 0.15]
 edge_u = [0.3, 0.0, 0.0]
 edge_v = [0.0, 0.0, 0.3]
 material = "lamp"
+[[shapes]]
+type = "torus"
+radius = 0.25
+tube = 0.04
+segments = [12, 6]
+material = "lamp"
+transform = { rvec = [1.5708, 0.0, 0.0], translation = [0.8, 1.2, -0.4] }
 [[lights]]
 type = "point"
 position = [1.0, 1.5, 1.0]

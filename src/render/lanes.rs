@@ -63,54 +63,58 @@ pub fn render_row(scene: &Scene, settings: &Settings, y: u32, x0: u32, x1: u32) 
     out
 }
 
-/// The light a lane's vertex sampled, as the lanes' arithmetic needs it: a triangle (v0, e1,
-/// e2, unit normal, area), a point (position in v0) or a direction (towards the light, in v0).
-#[derive(Clone, Copy, Default)]
-struct LaneLight {
-    v0: Vec3A,
-    e1: Vec3A,
-    e2: Vec3A,
-    n: Vec3A,
-    /// Radiance (area light), intensity (point light) or irradiance (directional light).
-    power: Vec3A,
-    area: f32,
-    kind: Kind,
+/// The lights as the lanes gather them by index, one array per component: a triangle (v0,
+/// e1, e2, unit normal, area), a point (position in v0) or a direction (towards the light, in
+/// v0), and `power`: radiance, intensity or irradiance.
+struct LightTable {
+    v0: [Vec<f32>; 3],
+    e1: [Vec<f32>; 3],
+    e2: [Vec<f32>; 3],
+    n: [Vec<f32>; 3],
+    power: [Vec<f32>; 3],
+    area: Vec<f32>,
+    kind: Vec<i32>,
 }
 
-#[derive(Clone, Copy, Default, PartialEq, Eq)]
-enum Kind {
-    #[default]
-    Triangle,
-    Point,
-    Directional,
-}
+const TRIANGLE: i32 = 0;
+const POINT: i32 = 1;
+const DIRECTIONAL: i32 = 2;
 
-fn lane_lights(scene: &Scene) -> Vec<LaneLight> {
-    scene
-        .lights
-        .iter()
-        .map(|l| match *l {
-            Light::Point { position, intensity } => {
-                LaneLight { v0: position, power: intensity, kind: Kind::Point, ..Default::default() }
-            }
-            Light::Directional { to_light, irradiance } => {
-                LaneLight { v0: to_light, power: irradiance, kind: Kind::Directional, ..Default::default() }
-            }
-            Light::Area { prim, radiance, area } => match scene.bvh.prims[prim as usize] {
-                Prim::Triangle { v0, e1, e2 } => LaneLight {
-                    v0,
-                    e1,
-                    e2,
-                    n: scene.info[prim as usize].normal,
-                    power: radiance,
-                    area,
-                    kind: Kind::Triangle,
+impl LightTable {
+    fn new(scene: &Scene) -> LightTable {
+        let none = || [Vec::new(), Vec::new(), Vec::new()];
+        let mut t = LightTable {
+            v0: none(),
+            e1: none(),
+            e2: none(),
+            n: none(),
+            power: none(),
+            area: Vec::new(),
+            kind: Vec::new(),
+        };
+        for light in &scene.lights {
+            let z = Vec3A::ZERO;
+            let (kind, v0, e1, e2, n, power, area) = match *light {
+                Light::Point { position, intensity } => (POINT, position, z, z, z, intensity, 0.0),
+                Light::Directional { to_light, irradiance } => (DIRECTIONAL, to_light, z, z, z, irradiance, 0.0),
+                Light::Area { prim, radiance, area } => match scene.bvh.prims[prim as usize] {
+                    Prim::Triangle { v0, e1, e2 } => {
+                        (TRIANGLE, v0, e1, e2, scene.info[prim as usize].normal, radiance, area)
+                    }
+                    Prim::Sphere { .. } => (TRIANGLE, z, z, z, z, z, 0.0),
                 },
-                Prim::Sphere { .. } => LaneLight::default(),
-            },
-            _ => LaneLight::default(),
-        })
-        .collect()
+                _ => (TRIANGLE, z, z, z, z, z, 0.0),
+            };
+            for (table, v) in [(&mut t.v0, v0), (&mut t.e1, e1), (&mut t.e2, e2), (&mut t.n, n), (&mut t.power, power)] {
+                for a in 0..3 {
+                    table[a].push(v[a]);
+                }
+            }
+            t.area.push(area);
+            t.kind.push(kind);
+        }
+        t
+    }
 }
 
 #[cfg(not(target_arch = "x86_64"))]
@@ -260,6 +264,12 @@ mod simd {
             // SAFETY: as in `binop`.
             F(unsafe { _mm256_castsi256_ps(v) })
         }
+        /// Lane i gets `table[index[i]]`; every index must be in bounds.
+        #[inline(always)]
+        fn gather(table: &[f32], index: __m256i) -> F {
+            // SAFETY: the callers' indices are in 0..table.len(); as in `binop` otherwise.
+            F(unsafe { _mm256_i32gather_ps::<4>(table.as_ptr(), index) })
+        }
         cmp!(le, _CMP_LE_OQ);
         cmp!(gt, _CMP_GT_OQ);
         cmp!(ge, _CMP_GE_OQ);
@@ -305,6 +315,10 @@ mod simd {
             self.y.store(&mut v[1]);
             self.z.store(&mut v[2]);
         }
+        #[inline(always)]
+        fn gather(table: &[Vec<f32>; 3], index: __m256i) -> V {
+            V { x: F::gather(&table[0], index), y: F::gather(&table[1], index), z: F::gather(&table[2], index) }
+        }
         /// glam's `Vec3A::dot` order: (x·x' + y·y') + z·z'.
         #[inline(always)]
         fn dot(self, o: V) -> F {
@@ -342,6 +356,53 @@ mod simd {
         #[inline(always)]
         fn max_element(self) -> F {
             self.x.max(self.z).max(self.y)
+        }
+    }
+
+    /// Lane i gets `table[index[i]]`; every index must be in bounds.
+    #[inline(always)]
+    fn gather_i(table: &[i32], index: __m256i) -> __m256i {
+        // SAFETY: the callers' indices are in 0..table.len(); as in `binop` otherwise.
+        unsafe { _mm256_i32gather_epi32::<4>(table.as_ptr(), index) }
+    }
+
+    /// `Scene::pick_light`, lane by lane: (light index, pick probability, the pick number
+    /// stretched over the light's share). The index is a branch-free binary search for the
+    /// partition point that `partition_point` finds; the probability is 0 where the scalar
+    /// pick gives `None` (no light, or one of zero power).
+    #[inline(always)]
+    fn pick_light(cdf: &[f32], u: F) -> (__m256i, F, F) {
+        let n = cdf.len().saturating_sub(1);
+        // SAFETY: indices stay within cdf (see below); as in `binop` otherwise.
+        unsafe {
+            let zero = F::splat(0.0);
+            if n == 0 {
+                return (_mm256_setzero_si256(), zero, zero);
+            }
+            // The partition point P of cdf[1..=n] under c ≤ u lies in [base, base + size].
+            let upper = &cdf[1..];
+            let mut base = _mm256_setzero_si256();
+            let mut size = n;
+            while size > 1 {
+                let half = size / 2;
+                let mid = _mm256_add_epi32(base, _mm256_set1_epi32(half as i32));
+                let below = F::gather(upper, mid).le(u);
+                base = _mm256_castps_si256(_mm256_blendv_ps(
+                    _mm256_castsi256_ps(base),
+                    _mm256_castsi256_ps(mid),
+                    below.0,
+                ));
+                size -= half;
+            }
+            let below = F::gather(upper, base).le(u);
+            // P = base + 1 where cdf[1 + base] ≤ u (the mask is −1 there), then min(P, n − 1).
+            let p = _mm256_sub_epi32(base, _mm256_castps_si256(below.0));
+            let i = _mm256_min_epi32(p, _mm256_set1_epi32(n as i32 - 1));
+            let lo = F::gather(cdf, i);
+            let prob = F::gather(cdf, _mm256_add_epi32(i, _mm256_set1_epi32(1))) - lo;
+            let ok = prob.gt(zero);
+            let reused = ((u - lo) / prob).max(zero).min(F::splat(1.0 - f32::EPSILON / 2.0));
+            (i, ok.select(prob, zero), reused)
         }
     }
 
@@ -405,19 +466,6 @@ mod simd {
         u_light: [[f32; 8]; 2],
         u_bsdf: [[f32; 8]; 2],
         u_rr: [f32; 8],
-        /// Picked light per lane (`LaneLight`), its pick probability (0: no light) and the
-        /// reused pick number.
-        light_v0: [[f32; 8]; 3],
-        light_e1: [[f32; 8]; 3],
-        light_e2: [[f32; 8]; 3],
-        light_n: [[f32; 8]; 3],
-        light_power: [[f32; 8]; 3],
-        light_area: [f32; 8],
-        /// Lanes whose light is a point, or a direction.
-        light_point: u32,
-        light_directional: u32,
-        p_pick: [f32; 8],
-        u_pick: [f32; 8],
     }
 
     #[inline(always)]
@@ -448,8 +496,8 @@ mod simd {
     ) {
         let spp = settings.spp;
         let max_depth = settings.max_depth;
-        let lights = lane_lights(scene);
-        let mut jobs = (gx0..gx1).flat_map(|x| (0..spp).map(move |k| (x, k))).enumerate();
+        let jobs = (gx1 - gx0) as usize * spp as usize;
+        let mut next_job = 0;
         let mut lanes = Lanes {
             origin: [[0.0; 8]; 3],
             dir: [[0.0; 8]; 3],
@@ -460,6 +508,7 @@ mod simd {
             sampler: std::array::from_fn(|_| Sampler::new(0, 0, 0)),
             active: 0,
         };
+        let lights = LightTable::new(scene);
         let mut v = Vertex::default();
         loop {
             // Empty lanes take the next samples.
@@ -467,7 +516,10 @@ mod simd {
                 if lanes.active & (1 << lane) != 0 {
                     continue;
                 }
-                for (slot, (x, k)) in jobs.by_ref() {
+                while next_job < jobs {
+                    let slot = next_job;
+                    next_job += 1;
+                    let (x, k) = (gx0 + (slot / spp as usize) as u32, (slot % spp as usize) as u32);
                     let (s, ray) = camera_path(scene, settings, x, y, k);
                     let Some(ray) = ray else { continue }; // black, as the buffer already is
                     lanes.sampler[lane] = s;
@@ -486,8 +538,6 @@ mod simd {
             }
             // Hits, emission seen from the camera, and what shading needs, lane by lane.
             let mut shade = 0u32;
-            v.light_point = 0;
-            v.light_directional = 0;
             let mut mask = lanes.active;
             while mask != 0 {
                 let lane = mask.trailing_zeros() as usize;
@@ -522,20 +572,6 @@ mod simd {
                 v.u_rr[lane] = if depth >= RR_START { s.next() } else { 0.0 };
                 (v.u_light[0][lane], v.u_light[1][lane]) = u_light;
                 (v.u_bsdf[0][lane], v.u_bsdf[1][lane]) = u_bsdf;
-                v.p_pick[lane] = 0.0;
-                if let Some((i, p_pick, u0)) = scene.pick_light(u_light.0) {
-                    let ll = &lights[i];
-                    v.p_pick[lane] = p_pick;
-                    v.u_pick[lane] = u0;
-                    put(&mut v.light_v0, lane, ll.v0);
-                    put(&mut v.light_e1, lane, ll.e1);
-                    put(&mut v.light_e2, lane, ll.e2);
-                    put(&mut v.light_n, lane, ll.n);
-                    put(&mut v.light_power, lane, ll.power);
-                    v.light_area[lane] = ll.area;
-                    v.light_point |= ((ll.kind == Kind::Point) as u32) << lane;
-                    v.light_directional |= ((ll.kind == Kind::Directional) as u32) << lane;
-                }
             }
             if shade == 0 {
                 continue;
@@ -550,24 +586,25 @@ mod simd {
             let n = V::select(front, surf_n, surf_n.neg());
             let eps = F::splat(1e-4) * (F::splat(1.0) + p.x.abs().max(p.z.abs()).max(p.y.abs()));
             let zero = F::splat(0.0);
-            let p_pick = F::load(&v.p_pick);
-            let point = M::from_bits(v.light_point);
-            let directional = M::from_bits(v.light_directional);
+            let (light, p_pick, u_pick) = pick_light(&scene.light_cdf, F::load(&v.u_light[0]));
+            let kind = gather_i(&lights.kind, light);
+            let is = |k: i32| M(_mm256_castsi256_ps(_mm256_cmpeq_epi32(kind, _mm256_set1_epi32(k))));
+            let (point, directional) = (is(POINT), is(DIRECTIONAL));
             // Triangle: y = v0 + b1·e1 + b2·e2 with b1 = √u(1 − v), b2 = √u·v.
-            let su = F::load(&v.u_pick).sqrt();
+            let su = u_pick.sqrt();
             let uv = F::load(&v.u_light[1]);
             let (b1, b2) = (su * (F::splat(1.0) - uv), su * uv);
-            let v0 = V::load(&v.light_v0);
-            let tri_y = v0.add(V::load(&v.light_e1).scale(b1)).add(V::load(&v.light_e2).scale(b2));
+            let v0 = V::gather(&lights.v0, light);
+            let tri_y = v0.add(V::gather(&lights.e1, light).scale(b1)).add(V::gather(&lights.e2, light).scale(b2));
             let d = V::select(point, v0, tri_y).sub(p);
             let r2 = d.dot(d);
             let r = r2.sqrt();
             let wi = V::select(directional, v0, d.div(r));
-            let cos_light = -V::load(&v.light_n).dot(wi);
-            let power = V::load(&v.light_power);
+            let cos_light = -V::gather(&lights.n, light).dot(wi);
+            let power = V::gather(&lights.power, light);
             // Point: intensity / (r²·p_pick). Triangle: radiance / pdf, pdf = p_pick·r² / (A·cos θ_light).
             let li_point = power.div(r2 * p_pick);
-            let pdf = p_pick * r2 / (F::load(&v.light_area) * cos_light);
+            let pdf = p_pick * r2 / (F::gather(&lights.area, light) * cos_light);
             let li_tri = power.div(pdf);
             // Directional: irradiance / p_pick, along the direction itself.
             let li_directional = power.div(p_pick);
