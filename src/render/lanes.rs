@@ -19,7 +19,7 @@
 use super::bsdf::Bsdf;
 use super::geometry::{Prim, Ray};
 use super::integrator::{camera_path, pixel_stats, Settings, RR_START};
-use super::sampler::Sampler;
+use super::sampler::{self, Sampler};
 use super::scene::{Light, Scene};
 use glam::Vec3A;
 
@@ -444,6 +444,238 @@ mod simd {
         )
     }
 
+    /// Eight unsigned 64-bit lanes, as two registers (lanes 0–3, 4–7).
+    #[derive(Clone, Copy)]
+    struct U64([__m256i; 2]);
+
+    impl U64 {
+        #[inline(always)]
+        fn load(v: &[u64; 8]) -> U64 {
+            // SAFETY: reads the eight integers of `v`; as in `binop` otherwise.
+            unsafe { U64([_mm256_loadu_si256(v.as_ptr().cast()), _mm256_loadu_si256(v[4..].as_ptr().cast())]) }
+        }
+        #[inline(always)]
+        fn store(self, v: &mut [u64; 8]) {
+            // SAFETY: writes the eight integers of `v`; as in `binop` otherwise.
+            unsafe {
+                _mm256_storeu_si256(v.as_mut_ptr().cast(), self.0[0]);
+                _mm256_storeu_si256(v[4..].as_mut_ptr().cast(), self.0[1]);
+            }
+        }
+        #[inline(always)]
+        fn map(self, f: impl Fn(__m256i) -> __m256i) -> U64 {
+            U64([f(self.0[0]), f(self.0[1])])
+        }
+        #[inline(always)]
+        fn zip(self, o: U64, f: impl Fn(__m256i, __m256i) -> __m256i) -> U64 {
+            U64([f(self.0[0], o.0[0]), f(self.0[1], o.0[1])])
+        }
+        #[inline(always)]
+        fn xor(self, o: U64) -> U64 {
+            // SAFETY: as in `binop`.
+            self.zip(o, |a, b| unsafe { _mm256_xor_si256(a, b) })
+        }
+        #[inline(always)]
+        fn add(self, c: u64) -> U64 {
+            // SAFETY: as in `binop`.
+            self.map(|a| unsafe { _mm256_add_epi64(a, _mm256_set1_epi64x(c as i64)) })
+        }
+        #[inline(always)]
+        fn shr<const S: i32>(self) -> U64 {
+            // SAFETY: as in `binop`.
+            self.map(|a| unsafe { _mm256_srli_epi64::<S>(a) })
+        }
+        /// The low 64 bits of the product with c (`u64::wrapping_mul`), from 32-bit products.
+        #[inline(always)]
+        fn mul(self, c: u64) -> U64 {
+            // SAFETY: as in `binop`.
+            self.map(|a| unsafe {
+                let (lo, hi) = (_mm256_set1_epi64x((c & 0xffff_ffff) as i64), _mm256_set1_epi64x((c >> 32) as i64));
+                let cross = _mm256_add_epi64(_mm256_mul_epu32(_mm256_srli_epi64::<32>(a), lo), _mm256_mul_epu32(a, hi));
+                _mm256_add_epi64(_mm256_mul_epu32(a, lo), _mm256_slli_epi64::<32>(cross))
+            })
+        }
+        /// The low (`HIGH` false) or high halves of the eight lanes, as eight 32-bit lanes.
+        #[inline(always)]
+        fn halves<const HIGH: bool>(self) -> __m256i {
+            // SAFETY: as in `binop`.
+            unsafe {
+                let (a, b) = (_mm256_castsi256_ps(self.0[0]), _mm256_castsi256_ps(self.0[1]));
+                // Per 128-bit half: a's two chosen dwords, then b's; then the 64-bit pairs in order.
+                let mixed = if HIGH { _mm256_shuffle_ps::<0b11_01_11_01>(a, b) } else { _mm256_shuffle_ps::<0b10_00_10_00>(a, b) };
+                _mm256_permute4x64_epi64::<0b11_01_10_00>(_mm256_castps_si256(mixed))
+            }
+        }
+        /// `m` (eight 32-bit lanes, all bits or none) as the mask of the matching 64-bit lanes.
+        #[inline(always)]
+        fn widen(m: __m256i) -> U64 {
+            // SAFETY: as in `binop`.
+            unsafe {
+                U64([
+                    _mm256_cvtepi32_epi64(_mm256_castsi256_si128(m)),
+                    _mm256_cvtepi32_epi64(_mm256_extracti128_si256::<1>(m)),
+                ])
+            }
+        }
+        /// `a` where the 32-bit lane mask `m` is set, `b` elsewhere.
+        #[inline(always)]
+        fn select(m: __m256i, a: U64, b: U64) -> U64 {
+            let w = U64::widen(m);
+            // SAFETY: as in `binop`.
+            U64([0, 1].map(|h| unsafe { _mm256_blendv_epi8(b.0[h], a.0[h], w.0[h]) }))
+        }
+    }
+
+    /// `sampler::mix64`, lane by lane.
+    #[inline(always)]
+    fn mix64(x: U64) -> U64 {
+        let x = x.xor(x.shr::<30>()).mul(sampler::MIX64_MUL[0]);
+        let x = x.xor(x.shr::<27>()).mul(sampler::MIX64_MUL[1]);
+        x.xor(x.shr::<31>())
+    }
+
+    /// `sampler::lk_hash`, lane by lane.
+    #[inline(always)]
+    fn lk_hash(x: __m256i, seed: __m256i) -> __m256i {
+        // SAFETY: as in `binop`.
+        unsafe {
+            let mul = |a, c: u32| _mm256_mullo_epi32(a, _mm256_set1_epi32(c as i32));
+            let x = _mm256_xor_si256(x, mul(x, sampler::LK_MUL[0]));
+            let x = _mm256_add_epi32(x, seed);
+            let x = _mm256_mullo_epi32(x, _mm256_or_si256(_mm256_srli_epi32::<16>(seed), _mm256_set1_epi32(1)));
+            let x = _mm256_xor_si256(x, mul(x, sampler::LK_MUL[1]));
+            _mm256_xor_si256(x, mul(x, sampler::LK_MUL[2]))
+        }
+    }
+
+    /// `u32::reverse_bits`, lane by lane: the bytes swapped, then each byte's nibbles looked up
+    /// reversed and swapped.
+    #[inline(always)]
+    fn reverse_bits(x: __m256i) -> __m256i {
+        // SAFETY: as in `binop`.
+        unsafe {
+            let bytes = _mm256_setr_epi8(
+                3, 2, 1, 0, 7, 6, 5, 4, 11, 10, 9, 8, 15, 14, 13, 12, 3, 2, 1, 0, 7, 6, 5, 4, 11, 10, 9, 8, 15, 14,
+                13, 12,
+            );
+            let x = _mm256_shuffle_epi8(x, bytes);
+            let nibble = _mm256_setr_epi8(
+                0, 8, 4, 12, 2, 10, 6, 14, 1, 9, 5, 13, 3, 11, 7, 15, 0, 8, 4, 12, 2, 10, 6, 14, 1, 9, 5, 13, 3, 11,
+                7, 15,
+            );
+            let low = _mm256_set1_epi8(0x0f);
+            let lo = _mm256_shuffle_epi8(nibble, _mm256_and_si256(x, low));
+            let hi = _mm256_shuffle_epi8(nibble, _mm256_and_si256(_mm256_srli_epi16::<4>(x), low));
+            _mm256_or_si256(_mm256_slli_epi16::<4>(lo), hi)
+        }
+    }
+
+    /// `sampler::sobol_dim1_reversed`, lane by lane: the table looked up a byte at a time.
+    #[inline(always)]
+    fn sobol_dim1_reversed(i: __m256i) -> __m256i {
+        // SAFETY: every index is b·256 + (a byte) < 1024, within the table; as in `binop`.
+        unsafe {
+            let table: *const i32 = sampler::PASCAL_REVERSED.as_ptr().cast();
+            let byte = _mm256_set1_epi32(255);
+            let look = |shift: __m128i, row: i32| {
+                let index = _mm256_add_epi32(
+                    _mm256_and_si256(_mm256_srl_epi32(i, shift), byte),
+                    _mm256_set1_epi32(256 * row),
+                );
+                _mm256_i32gather_epi32::<4>(table, index)
+            };
+            let r0 = look(_mm_cvtsi32_si128(0), 0);
+            let r1 = look(_mm_cvtsi32_si128(8), 1);
+            let r2 = look(_mm_cvtsi32_si128(16), 2);
+            let r3 = look(_mm_cvtsi32_si128(24), 3);
+            _mm256_xor_si256(_mm256_xor_si256(r0, r1), _mm256_xor_si256(r2, r3))
+        }
+    }
+
+    /// `sampler::to_unit` (the top 24 bits as a float in [0, 1)), lane by lane.
+    #[inline(always)]
+    fn to_unit(bits: __m256i) -> F {
+        // SAFETY: as in `binop`.
+        let value = unsafe { F(_mm256_cvtepi32_ps(_mm256_srli_epi32::<8>(bits))) };
+        value * F::splat(1.0 / (1u32 << 24) as f32)
+    }
+
+    /// The eight lanes' `Sampler`s, structure of arrays, drawn from together.
+    #[derive(Default)]
+    struct Samplers {
+        pcg: [u64; 8],
+        sobol_left: [u32; 8],
+        index_reversed: [u32; 8],
+        key: [u64; 8],
+        dim: [u64; 8],
+    }
+
+    impl Samplers {
+        fn set(&mut self, lane: usize, s: &Sampler) {
+            (self.pcg[lane], self.sobol_left[lane], self.index_reversed[lane], self.key[lane], self.dim[lane]) =
+                s.parts();
+        }
+
+        /// `Sampler::next2` (or `next` when `two` is false, the second number then 0) for the
+        /// lanes of `want`; the other lanes' streams do not move.
+        #[inline(always)]
+        fn next(&mut self, want: u32, two: bool) -> (F, F) {
+            let zero = F::splat(0.0);
+            if want == 0 {
+                return (zero, zero);
+            }
+            // SAFETY: as in `binop`.
+            unsafe {
+                let want_m = M::from_bits(want);
+                let left = _mm256_loadu_si256(self.sobol_left.as_ptr().cast());
+                let sobol_m = _mm256_and_si256(_mm256_cmpgt_epi32(left, _mm256_setzero_si256()), _mm256_castps_si256(want_m.0));
+                let sobol = _mm256_movemask_ps(_mm256_castsi256_ps(sobol_m)) as u32;
+                let (mut x, mut y) = (zero, zero);
+                let pcg = want & !sobol;
+                if pcg != 0 {
+                    let old = U64::load(&self.pcg);
+                    let (a, state) = pcg_step(old);
+                    let (b, state) = if two { pcg_step(state) } else { (zero, state) };
+                    let m = _mm256_castps_si256(M::from_bits(pcg).0);
+                    U64::select(m, state, old).store(&mut self.pcg);
+                    (x, y) = (a, b);
+                }
+                if sobol != 0 {
+                    // `Sobol::seeds`, then `Sobol::next2` / `next`.
+                    let dim = U64::load(&self.dim);
+                    let h = mix64(U64::load(&self.key).xor(dim.mul(sampler::DIM_STRIDE)));
+                    U64::select(sobol_m, dim.add(1), dim).store(&mut self.dim);
+                    _mm256_storeu_si256(self.sobol_left.as_mut_ptr().cast(), _mm256_add_epi32(left, sobol_m));
+                    let (hi, hx) = (h.halves::<false>(), h.halves::<true>());
+                    let index = _mm256_loadu_si256(self.index_reversed.as_ptr().cast());
+                    let i = reverse_bits(lk_hash(index, hi));
+                    let sm = M(_mm256_castsi256_ps(sobol_m));
+                    x = sm.select(to_unit(reverse_bits(lk_hash(i, hx))), x);
+                    if two {
+                        let hy = mix64(h).halves::<false>();
+                        y = sm.select(to_unit(reverse_bits(lk_hash(sobol_dim1_reversed(i), hy))), y);
+                    }
+                }
+                (x, y)
+            }
+        }
+    }
+
+    /// One PCG32 step (`Sampler::pcg`) on eight streams: the number and the next state.
+    #[inline(always)]
+    fn pcg_step(old: U64) -> (F, U64) {
+        let state = old.mul(sampler::PCG_MUL).add(sampler::PCG_INC);
+        let xorshifted = old.shr::<18>().xor(old).shr::<27>().halves::<false>();
+        let rot = old.shr::<59>().halves::<false>();
+        // SAFETY: as in `binop`.
+        unsafe {
+            // Rotate right by rot (a left shift by 32 gives 0, so rot = 0 is the value itself).
+            let left = _mm256_sub_epi32(_mm256_set1_epi32(32), rot);
+            let out = _mm256_or_si256(_mm256_srlv_epi32(xorshifted, rot), _mm256_sllv_epi32(xorshifted, left));
+            (to_unit(out), state)
+        }
+    }
+
     /// The state of the eight lanes' paths, structure of arrays.
     struct Lanes {
         origin: [[f32; 8]; 3],
@@ -453,7 +685,7 @@ mod simd {
         depth: [u32; 8],
         /// Index of the lane's sample in the group's radiance buffer.
         slot: [usize; 8],
-        sampler: [Sampler; 8],
+        samplers: Samplers,
         active: u32,
     }
 
@@ -463,9 +695,6 @@ mod simd {
         p: [[f32; 8]; 3],
         n: [[f32; 8]; 3],
         albedo: [[f32; 8]; 3],
-        u_light: [[f32; 8]; 2],
-        u_bsdf: [[f32; 8]; 2],
-        u_rr: [f32; 8],
     }
 
     #[inline(always)]
@@ -505,7 +734,7 @@ mod simd {
             l: [[0.0; 8]; 3],
             depth: [0; 8],
             slot: [0; 8],
-            sampler: std::array::from_fn(|_| Sampler::new(0, 0, 0)),
+            samplers: Samplers::default(),
             active: 0,
         };
         let lights = LightTable::new(scene);
@@ -522,7 +751,7 @@ mod simd {
                     let (x, k) = (gx0 + (slot / spp as usize) as u32, (slot % spp as usize) as u32);
                     let (s, ray) = camera_path(scene, settings, x, y, k);
                     let Some(ray) = ray else { continue }; // black, as the buffer already is
-                    lanes.sampler[lane] = s;
+                    lanes.samplers.set(lane, &s);
                     lanes.slot[lane] = slot;
                     lanes.depth[lane] = 1;
                     put(&mut lanes.origin, lane, ray.origin);
@@ -566,17 +795,16 @@ mod simd {
                 put(&mut v.p, lane, surf.p);
                 put(&mut v.n, lane, surf.n);
                 put(&mut v.albedo, lane, scene.albedo(surf.material, &hit, surf.p));
-                let s = &mut lanes.sampler[lane];
-                let u_light = s.next2();
-                let u_bsdf = s.next2();
-                v.u_rr[lane] = if depth >= RR_START { s.next() } else { 0.0 };
-                (v.u_light[0][lane], v.u_light[1][lane]) = u_light;
-                (v.u_bsdf[0][lane], v.u_bsdf[1][lane]) = u_bsdf;
             }
             if shade == 0 {
                 continue;
             }
             let shading = M::from_bits(shade);
+            // The vertex's numbers, in the scalar loop's order: light, bounce, roulette.
+            let roulette: u32 = (0..8).filter(|&i| lanes.depth[i] >= RR_START).fold(0, |m, i| m | 1 << i);
+            let u_light = lanes.samplers.next(shade, true);
+            let u_bsdf = lanes.samplers.next(shade, true);
+            let u_rr = lanes.samplers.next(shade & roulette, false).0;
 
             // The light sample and its shadow ray (`Scene::sample_light`, `unoccluded`).
             let p = V::load(&v.p);
@@ -586,13 +814,13 @@ mod simd {
             let n = V::select(front, surf_n, surf_n.neg());
             let eps = F::splat(1e-4) * (F::splat(1.0) + p.x.abs().max(p.z.abs()).max(p.y.abs()));
             let zero = F::splat(0.0);
-            let (light, p_pick, u_pick) = pick_light(&scene.light_cdf, F::load(&v.u_light[0]));
+            let (light, p_pick, u_pick) = pick_light(&scene.light_cdf, u_light.0);
             let kind = gather_i(&lights.kind, light);
             let is = |k: i32| M(_mm256_castsi256_ps(_mm256_cmpeq_epi32(kind, _mm256_set1_epi32(k))));
             let (point, directional) = (is(POINT), is(DIRECTIONAL));
             // Triangle: y = v0 + b1·e1 + b2·e2 with b1 = √u(1 − v), b2 = √u·v.
             let su = u_pick.sqrt();
-            let uv = F::load(&v.u_light[1]);
+            let uv = u_light.1;
             let (b1, b2) = (su * (F::splat(1.0) - uv), su * uv);
             let v0 = V::gather(&lights.v0, light);
             let tri_y = v0.add(V::gather(&lights.e1, light).scale(b1)).add(V::gather(&lights.e2, light).scale(b2));
@@ -649,18 +877,17 @@ mod simd {
             l.store(&mut lanes.l);
 
             // The bounce (`bsdf::cosine_hemisphere`): weight kd.
-            let u1 = F::load(&v.u_bsdf[0]);
+            let u1 = u_bsdf.0;
             let radius = u1.sqrt();
-            let (c, s) = unit_circle(F::load(&v.u_bsdf[1]));
+            let (c, s) = unit_circle(u_bsdf.1);
             let (t, b) = basis(n);
             let z = (F::splat(1.0) - u1).max(zero).sqrt();
             let wi = t.scale(radius * c).add(b.scale(radius * s)).add(n.scale(z));
             let mut beta = beta.mul(albedo);
             // Russian roulette after RR_START segments: survive with q = min(max β, 0.95).
-            let depth: [f32; 8] = std::array::from_fn(|i| lanes.depth[i] as f32);
-            let roulette = F::load(&depth).ge(F::splat(RR_START as f32));
+            let roulette = M::from_bits(roulette);
             let q = beta.max_element().min(F::splat(0.95));
-            let killed = roulette & F::load(&v.u_rr).ge(q);
+            let killed = roulette & u_rr.ge(q);
             beta = V::select(roulette, beta.div(q), beta);
             let black = beta.x.eq(zero) & beta.y.eq(zero) & beta.z.eq(zero);
             let alive = shading & !killed & !black;

@@ -45,11 +45,14 @@
 #[inline]
 pub fn mix64(mut x: u64) -> u64 {
     x ^= x >> 30;
-    x = x.wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    x = x.wrapping_mul(MIX64_MUL[0]);
     x ^= x >> 27;
-    x = x.wrapping_mul(0x94d0_49bb_1331_11eb);
+    x = x.wrapping_mul(MIX64_MUL[1]);
     x ^ (x >> 31)
 }
+
+/// `mix64`'s multipliers (shared with `render::lanes`, which mixes eight lanes at once).
+pub(super) const MIX64_MUL: [u64; 2] = [0xbf58_476d_1ce4_e5b9, 0x94d0_49bb_1331_11eb];
 
 /// Which sample stream a render draws from (scene files: `render.sampler`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
@@ -86,18 +89,24 @@ struct Sobol {
 /// seed and of the bits below it, i.e. of the more significant digits of the fraction.
 #[inline]
 fn lk_hash(mut x: u32, seed: u32) -> u32 {
-    x ^= x.wrapping_mul(0x3d20_adea);
+    x ^= x.wrapping_mul(LK_MUL[0]);
     x = x.wrapping_add(seed);
     x = x.wrapping_mul((seed >> 16) | 1);
-    x ^= x.wrapping_mul(0x0552_6c56);
-    x ^= x.wrapping_mul(0x53a2_2864);
+    x ^= x.wrapping_mul(LK_MUL[1]);
+    x ^= x.wrapping_mul(LK_MUL[2]);
     x
 }
+
+/// `lk_hash`'s multipliers.
+pub(super) const LK_MUL: [u32; 3] = [0x3d20_adea, 0x0552_6c56, 0x53a2_2864];
+
+/// Step between the dimensions' keys before `mix64` (the 64-bit golden ratio).
+pub(super) const DIM_STRIDE: u64 = 0x9e37_79b9_7f4a_7c15;
 
 /// The second Sobol dimension's generator matrix (Pascal's triangle mod 2), bit-reversed and
 /// tabulated a byte of the index at a time: entry [b][v] is the XOR of the columns of the bits
 /// set in v, for index bits 8b..8b+8.
-const PASCAL_REVERSED: [[u32; 256]; 4] = {
+pub(super) const PASCAL_REVERSED: [[u32; 256]; 4] = {
     let mut cols = [0u32; 32];
     let mut v = 1u32;
     let mut k = 0;
@@ -146,8 +155,8 @@ fn to_unit(bits: u32) -> f32 {
 /// docs).
 pub const SOBOL_DIMENSIONS: u64 = 5;
 
-const PCG_MUL: u64 = 6_364_136_223_846_793_005;
-const PCG_INC: u64 = 1_442_695_040_888_963_407;
+pub(super) const PCG_MUL: u64 = 6_364_136_223_846_793_005;
+pub(super) const PCG_INC: u64 = 1_442_695_040_888_963_407;
 
 impl Sampler {
     pub fn new(seed: u64, pixel: u64, sample: u64) -> Sampler {
@@ -172,6 +181,12 @@ impl Sampler {
                 },
             },
         }
+    }
+
+    /// The whole state, for `render::lanes`, which draws eight samplers' numbers at once:
+    /// (PCG state, Sobol requests left, bit-reversed sample index, Sobol key, Sobol dimension).
+    pub(super) fn parts(&self) -> (u64, u32, u32, u64, u64) {
+        (self.state, self.sobol_left, self.sobol.index_reversed, self.sobol.key, self.sobol.dim)
     }
 
     /// A uniform number in [0, 1) with 24 random bits. PCG inlines into its callers; a Sobol
@@ -210,7 +225,7 @@ impl Sobol {
     /// The next dimension's scramble seeds: index shuffle, x and y.
     #[inline]
     fn seeds(&mut self) -> (u32, u32, u32) {
-        let h = mix64(self.key ^ self.dim.wrapping_mul(0x9e37_79b9_7f4a_7c15));
+        let h = mix64(self.key ^ self.dim.wrapping_mul(DIM_STRIDE));
         self.dim += 1;
         (h as u32, (h >> 32) as u32, mix64(h) as u32)
     }
