@@ -19,7 +19,7 @@
 use super::bsdf::Bsdf;
 use super::geometry::{Prim, Ray};
 use super::integrator::{camera_path, pixel_stats, Settings, RR_START};
-use super::sampler::{self, Sampler};
+use super::sampler::{self, Sampler, SamplerKind};
 use super::scene::{Light, Scene};
 use glam::Vec3A;
 
@@ -526,14 +526,6 @@ mod simd {
         }
     }
 
-    /// `sampler::mix64`, lane by lane.
-    #[inline(always)]
-    fn mix64(x: U64) -> U64 {
-        let x = x.xor(x.shr::<30>()).mul(sampler::MIX64_MUL[0]);
-        let x = x.xor(x.shr::<27>()).mul(sampler::MIX64_MUL[1]);
-        x.xor(x.shr::<31>())
-    }
-
     /// `sampler::lk_hash`, lane by lane.
     #[inline(always)]
     fn lk_hash(x: __m256i, seed: __m256i) -> __m256i {
@@ -600,20 +592,46 @@ mod simd {
         value * F::splat(1.0 / (1u32 << 24) as f32)
     }
 
-    /// The eight lanes' `Sampler`s, structure of arrays, drawn from together.
+    /// The eight lanes' `Sampler`s, structure of arrays, drawn from together, and the Sobol
+    /// scramble seeds of the group's pixels.
     #[derive(Default)]
     struct Samplers {
         pcg: [u64; 8],
         sobol_left: [u32; 8],
         index_reversed: [u32; 8],
-        key: [u64; 8],
-        dim: [u64; 8],
+        dim: [u32; 8],
+        /// Per lane, where its pixel's rows of `seeds` start.
+        seed_row: [u32; 8],
+        /// (index shuffle, x, y) seeds per pixel of the group and Sobol dimension
+        /// (`sampler::sobol_seeds`), pixel-major; empty without Sobol points.
+        seeds: [Vec<u32>; 3],
     }
 
+    const DIMS: u32 = sampler::SOBOL_DIMENSIONS as u32;
+
     impl Samplers {
-        fn set(&mut self, lane: usize, s: &Sampler) {
-            (self.pcg[lane], self.sobol_left[lane], self.index_reversed[lane], self.key[lane], self.dim[lane]) =
-                s.parts();
+        fn new(settings: &Settings, y: u32, gx0: u32, gx1: u32, width: u32) -> Samplers {
+            let mut s = Samplers::default();
+            if settings.sampler == SamplerKind::Sobol {
+                for x in gx0..gx1 {
+                    for dim in 0..DIMS {
+                        let pixel = y as u64 * width as u64 + x as u64;
+                        let (hi, hx, hy) = sampler::sobol_seeds(settings.seed, pixel, dim as u64);
+                        s.seeds[0].push(hi);
+                        s.seeds[1].push(hx);
+                        s.seeds[2].push(hy);
+                    }
+                }
+            }
+            s
+        }
+
+        /// Lane `lane` continues `s`, a sampler of the group's pixel `x_local`.
+        fn set(&mut self, lane: usize, s: &Sampler, x_local: u32) {
+            let dim;
+            (self.pcg[lane], self.sobol_left[lane], self.index_reversed[lane], dim) = s.parts();
+            self.dim[lane] = dim.min(DIMS as u64) as u32;
+            self.seed_row[lane] = x_local * DIMS;
         }
 
         /// `Sampler::next2` (or `next` when `two` is false, the second number then 0) for the
@@ -641,18 +659,24 @@ mod simd {
                     (x, y) = (a, b);
                 }
                 if sobol != 0 {
-                    // `Sobol::seeds`, then `Sobol::next2` / `next`.
-                    let dim = U64::load(&self.dim);
-                    let h = mix64(U64::load(&self.key).xor(dim.mul(sampler::DIM_STRIDE)));
-                    U64::select(sobol_m, dim.add(1), dim).store(&mut self.dim);
+                    // `Sobol::seeds` (looked up), then `Sobol::next2` / `next`. A lane with
+                    // Sobol requests left is at a dimension below DIMS; the others' look-ups
+                    // are clamped into the table and not used.
+                    let dim = _mm256_loadu_si256(self.dim.as_ptr().cast());
+                    let row = _mm256_add_epi32(
+                        _mm256_loadu_si256(self.seed_row.as_ptr().cast()),
+                        _mm256_min_epu32(dim, _mm256_set1_epi32(DIMS as i32 - 1)),
+                    );
+                    let seed = |k: usize| _mm256_i32gather_epi32::<4>(self.seeds[k].as_ptr().cast(), row);
+                    _mm256_storeu_si256(self.dim.as_mut_ptr().cast(), _mm256_sub_epi32(dim, sobol_m));
                     _mm256_storeu_si256(self.sobol_left.as_mut_ptr().cast(), _mm256_add_epi32(left, sobol_m));
-                    let (hi, hx) = (h.halves::<false>(), h.halves::<true>());
+                    let (hi, hx) = (seed(0), seed(1));
                     let index = _mm256_loadu_si256(self.index_reversed.as_ptr().cast());
                     let i = reverse_bits(lk_hash(index, hi));
                     let sm = M(_mm256_castsi256_ps(sobol_m));
                     x = sm.select(to_unit(reverse_bits(lk_hash(i, hx))), x);
                     if two {
-                        let hy = mix64(h).halves::<false>();
+                        let hy = seed(2);
                         y = sm.select(to_unit(reverse_bits(lk_hash(sobol_dim1_reversed(i), hy))), y);
                     }
                 }
@@ -734,7 +758,7 @@ mod simd {
             l: [[0.0; 8]; 3],
             depth: [0; 8],
             slot: [0; 8],
-            samplers: Samplers::default(),
+            samplers: Samplers::new(settings, y, gx0, gx1, scene.camera.width),
             active: 0,
         };
         let lights = LightTable::new(scene);
@@ -751,7 +775,7 @@ mod simd {
                     let (x, k) = (gx0 + (slot / spp as usize) as u32, (slot % spp as usize) as u32);
                     let (s, ray) = camera_path(scene, settings, x, y, k);
                     let Some(ray) = ray else { continue }; // black, as the buffer already is
-                    lanes.samplers.set(lane, &s);
+                    lanes.samplers.set(lane, &s, x - gx0);
                     lanes.slot[lane] = slot;
                     lanes.depth[lane] = 1;
                     put(&mut lanes.origin, lane, ray.origin);

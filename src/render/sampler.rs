@@ -41,6 +41,25 @@
 //! direct light stratified, and a thin lens's sample does not push the first vertex's BSDF
 //! sample out.
 
+/// The (seed, pixel) hash every Sobol dimension's scramble seeds derive from.
+#[inline]
+fn sobol_key(seed: u64, pixel: u64) -> u64 {
+    mix64(seed ^ mix64(pixel))
+}
+
+/// Scramble seeds (index shuffle, x, y) of dimension `dim` under `key`.
+#[inline]
+fn seeds_of(key: u64, dim: u64) -> (u32, u32, u32) {
+    let h = mix64(key ^ dim.wrapping_mul(DIM_STRIDE));
+    (h as u32, (h >> 32) as u32, mix64(h) as u32)
+}
+
+/// The scramble seeds (index shuffle, x, y) every sample of a pixel uses at Sobol dimension
+/// `dim`: they do not depend on the sample, so `render::lanes` computes them once per pixel.
+pub(super) fn sobol_seeds(seed: u64, pixel: u64, dim: u64) -> (u32, u32, u32) {
+    seeds_of(sobol_key(seed, pixel), dim)
+}
+
 /// SplitMix64's finaliser: a bijective 64-bit mixer.
 #[inline]
 pub fn mix64(mut x: u64) -> u64 {
@@ -51,8 +70,8 @@ pub fn mix64(mut x: u64) -> u64 {
     x ^ (x >> 31)
 }
 
-/// `mix64`'s multipliers (shared with `render::lanes`, which mixes eight lanes at once).
-pub(super) const MIX64_MUL: [u64; 2] = [0xbf58_476d_1ce4_e5b9, 0x94d0_49bb_1331_11eb];
+/// `mix64`'s multipliers.
+const MIX64_MUL: [u64; 2] = [0xbf58_476d_1ce4_e5b9, 0x94d0_49bb_1331_11eb];
 
 /// Which sample stream a render draws from (scene files: `render.sampler`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
@@ -101,7 +120,7 @@ fn lk_hash(mut x: u32, seed: u32) -> u32 {
 pub(super) const LK_MUL: [u32; 3] = [0x3d20_adea, 0x0552_6c56, 0x53a2_2864];
 
 /// Step between the dimensions' keys before `mix64` (the 64-bit golden ratio).
-pub(super) const DIM_STRIDE: u64 = 0x9e37_79b9_7f4a_7c15;
+const DIM_STRIDE: u64 = 0x9e37_79b9_7f4a_7c15;
 
 /// The second Sobol dimension's generator matrix (Pascal's triangle mod 2), bit-reversed and
 /// tabulated a byte of the index at a time: entry [b][v] is the XOR of the columns of the bits
@@ -176,17 +195,18 @@ impl Sampler {
                 sobol_left: SOBOL_DIMENSIONS as u32,
                 sobol: Sobol {
                     index_reversed: (sample as u32).reverse_bits(),
-                    key: mix64(seed ^ mix64(pixel)),
+                    key: sobol_key(seed, pixel),
                     dim: 0,
                 },
             },
         }
     }
 
-    /// The whole state, for `render::lanes`, which draws eight samplers' numbers at once:
-    /// (PCG state, Sobol requests left, bit-reversed sample index, Sobol key, Sobol dimension).
-    pub(super) fn parts(&self) -> (u64, u32, u32, u64, u64) {
-        (self.state, self.sobol_left, self.sobol.index_reversed, self.sobol.key, self.sobol.dim)
+    /// The state `render::lanes` needs to draw eight samplers' numbers at once: (PCG state,
+    /// Sobol requests left, bit-reversed sample index, Sobol dimension). The scramble seeds it
+    /// looks up per pixel (`sobol_seeds`).
+    pub(super) fn parts(&self) -> (u64, u32, u32, u64) {
+        (self.state, self.sobol_left, self.sobol.index_reversed, self.sobol.dim)
     }
 
     /// A uniform number in [0, 1) with 24 random bits. PCG inlines into its callers; a Sobol
@@ -225,9 +245,8 @@ impl Sobol {
     /// The next dimension's scramble seeds: index shuffle, x and y.
     #[inline]
     fn seeds(&mut self) -> (u32, u32, u32) {
-        let h = mix64(self.key ^ self.dim.wrapping_mul(DIM_STRIDE));
         self.dim += 1;
-        (h as u32, (h >> 32) as u32, mix64(h) as u32)
+        seeds_of(self.key, self.dim - 1)
     }
 
     #[inline(never)]
