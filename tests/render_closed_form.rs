@@ -376,17 +376,21 @@ irradiance = [0.5, 0.6, 0.7]
 "#;
 
 /// The eight-lane path loop (`render::lanes`) gives the one-path loop's image bit for bit,
-/// with either sampler, on every kind of scene it takes.
+/// with either sampler, with a pinhole or a thin lens, on every kind of scene it takes.
 #[test]
 fn eight_lanes_match_the_scalar_loop_bit_for_bit() {
     let root = common::root();
     let dir = tempfile::tempdir().unwrap();
     let mixed = common::scene(MIXED_LIGHTS, dir.path()).unwrap();
+    let lens = MIXED_LIGHTS.replace("fov_deg = 50.0", "fov_deg = 50.0\naperture_radius = 0.1\nfocus_distance = 3.0");
+    let lens = common::scene(&lens, dir.path()).unwrap();
+    assert!(lens.lens.is_some());
     let cornell = render::load(&root.join("pipelines/scenes/cornell-box.toml")).unwrap();
     let board = render::load(&root.join("pipelines/scenes/calib-board.toml")).unwrap();
     let cases = [
         ("mixed lights", &mixed, render::sampler::SamplerKind::Independent, None),
         ("mixed lights, Sobol", &mixed, render::sampler::SamplerKind::Sobol, None),
+        ("thin lens, Sobol", &lens, render::sampler::SamplerKind::Sobol, None),
         ("Cornell box", &cornell, render::sampler::SamplerKind::Independent, Some([100, 20, 140, 200])),
         ("Cornell box, Sobol", &cornell, render::sampler::SamplerKind::Sobol, Some([100, 20, 140, 200])),
         ("calibration board", &board, render::sampler::SamplerKind::Independent, Some([200, 150, 260, 190])),

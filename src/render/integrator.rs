@@ -474,19 +474,37 @@ fn render_pixel(scene: &Scene, settings: &Settings, x: u32, y: u32) -> ([f32; 3]
 pub(super) fn camera_path(scene: &Scene, settings: &Settings, x: u32, y: u32, k: u32) -> (Sampler, Option<Ray>) {
     let pixel_index = y as u64 * scene.camera.width as u64 + x as u64;
     let mut s = Sampler::with_kind(settings.sampler, settings.seed, pixel_index, k as u64);
-    let (jx, jy) = s.next2();
-    let px = DVec2::new(x as f64 + jx as f64 - 0.5, y as f64 + jy as f64 - 0.5);
-    let Some(d) = scene.camera.pixel_ray(px) else { return (s, None) };
+    let ray = camera_direction(scene, x, y, s.next2()).map(|d| {
+        let lens_u = needs_lens_sample(scene, d).then(|| s.next2());
+        camera_ray(scene, d, lens_u)
+    });
+    (s, ray)
+}
+
+/// The pinhole direction (camera frame) through pixel (x, y) at the offset `jitter` ∈ [0, 1)²
+/// within it; `None` beyond the fold of the distortion.
+pub(super) fn camera_direction(scene: &Scene, x: u32, y: u32, jitter: (f32, f32)) -> Option<glam::DVec3> {
+    let px = DVec2::new(x as f64 + jitter.0 as f64 - 0.5, y as f64 + jitter.1 as f64 - 0.5);
+    scene.camera.pixel_ray(px)
+}
+
+/// Whether the camera ray for the pinhole direction `d` takes a thin-lens sample.
+pub(super) fn needs_lens_sample(scene: &Scene, d: glam::DVec3) -> bool {
+    scene.lens.is_some() && d.z > 0.0
+}
+
+/// The world-space camera ray for the pinhole direction `d`, through the point `lens_u` of
+/// the aperture when `needs_lens_sample`.
+pub(super) fn camera_ray(scene: &Scene, d: glam::DVec3, lens_u: Option<(f32, f32)>) -> Ray {
     let origin = Vec3A::from(scene.t_world_cam.translation.as_vec3());
     let rot = scene.t_world_cam.rotation;
-    let ray = match scene.lens {
-        Some(lens) if d.z > 0.0 => {
-            let (lo, ld) = lens_ray(lens, d, s.next2());
+    match (scene.lens, lens_u) {
+        (Some(lens), Some(u)) => {
+            let (lo, ld) = lens_ray(lens, d, u);
             Ray { origin: origin + Vec3A::from((rot * lo).as_vec3()), dir: Vec3A::from((rot * ld).as_vec3()) }
         }
         _ => Ray { origin, dir: Vec3A::from((rot * d).as_vec3()) },
-    };
-    (s, Some(ray))
+    }
 }
 
 /// Mean and variance of the mean of a pixel's samples, in sample order, and the number of

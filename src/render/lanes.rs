@@ -18,7 +18,7 @@
 
 use super::bsdf::Bsdf;
 use super::geometry::{Prim, Ray};
-use super::integrator::{camera_path, pixel_stats, Settings, RR_START};
+use super::integrator::{camera_direction, camera_ray, needs_lens_sample, pixel_stats, Settings, RR_START};
 use super::sampler::{self, Sampler, SamplerKind};
 use super::scene::{Light, Scene};
 use glam::Vec3A;
@@ -707,8 +707,9 @@ mod simd {
         beta: [[f32; 8]; 3],
         l: [[f32; 8]; 3],
         depth: [u32; 8],
-        /// Index of the lane's sample in the group's radiance buffer.
+        /// Index of the lane's sample in the group's radiance buffer, and its pixel's column.
         slot: [usize; 8],
+        x: [u32; 8],
         samplers: Samplers,
         active: u32,
     }
@@ -758,36 +759,73 @@ mod simd {
             l: [[0.0; 8]; 3],
             depth: [0; 8],
             slot: [0; 8],
+            x: [0; 8],
             samplers: Samplers::new(settings, y, gx0, gx1, scene.camera.width),
             active: 0,
         };
         let lights = LightTable::new(scene);
         let mut v = Vertex::default();
         loop {
-            // Empty lanes take the next samples.
-            for lane in 0..8 {
-                if lanes.active & (1 << lane) != 0 {
-                    continue;
+            // Empty lanes take the next samples (`integrator::camera_path`, with the pixel
+            // position and a thin lens's sample drawn for the new lanes together).
+            let mut fresh = 0u32;
+            let mut empty = !lanes.active & 0xff;
+            while empty != 0 && next_job < jobs {
+                let lane = empty.trailing_zeros() as usize;
+                empty &= empty - 1;
+                let slot = next_job;
+                next_job += 1;
+                let (x, k) = (gx0 + (slot / spp as usize) as u32, (slot % spp as usize) as u32);
+                let pixel = y as u64 * scene.camera.width as u64 + x as u64;
+                let s = Sampler::with_kind(settings.sampler, settings.seed, pixel, k as u64);
+                lanes.samplers.set(lane, &s, x - gx0);
+                lanes.slot[lane] = slot;
+                lanes.x[lane] = x;
+                fresh |= 1 << lane;
+            }
+            if lanes.active == 0 && fresh == 0 {
+                return;
+            }
+            if fresh != 0 {
+                let mut jitter = ([0.0f32; 8], [0.0f32; 8]);
+                let (jx, jy) = lanes.samplers.next(fresh, true);
+                jx.store(&mut jitter.0);
+                jy.store(&mut jitter.1);
+                let mut dirs = [glam::DVec3::ZERO; 8];
+                let (mut seen, mut lens) = (0u32, 0u32);
+                let mut mask = fresh;
+                while mask != 0 {
+                    let lane = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    // Beyond the fold of the distortion the sample is black, as the buffer is.
+                    if let Some(d) = camera_direction(scene, lanes.x[lane], y, (jitter.0[lane], jitter.1[lane])) {
+                        dirs[lane] = d;
+                        seen |= 1 << lane;
+                        lens |= (needs_lens_sample(scene, d) as u32) << lane;
+                    }
                 }
-                while next_job < jobs {
-                    let slot = next_job;
-                    next_job += 1;
-                    let (x, k) = (gx0 + (slot / spp as usize) as u32, (slot % spp as usize) as u32);
-                    let (s, ray) = camera_path(scene, settings, x, y, k);
-                    let Some(ray) = ray else { continue }; // black, as the buffer already is
-                    lanes.samplers.set(lane, &s, x - gx0);
-                    lanes.slot[lane] = slot;
+                let mut lens_u = ([0.0f32; 8], [0.0f32; 8]);
+                if lens != 0 {
+                    let (lx, ly) = lanes.samplers.next(lens, true);
+                    lx.store(&mut lens_u.0);
+                    ly.store(&mut lens_u.1);
+                }
+                let mut mask = seen;
+                while mask != 0 {
+                    let lane = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    let u = (lens & (1 << lane) != 0).then_some((lens_u.0[lane], lens_u.1[lane]));
+                    let ray = camera_ray(scene, dirs[lane], u);
                     lanes.depth[lane] = 1;
                     put(&mut lanes.origin, lane, ray.origin);
                     put(&mut lanes.dir, lane, ray.dir);
                     put(&mut lanes.beta, lane, Vec3A::ONE);
                     put(&mut lanes.l, lane, Vec3A::ZERO);
-                    lanes.active |= 1 << lane;
-                    break;
                 }
-            }
-            if lanes.active == 0 {
-                return;
+                lanes.active |= seen;
+                if lanes.active == 0 {
+                    continue;
+                }
             }
             // Hits, emission seen from the camera, and what shading needs, lane by lane.
             let mut shade = 0u32;
