@@ -290,9 +290,12 @@ mod simd {
         }
         #[inline(always)]
         fn from_bits(bits: u32) -> M {
-            let lanes: [i32; 8] = std::array::from_fn(|i| -(((bits >> i) & 1) as i32));
             // SAFETY: as in `binop`.
-            M(unsafe { _mm256_castsi256_ps(_mm256_loadu_si256(lanes.as_ptr().cast())) })
+            unsafe {
+                let lane_bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+                let set = _mm256_and_si256(_mm256_set1_epi32(bits as i32), lane_bit);
+                M(_mm256_castsi256_ps(_mm256_cmpeq_epi32(set, lane_bit)))
+            }
         }
     }
 
