@@ -565,26 +565,18 @@ mod simd {
         }
     }
 
-    /// `sampler::sobol_dim1_reversed`, lane by lane: the table looked up a byte at a time.
+    /// `sampler::sobol_dim1_reversed`, lane by lane.
     #[inline(always)]
     fn sobol_dim1_reversed(i: __m256i) -> __m256i {
-        // SAFETY: every index is b·256 + (a byte) < 1024, within the table; as in `binop`.
-        unsafe {
-            let table: *const i32 = sampler::PASCAL_REVERSED.as_ptr().cast();
-            let byte = _mm256_set1_epi32(255);
-            let look = |shift: __m128i, row: i32| {
-                let index = _mm256_add_epi32(
-                    _mm256_and_si256(_mm256_srl_epi32(i, shift), byte),
-                    _mm256_set1_epi32(256 * row),
-                );
-                _mm256_i32gather_epi32::<4>(table, index)
+        let mut v = i;
+        for (shift, mask) in sampler::SUPERSET_STEPS {
+            // SAFETY: as in `binop`.
+            v = unsafe {
+                let shifted = _mm256_srl_epi32(v, _mm_cvtsi32_si128(shift as i32));
+                _mm256_xor_si256(v, _mm256_and_si256(shifted, _mm256_set1_epi32(mask as i32)))
             };
-            let r0 = look(_mm_cvtsi32_si128(0), 0);
-            let r1 = look(_mm_cvtsi32_si128(8), 1);
-            let r2 = look(_mm_cvtsi32_si128(16), 2);
-            let r3 = look(_mm_cvtsi32_si128(24), 3);
-            _mm256_xor_si256(_mm256_xor_si256(r0, r1), _mm256_xor_si256(r2, r3))
         }
+        v
     }
 
     /// `sampler::to_unit` (the top 24 bits as a float in [0, 1)), lane by lane.

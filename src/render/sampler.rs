@@ -122,48 +122,23 @@ pub(super) const LK_MUL: [u32; 3] = [0x3d20_adea, 0x0552_6c56, 0x53a2_2864];
 /// Step between the dimensions' keys before `mix64` (the 64-bit golden ratio).
 const DIM_STRIDE: u64 = 0x9e37_79b9_7f4a_7c15;
 
-/// The second Sobol dimension's generator matrix (Pascal's triangle mod 2), bit-reversed and
-/// tabulated a byte of the index at a time: entry [b][v] is the XOR of the columns of the bits
-/// set in v, for index bits 8b..8b+8.
-pub(super) const PASCAL_REVERSED: [[u32; 256]; 4] = {
-    let mut cols = [0u32; 32];
-    let mut v = 1u32;
-    let mut k = 0;
-    while k < 32 {
-        cols[k] = v;
-        v ^= v << 1;
-        k += 1;
-    }
-    let mut table = [[0u32; 256]; 4];
-    let mut b = 0;
-    while b < 4 {
-        let mut byte = 0;
-        while byte < 256 {
-            let mut acc = 0;
-            let mut j = 0;
-            while j < 8 {
-                if (byte >> j) & 1 == 1 {
-                    acc ^= cols[8 * b + j];
-                }
-                j += 1;
-            }
-            table[b][byte] = acc;
-            byte += 1;
-        }
-        b += 1;
-    }
-    table
-};
-
-/// The second Sobol dimension at index i, bit-reversed (the form `lk_hash` takes).
+/// The second Sobol dimension at index i, bit-reversed (the form `lk_hash` takes). Its
+/// generator matrix is Pascal's triangle mod 2: column k is (1 + x)^k, whose bit r is set when
+/// C(k, r) is odd, that is (Lucas) when the bits of r are a subset of those of k. So bit r of
+/// the result is the XOR of the bits i_k over every k ⊇ r: a superset sum over the five bits
+/// of the position, one shift, mask and XOR per bit, without a table.
 #[inline]
-fn sobol_dim1_reversed(i: u32) -> u32 {
-    let t = &PASCAL_REVERSED;
-    t[0][(i & 255) as usize]
-        ^ t[1][((i >> 8) & 255) as usize]
-        ^ t[2][((i >> 16) & 255) as usize]
-        ^ t[3][(i >> 24) as usize]
+pub(super) fn sobol_dim1_reversed(i: u32) -> u32 {
+    let mut v = i;
+    for (shift, mask) in SUPERSET_STEPS {
+        v ^= (v >> shift) & mask;
+    }
+    v
 }
+
+/// (shift, positions whose bit `shift` is clear) for `sobol_dim1_reversed`'s five steps.
+pub(super) const SUPERSET_STEPS: [(u32, u32); 5] =
+    [(1, 0x5555_5555), (2, 0x3333_3333), (4, 0x0f0f_0f0f), (8, 0x00ff_00ff), (16, 0x0000_ffff)];
 
 #[inline]
 fn to_unit(bits: u32) -> f32 {
@@ -269,6 +244,23 @@ impl Sobol {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The superset sum equals the generator matrix applied column by column.
+    #[test]
+    fn sobol_dim1_matches_pascal_columns() {
+        let mut cols = [0u32; 32];
+        let mut v = 1u32;
+        for c in cols.iter_mut() {
+            *c = v;
+            v ^= v << 1;
+        }
+        let mut s = Sampler::new(3, 1, 4);
+        for n in 0..100_000u32 {
+            let i = if n < 1000 { n } else { (s.next() * 16_777_216.0) as u32 ^ (n << 24) };
+            let direct = (0..32).filter(|k| (i >> k) & 1 == 1).fold(0, |acc, k| acc ^ cols[k]);
+            assert_eq!(sobol_dim1_reversed(i), direct, "index {i}");
+        }
+    }
 
     #[test]
     fn uniform_mean_and_range() {
