@@ -28,6 +28,10 @@
 //! Film: each pixel (i, j) of the image is integrated over the box [i − ½, i + ½) × [j − ½, j + ½)
 //! in OpenCV's pixel coordinates (centre at the integer), so sample position = index + ξ − ½.
 //! The film keeps the mean and the variance of that mean (sample variance / n) per channel.
+//!
+//! Scenes of Lambertian surfaces under triangle area lights, point lights and directional
+//! lights (the Cornell box among them) are traced eight paths at a time by `render::lanes`,
+//! which computes exactly this loop's numbers, about 1.2–1.3× as fast.
 
 use super::bsdf::Bsdf;
 use super::geometry::{Hit, Prim, Ray};

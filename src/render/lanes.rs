@@ -4,17 +4,38 @@
 //! AVX2 registers.
 //!
 //! Rays are still traced one at a time (the BVH's 8-wide tests already use the lanes for one
-//! ray). What the lanes take over is everything between two hits: the light sample, the
-//! shadow ray's set-up, the Lambertian contribution, the cosine-weighted bounce (Malley's
-//! method with `bsdf::unit_circle`'s polynomials), the throughput and Russian roulette. A lane
-//! whose path ends takes the next (pixel, sample) of its group of pixels at once, so the lanes
-//! stay full while paths of different lengths run side by side.
+//! ray), and so are a hit's surface look-ups and a new path's camera ray. What the lanes take
+//! over is the rest of a vertex: the light pick (a branch-free binary search over the power
+//! CDF) and the light sample, the shadow ray's set-up, the Lambertian contribution, the
+//! cosine-weighted bounce (Malley's method with `bsdf::unit_circle`'s polynomials), the
+//! throughput, Russian roulette, and the random numbers themselves: PCG32 with 64-bit products
+//! built from 32-bit ones, and Owen-scrambled Sobol points with the scramble seeds looked up
+//! per pixel (they do not depend on the sample). A lane whose path ends takes the next
+//! (pixel, sample) of its group of pixels at once, so the lanes stay full while paths of
+//! different lengths run side by side.
 //!
-//! Every lane performs the scalar loop's floating-point operations in the same order, draws
-//! the same numbers from its own (pixel, sample) sampler, and the film sums each pixel's
-//! samples in sample order, so the image is bit-identical to the scalar loop's (tested). Scenes
-//! with anything else (glossy or delta materials, textured roughness, spot, sphere or
+//! Every lane performs the scalar loop's floating-point and integer operations in the same
+//! order, draws the same numbers from its own (pixel, sample) stream, and the film sums each
+//! pixel's samples in sample order, so the image is bit-identical to the scalar loop's
+//! (tested on both samplers, a thin lens, spheres, textures and every light kind taken).
+//! Scenes with anything else (glossy or delta materials, textured roughness, spot, sphere or
 //! environment lights) and processors without AVX2 take the scalar loop.
+//!
+//! Written with `std::arch` intrinsics behind small operator types rather than a SIMD crate,
+//! for the reason the BVH's 8-wide module gives: glam stops at four lanes, and the lanes must
+//! reproduce the scalar code's rounding exactly. On the Cornell box (callgrind, `lumen bench
+//! render --spp 8 --threads 1`, instructions per path; alternating runs at 64 spp on 2
+//! threads for time):
+//!
+//! | sampler | one path at a time | eight lanes | speed |
+//! |---|---:|---:|---:|
+//! | independent | 4210 | 3395 (−19 %) | 1.21× |
+//! | Sobol | 4686 | 3569 (−24 %) | 1.32× |
+//!
+//! Of the 3395 instructions left, closest-hit traversal takes about 1680 and shadow rays 620.
+//! Tried and not kept: gathering the hit's normal, material and albedo for the lanes from
+//! per-primitive tables (−1.9 % instructions, no faster: the gathers cost what the scalar
+//! loads did).
 
 use super::bsdf::Bsdf;
 use super::geometry::{Prim, Ray};
