@@ -408,7 +408,7 @@ pub fn render(scene: &Scene, settings: &Settings) -> Film {
     let mut variance = Image::new(fw, fh, 3);
     let bar = super::progress_bar(fh as u64, "render", settings.progress);
     let dropped = std::sync::atomic::AtomicU64::new(0);
-    let lanes = settings.lanes && super::lanes::supported(scene, settings);
+    let lanes = if settings.lanes { super::lanes::Tracer::new(scene, settings) } else { None };
     let mut work = || {
         let (mean, variance) = (&mut mean, &mut variance);
         mean.data
@@ -423,8 +423,8 @@ pub fn render(scene: &Scene, settings: &Settings) -> Film {
                     vrow[3 * i..3 * i + 3].copy_from_slice(&v);
                     lost += d;
                 };
-                if lanes {
-                    for (i, px) in super::lanes::render_row(scene, settings, y, x0, x1).into_iter().enumerate() {
+                if let Some(lanes) = &lanes {
+                    for (i, px) in lanes.render_row(settings, y, x0, x1).into_iter().enumerate() {
                         put(i, px);
                     }
                 } else {

@@ -61,27 +61,40 @@ pub fn supported(scene: &Scene, settings: &Settings) -> bool {
 /// longest paths leave the lanes idle for a small share of the time.
 const GROUP_SAMPLES: usize = 4096;
 
-/// Mean, variance of the mean and dropped samples of the pixels x0..x1 of row y, as
-/// `integrator::render_pixel` gives them. Only for scenes `supported` accepts.
-pub fn render_row(scene: &Scene, settings: &Settings, y: u32, x0: u32, x1: u32) -> Vec<([f32; 3], [f32; 3], u64)> {
-    let spp = settings.spp as usize;
-    let group = (GROUP_SAMPLES / spp.max(1)).max(1) as u32;
-    let mut out = Vec::with_capacity((x1 - x0) as usize);
-    let mut radiance = Vec::new();
-    let mut gx = x0;
-    while gx < x1 {
-        let gx1 = (gx + group).min(x1);
-        radiance.clear();
-        radiance.resize((gx1 - gx) as usize * spp, Vec3A::ZERO);
-        // SAFETY: `supported` checked that the processor has AVX2.
-        unsafe { simd::trace_group(scene, settings, y, gx, gx1, &mut radiance) };
-        out.extend(radiance.chunks(spp.max(1)).map(|c| pixel_stats(c.iter().copied())));
-        gx = gx1;
+/// A scene `supported` accepts, with its lights laid out for the lanes (once per render).
+pub struct Tracer<'a> {
+    scene: &'a Scene,
+    lights: LightTable,
+}
+
+impl<'a> Tracer<'a> {
+    /// `None` where the scene or the processor needs the one-path loop.
+    pub fn new(scene: &'a Scene, settings: &Settings) -> Option<Tracer<'a>> {
+        supported(scene, settings).then(|| Tracer { scene, lights: LightTable::new(scene) })
     }
-    if spp == 0 {
-        out = (x0..x1).map(|_| pixel_stats(std::iter::empty())).collect();
+
+    /// Mean, variance of the mean and dropped samples of the pixels x0..x1 of row y, as
+    /// `integrator::render_pixel` gives them.
+    pub fn render_row(&self, settings: &Settings, y: u32, x0: u32, x1: u32) -> Vec<([f32; 3], [f32; 3], u64)> {
+        let spp = settings.spp as usize;
+        if spp == 0 {
+            return (x0..x1).map(|_| pixel_stats(std::iter::empty())).collect();
+        }
+        let group = (GROUP_SAMPLES / spp).max(1) as u32;
+        let mut out = Vec::with_capacity((x1 - x0) as usize);
+        let mut radiance = Vec::new();
+        let mut gx = x0;
+        while gx < x1 {
+            let gx1 = (gx + group).min(x1);
+            radiance.clear();
+            radiance.resize((gx1 - gx) as usize * spp, Vec3A::ZERO);
+            // SAFETY: `supported` checked that the processor has AVX2.
+            unsafe { simd::trace_group(self.scene, &self.lights, settings, y, gx, gx1, &mut radiance) };
+            out.extend(radiance.chunks(spp).map(|c| pixel_stats(c.iter().copied())));
+            gx = gx1;
+        }
+        out
     }
-    out
 }
 
 /// The lights as the lanes gather them by index, one array per component: a triangle (v0,
@@ -145,6 +158,7 @@ mod simd {
     }
     pub unsafe fn trace_group(
         _: &super::Scene,
+        _: &super::LightTable,
         _: &super::Settings,
         _: u32,
         _: u32,
@@ -519,14 +533,14 @@ mod simd {
                 _mm256_add_epi64(_mm256_mul_epu32(a, lo), _mm256_slli_epi64::<32>(cross))
             })
         }
-        /// The low (`HIGH` false) or high halves of the eight lanes, as eight 32-bit lanes.
+        /// The low 32 bits of the eight lanes (`as u32`), as eight 32-bit lanes.
         #[inline(always)]
-        fn halves<const HIGH: bool>(self) -> __m256i {
+        fn low_halves(self) -> __m256i {
             // SAFETY: as in `binop`.
             unsafe {
                 let (a, b) = (_mm256_castsi256_ps(self.0[0]), _mm256_castsi256_ps(self.0[1]));
-                // Per 128-bit half: a's two chosen dwords, then b's; then the 64-bit pairs in order.
-                let mixed = if HIGH { _mm256_shuffle_ps::<0b11_01_11_01>(a, b) } else { _mm256_shuffle_ps::<0b10_00_10_00>(a, b) };
+                // Per 128-bit half: a's two low dwords, then b's; then the 64-bit pairs in order.
+                let mixed = _mm256_shuffle_ps::<0b10_00_10_00>(a, b);
                 _mm256_permute4x64_epi64::<0b11_01_10_00>(_mm256_castps_si256(mixed))
             }
         }
@@ -705,8 +719,8 @@ mod simd {
     #[inline(always)]
     fn pcg_step(old: U64) -> (F, U64) {
         let state = old.mul(sampler::PCG_MUL).add(sampler::PCG_INC);
-        let xorshifted = old.shr::<18>().xor(old).shr::<27>().halves::<false>();
-        let rot = old.shr::<59>().halves::<false>();
+        let xorshifted = old.shr::<18>().xor(old).shr::<27>().low_halves();
+        let rot = old.shr::<59>().low_halves();
         // SAFETY: as in `binop`.
         unsafe {
             // Rotate right by rot (a left shift by 32 gives 0, so rot = 0 is the value itself).
@@ -758,6 +772,7 @@ mod simd {
     #[target_feature(enable = "avx2")]
     pub unsafe fn trace_group(
         scene: &Scene,
+        lights: &LightTable,
         settings: &Settings,
         y: u32,
         gx0: u32,
@@ -779,7 +794,6 @@ mod simd {
             samplers: Samplers::new(settings, y, gx0, gx1, scene.camera.width),
             active: 0,
         };
-        let lights = LightTable::new(scene);
         let mut v = Vertex::default();
         loop {
             // Empty lanes take the next samples (`integrator::camera_path`, with the pixel

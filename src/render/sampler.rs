@@ -64,14 +64,11 @@ pub(super) fn sobol_seeds(seed: u64, pixel: u64, dim: u64) -> (u32, u32, u32) {
 #[inline]
 pub fn mix64(mut x: u64) -> u64 {
     x ^= x >> 30;
-    x = x.wrapping_mul(MIX64_MUL[0]);
+    x = x.wrapping_mul(0xbf58_476d_1ce4_e5b9);
     x ^= x >> 27;
-    x = x.wrapping_mul(MIX64_MUL[1]);
+    x = x.wrapping_mul(0x94d0_49bb_1331_11eb);
     x ^ (x >> 31)
 }
-
-/// `mix64`'s multipliers.
-const MIX64_MUL: [u64; 2] = [0xbf58_476d_1ce4_e5b9, 0x94d0_49bb_1331_11eb];
 
 /// Which sample stream a render draws from (scene files: `render.sampler`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
@@ -128,7 +125,7 @@ const DIM_STRIDE: u64 = 0x9e37_79b9_7f4a_7c15;
 /// the result is the XOR of the bits i_k over every k ⊇ r: a superset sum over the five bits
 /// of the position, one shift, mask and XOR per bit, without a table.
 #[inline]
-pub(super) fn sobol_dim1_reversed(i: u32) -> u32 {
+fn sobol_dim1_reversed(i: u32) -> u32 {
     let mut v = i;
     for (shift, mask) in SUPERSET_STEPS {
         v ^= (v >> shift) & mask;
@@ -136,7 +133,8 @@ pub(super) fn sobol_dim1_reversed(i: u32) -> u32 {
     v
 }
 
-/// (shift, positions whose bit `shift` is clear) for `sobol_dim1_reversed`'s five steps.
+/// `sobol_dim1_reversed`'s five steps: (s, the mask of the bit positions r with r & s = 0),
+/// each adding the bit at r + s into the bit at r.
 pub(super) const SUPERSET_STEPS: [(u32, u32); 5] =
     [(1, 0x5555_5555), (2, 0x3333_3333), (4, 0x0f0f_0f0f), (8, 0x00ff_00ff), (16, 0x0000_ffff)];
 
