@@ -475,7 +475,7 @@ fn render_pixel(scene: &Scene, settings: &Settings, x: u32, y: u32) -> ([f32; 3]
 /// The start of sample `k` of pixel (x, y): its sampler, after the pixel position (and a thin
 /// lens's sample) were drawn, and the camera ray, `None` beyond the fold of the distortion
 /// (no scene ray maps there; the sample is black).
-pub(super) fn camera_path(scene: &Scene, settings: &Settings, x: u32, y: u32, k: u32) -> (Sampler, Option<Ray>) {
+fn camera_path(scene: &Scene, settings: &Settings, x: u32, y: u32, k: u32) -> (Sampler, Option<Ray>) {
     let pixel_index = y as u64 * scene.camera.width as u64 + x as u64;
     let mut s = Sampler::with_kind(settings.sampler, settings.seed, pixel_index, k as u64);
     let ray = camera_direction(scene, x, y, s.next2()).map(|d| {
