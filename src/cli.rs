@@ -132,6 +132,12 @@ enum Bench {
         /// Repetitions; the best is reported.
         #[arg(long, default_value_t = 3)]
         repeat: u32,
+        /// `independent` or `sobol` (default: the scene's `[render] sampler`).
+        #[arg(long)]
+        sampler: Option<String>,
+        /// Trace one path at a time even where the scene allows eight at once, to compare.
+        #[arg(long)]
+        one_path: bool,
     },
     /// RMSE against a reference image as the sample count grows, for the independent and
     /// the Sobol sampler (default: the Cornell box against Mitsuba 3's 8192-spp reference).
@@ -198,8 +204,9 @@ pub fn main() -> i32 {
         Command::Undistort { camera, alpha, input, output } => {
             undistort_cmd(&camera, alpha, &input, &output).map(|_| 0)
         }
-        Command::Bench { what: Bench::Render { scene, spp, max_depth, threads, repeat } } => {
-            bench_render(&scene, spp, max_depth, threads, repeat).map(|_| 0)
+        Command::Bench { what: Bench::Render { scene, spp, max_depth, threads, repeat, sampler, one_path } } => {
+            let opts = BenchRender { spp, max_depth, threads, repeat, sampler, one_path };
+            bench_render(&scene, &opts).map(|_| 0)
         }
         Command::Bench { what: Bench::Convergence { scene, reference, spp, threads } } => {
             bench_convergence(&scene, &reference, &spp, threads).map(|_| 0)
@@ -335,34 +342,47 @@ fn render_cmd(
     Ok(())
 }
 
-fn bench_render(
-    scene_path: &Path,
+/// `lumen bench render`'s options.
+struct BenchRender {
     spp: u32,
     max_depth: u32,
     threads: Option<usize>,
     repeat: u32,
-) -> Result<()> {
+    sampler: Option<String>,
+    one_path: bool,
+}
+
+fn bench_render(scene_path: &Path, o: &BenchRender) -> Result<()> {
     let scene = render::load(scene_path)?;
     let mut settings = render::Settings::from_scene(&scene);
-    settings.spp = spp.max(1);
-    settings.max_depth = max_depth.max(1);
-    settings.threads = threads;
+    settings.spp = o.spp.max(1);
+    settings.max_depth = o.max_depth.max(1);
+    settings.threads = o.threads;
+    settings.lanes = !o.one_path;
+    settings.sampler = match o.sampler.as_deref() {
+        None => settings.sampler,
+        Some("independent") => render::sampler::SamplerKind::Independent,
+        Some("sobol") => render::sampler::SamplerKind::Sobol,
+        Some(other) => bail!("--sampler {other}: expected independent or sobol"),
+    };
     let paths = scene.camera.width as f64 * scene.camera.height as f64 * settings.spp as f64;
     let mut best = f64::INFINITY;
-    for _ in 0..repeat.max(1) {
+    for _ in 0..o.repeat.max(1) {
         let t = std::time::Instant::now();
         let film = render::render(&scene, &settings);
         best = best.min(t.elapsed().as_secs_f64());
         std::hint::black_box(film);
     }
+    let lanes = if settings.lanes && render::lanes::supported(&scene, &settings) { "8 lanes" } else { "one path" };
     println!(
-        "lumen {}: {}x{} spp {} depth {} threads {}: {best:.3} s, {:.3} M paths/s",
+        "lumen {}: {}x{} spp {} depth {} {:?} sampler, {lanes}, threads {}: {best:.3} s, {:.3} M paths/s",
         scene_path.display(),
         scene.camera.width,
         scene.camera.height,
         settings.spp,
         settings.max_depth,
-        threads.map_or_else(|| rayon::current_num_threads().to_string(), |t| t.to_string()),
+        settings.sampler,
+        o.threads.map_or_else(|| rayon::current_num_threads().to_string(), |t| t.to_string()),
         paths / best / 1e6
     );
     Ok(())

@@ -159,6 +159,17 @@ fn bench_names_a_missing_scene() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("/nonexistent/b.toml"));
 }
 
+#[test]
+fn bench_names_an_unknown_sampler() {
+    let o = Command::new(env!("CARGO_BIN_EXE_lumen"))
+        .args(["bench", "render", "--sampler", "halton", "--spp", "1", "--repeat", "1"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--sampler halton: expected independent or sobol"));
+}
+
 /// The photometric stage on a small Lambertian sphere (12 lights, 8 spp): the robust model
 /// within 0.2° of the truth normals; a bad setting is refused naming it.
 #[test]
