@@ -39,7 +39,8 @@
 //!
 //! Three would be 2 % better at equal time on this scene; five keeps the second vertex's
 //! direct light stratified, and a thin lens's sample does not push the first vertex's BSDF
-//! sample out.
+//! sample out. (These are the one-path loop's instructions. `render::lanes`, which looks the
+//! scramble seeds up per pixel and draws eight lanes' points at once, pays 5 % for five.)
 
 /// The (seed, pixel) hash every Sobol dimension's scramble seeds derive from.
 #[inline]
