@@ -204,7 +204,9 @@ pub fn main() -> i32 {
         Command::Undistort { camera, alpha, input, output } => {
             undistort_cmd(&camera, alpha, &input, &output).map(|_| 0)
         }
-        Command::Bench { what: Bench::Render { scene, spp, max_depth, threads, repeat, sampler, one_path } } => {
+        Command::Bench {
+            what: Bench::Render { scene, spp, max_depth, threads, repeat, sampler, one_path },
+        } => {
             let opts = BenchRender { spp, max_depth, threads, repeat, sampler, one_path };
             bench_render(&scene, &opts).map(|_| 0)
         }
@@ -373,7 +375,8 @@ fn bench_render(scene_path: &Path, o: &BenchRender) -> Result<()> {
         best = best.min(t.elapsed().as_secs_f64());
         std::hint::black_box(film);
     }
-    let lanes = if settings.lanes && render::lanes::supported(&scene, &settings) { "8 lanes" } else { "one path" };
+    let lanes =
+        if settings.lanes && render::lanes::supported(&scene, &settings) { "8 lanes" } else { "one path" };
     println!(
         "lumen {}: {}x{} spp {} depth {} {:?} sampler, {lanes}, threads {}: {best:.3} s, {:.3} M paths/s",
         scene_path.display(),

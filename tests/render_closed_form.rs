@@ -382,7 +382,8 @@ fn eight_lanes_match_the_scalar_loop_bit_for_bit() {
     let root = common::root();
     let dir = tempfile::tempdir().unwrap();
     let mixed = common::scene(MIXED_LIGHTS, dir.path()).unwrap();
-    let lens = MIXED_LIGHTS.replace("fov_deg = 50.0", "fov_deg = 50.0\naperture_radius = 0.1\nfocus_distance = 3.0");
+    let lens =
+        MIXED_LIGHTS.replace("fov_deg = 50.0", "fov_deg = 50.0\naperture_radius = 0.1\nfocus_distance = 3.0");
     let lens = common::scene(&lens, dir.path()).unwrap();
     assert!(lens.lens.is_some());
     let cornell = render::load(&root.join("pipelines/scenes/cornell-box.toml")).unwrap();
@@ -399,7 +400,10 @@ fn eight_lanes_match_the_scalar_loop_bit_for_bit() {
         let mut s = common::settings(scene, 8, 8);
         s.sampler = sampler;
         s.crop = crop;
-        assert!(render::lanes::supported(scene, &s) || !is_x86_feature_detected!("avx2"), "{name}: not taken");
+        assert!(
+            render::lanes::supported(scene, &s) || !is_x86_feature_detected!("avx2"),
+            "{name}: not taken"
+        );
         let a = render::render(scene, &s);
         s.lanes = false;
         let b = render::render(scene, &s);

@@ -75,7 +75,13 @@ impl<'a> Tracer<'a> {
 
     /// Mean, variance of the mean and dropped samples of the pixels x0..x1 of row y, as
     /// `integrator::render_pixel` gives them.
-    pub fn render_row(&self, settings: &Settings, y: u32, x0: u32, x1: u32) -> Vec<([f32; 3], [f32; 3], u64)> {
+    pub fn render_row(
+        &self,
+        settings: &Settings,
+        y: u32,
+        x0: u32,
+        x1: u32,
+    ) -> Vec<([f32; 3], [f32; 3], u64)> {
         let spp = settings.spp as usize;
         if spp == 0 {
             return (x0..x1).map(|_| pixel_stats(std::iter::empty())).collect();
@@ -130,7 +136,9 @@ impl LightTable {
             let z = Vec3A::ZERO;
             let (kind, v0, e1, e2, n, power, area) = match *light {
                 Light::Point { position, intensity } => (POINT, position, z, z, z, intensity, 0.0),
-                Light::Directional { to_light, irradiance } => (DIRECTIONAL, to_light, z, z, z, irradiance, 0.0),
+                Light::Directional { to_light, irradiance } => {
+                    (DIRECTIONAL, to_light, z, z, z, irradiance, 0.0)
+                }
                 Light::Area { prim, radiance, area } => match scene.bvh.prims[prim as usize] {
                     Prim::Triangle { v0, e1, e2 } => {
                         (TRIANGLE, v0, e1, e2, scene.info[prim as usize].normal, radiance, area)
@@ -139,7 +147,9 @@ impl LightTable {
                 },
                 _ => (TRIANGLE, z, z, z, z, z, 0.0),
             };
-            for (table, v) in [(&mut t.v0, v0), (&mut t.e1, e1), (&mut t.e2, e2), (&mut t.n, n), (&mut t.power, power)] {
+            for (table, v) in
+                [(&mut t.v0, v0), (&mut t.e1, e1), (&mut t.e2, e2), (&mut t.n, n), (&mut t.power, power)]
+            {
                 for a in 0..3 {
                     table[a].push(v[a]);
                 }
@@ -355,7 +365,11 @@ mod simd {
         }
         #[inline(always)]
         fn gather(table: &[Vec<f32>; 3], index: __m256i) -> V {
-            V { x: F::gather(&table[0], index), y: F::gather(&table[1], index), z: F::gather(&table[2], index) }
+            V {
+                x: F::gather(&table[0], index),
+                y: F::gather(&table[1], index),
+                z: F::gather(&table[2], index),
+            }
         }
         /// glam's `Vec3A::dot` order: (x·x' + y·y') + z·z'.
         #[inline(always)]
@@ -455,8 +469,10 @@ mod simd {
         let c = |x: f32| F::splat(x);
         let sin = t
             * (c(1.0)
-                + t2 * (c(-1.0 / 6.0) + t2 * (c(1.0 / 120.0) + t2 * (c(-1.0 / 5040.0) + t2 * c(1.0 / 362_880.0)))));
-        let cos = c(1.0) + t2 * (c(-0.5) + t2 * (c(1.0 / 24.0) + t2 * (c(-1.0 / 720.0) + t2 * c(1.0 / 40_320.0))));
+                + t2 * (c(-1.0 / 6.0)
+                    + t2 * (c(1.0 / 120.0) + t2 * (c(-1.0 / 5040.0) + t2 * c(1.0 / 362_880.0)))));
+        let cos =
+            c(1.0) + t2 * (c(-0.5) + t2 * (c(1.0 / 24.0) + t2 * (c(-1.0 / 720.0) + t2 * c(1.0 / 40_320.0))));
         // SAFETY: as in `binop`.
         unsafe {
             let one = _mm256_set1_epi32(1);
@@ -490,7 +506,9 @@ mod simd {
         #[inline(always)]
         fn load(v: &[u64; 8]) -> U64 {
             // SAFETY: reads the eight integers of `v`; as in `binop` otherwise.
-            unsafe { U64([_mm256_loadu_si256(v.as_ptr().cast()), _mm256_loadu_si256(v[4..].as_ptr().cast())]) }
+            unsafe {
+                U64([_mm256_loadu_si256(v.as_ptr().cast()), _mm256_loadu_si256(v[4..].as_ptr().cast())])
+            }
         }
         #[inline(always)]
         fn store(self, v: &mut [u64; 8]) {
@@ -528,8 +546,12 @@ mod simd {
         fn mul(self, c: u64) -> U64 {
             // SAFETY: as in `binop`.
             self.map(|a| unsafe {
-                let (lo, hi) = (_mm256_set1_epi64x((c & 0xffff_ffff) as i64), _mm256_set1_epi64x((c >> 32) as i64));
-                let cross = _mm256_add_epi64(_mm256_mul_epu32(_mm256_srli_epi64::<32>(a), lo), _mm256_mul_epu32(a, hi));
+                let (lo, hi) =
+                    (_mm256_set1_epi64x((c & 0xffff_ffff) as i64), _mm256_set1_epi64x((c >> 32) as i64));
+                let cross = _mm256_add_epi64(
+                    _mm256_mul_epu32(_mm256_srli_epi64::<32>(a), lo),
+                    _mm256_mul_epu32(a, hi),
+                );
                 _mm256_add_epi64(_mm256_mul_epu32(a, lo), _mm256_slli_epi64::<32>(cross))
             })
         }
@@ -572,7 +594,8 @@ mod simd {
             let mul = |a, c: u32| _mm256_mullo_epi32(a, _mm256_set1_epi32(c as i32));
             let x = _mm256_xor_si256(x, mul(x, sampler::LK_MUL[0]));
             let x = _mm256_add_epi32(x, seed);
-            let x = _mm256_mullo_epi32(x, _mm256_or_si256(_mm256_srli_epi32::<16>(seed), _mm256_set1_epi32(1)));
+            let x =
+                _mm256_mullo_epi32(x, _mm256_or_si256(_mm256_srli_epi32::<16>(seed), _mm256_set1_epi32(1)));
             let x = _mm256_xor_si256(x, mul(x, sampler::LK_MUL[1]));
             _mm256_xor_si256(x, mul(x, sampler::LK_MUL[2]))
         }
@@ -585,13 +608,13 @@ mod simd {
         // SAFETY: as in `binop`.
         unsafe {
             let bytes = _mm256_setr_epi8(
-                3, 2, 1, 0, 7, 6, 5, 4, 11, 10, 9, 8, 15, 14, 13, 12, 3, 2, 1, 0, 7, 6, 5, 4, 11, 10, 9, 8, 15, 14,
-                13, 12,
+                3, 2, 1, 0, 7, 6, 5, 4, 11, 10, 9, 8, 15, 14, 13, 12, 3, 2, 1, 0, 7, 6, 5, 4, 11, 10, 9, 8,
+                15, 14, 13, 12,
             );
             let x = _mm256_shuffle_epi8(x, bytes);
             let nibble = _mm256_setr_epi8(
-                0, 8, 4, 12, 2, 10, 6, 14, 1, 9, 5, 13, 3, 11, 7, 15, 0, 8, 4, 12, 2, 10, 6, 14, 1, 9, 5, 13, 3, 11,
-                7, 15,
+                0, 8, 4, 12, 2, 10, 6, 14, 1, 9, 5, 13, 3, 11, 7, 15, 0, 8, 4, 12, 2, 10, 6, 14, 1, 9, 5, 13,
+                3, 11, 7, 15,
             );
             let low = _mm256_set1_epi8(0x0f);
             let lo = _mm256_shuffle_epi8(nibble, _mm256_and_si256(x, low));
@@ -676,7 +699,10 @@ mod simd {
             unsafe {
                 let want_m = M::from_bits(want);
                 let left = _mm256_loadu_si256(self.sobol_left.as_ptr().cast());
-                let sobol_m = _mm256_and_si256(_mm256_cmpgt_epi32(left, _mm256_setzero_si256()), _mm256_castps_si256(want_m.0));
+                let sobol_m = _mm256_and_si256(
+                    _mm256_cmpgt_epi32(left, _mm256_setzero_si256()),
+                    _mm256_castps_si256(want_m.0),
+                );
                 let sobol = _mm256_movemask_ps(_mm256_castsi256_ps(sobol_m)) as u32;
                 let (mut x, mut y) = (zero, zero);
                 let pcg = want & !sobol;
@@ -725,7 +751,8 @@ mod simd {
         unsafe {
             // Rotate right by rot (a left shift by 32 gives 0, so rot = 0 is the value itself).
             let left = _mm256_sub_epi32(_mm256_set1_epi32(32), rot);
-            let out = _mm256_or_si256(_mm256_srlv_epi32(xorshifted, rot), _mm256_sllv_epi32(xorshifted, left));
+            let out =
+                _mm256_or_si256(_mm256_srlv_epi32(xorshifted, rot), _mm256_sllv_epi32(xorshifted, left));
             (to_unit(out), state)
         }
     }
@@ -828,7 +855,9 @@ mod simd {
                     let lane = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
                     // Beyond the fold of the distortion the sample is black, as the buffer is.
-                    if let Some(d) = camera_direction(scene, lanes.x[lane], y, (jitter.0[lane], jitter.1[lane])) {
+                    if let Some(d) =
+                        camera_direction(scene, lanes.x[lane], y, (jitter.0[lane], jitter.1[lane]))
+                    {
                         dirs[lane] = d;
                         seen |= 1 << lane;
                         lens |= (needs_lens_sample(scene, d) as u32) << lane;
@@ -915,7 +944,8 @@ mod simd {
             let uv = u_light.1;
             let (b1, b2) = (su * (F::splat(1.0) - uv), su * uv);
             let v0 = V::gather(&lights.v0, light);
-            let tri_y = v0.add(V::gather(&lights.e1, light).scale(b1)).add(V::gather(&lights.e2, light).scale(b2));
+            let tri_y =
+                v0.add(V::gather(&lights.e1, light).scale(b1)).add(V::gather(&lights.e2, light).scale(b2));
             let d = V::select(point, v0, tri_y).sub(p);
             let r2 = d.dot(d);
             let r = r2.sqrt();
