@@ -667,9 +667,8 @@ mod simd {
             let mut s = Samplers::default();
             if settings.sampler == SamplerKind::Sobol {
                 for x in gx0..gx1 {
-                    for dim in 0..DIMS {
-                        let pixel = y as u64 * width as u64 + x as u64;
-                        let (hi, hx, hy) = sampler::sobol_seeds(settings.seed, pixel, dim as u64);
+                    let pixel = y as u64 * width as u64 + x as u64;
+                    for (hi, hx, hy) in sampler::sobol_seeds(settings.seed, pixel) {
                         s.seeds[0].push(hi);
                         s.seeds[1].push(hx);
                         s.seeds[2].push(hy);

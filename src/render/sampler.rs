@@ -55,10 +55,12 @@ fn seeds_of(key: u64, dim: u64) -> (u32, u32, u32) {
     (h as u32, (h >> 32) as u32, mix64(h) as u32)
 }
 
-/// The scramble seeds (index shuffle, x, y) every sample of a pixel uses at Sobol dimension
-/// `dim`: they do not depend on the sample, so `render::lanes` computes them once per pixel.
-pub(super) fn sobol_seeds(seed: u64, pixel: u64, dim: u64) -> (u32, u32, u32) {
-    seeds_of(sobol_key(seed, pixel), dim)
+/// The scramble seeds (index shuffle, x, y) every sample of a pixel uses at each Sobol
+/// dimension: they do not depend on the sample, so `render::lanes` computes them once per
+/// pixel.
+pub(super) fn sobol_seeds(seed: u64, pixel: u64) -> [(u32, u32, u32); SOBOL_DIMENSIONS as usize] {
+    let key = sobol_key(seed, pixel);
+    std::array::from_fn(|dim| seeds_of(key, dim as u64))
 }
 
 /// SplitMix64's finaliser: a bijective 64-bit mixer.
