@@ -28,6 +28,12 @@ enum Command {
         /// Worker threads (default: all cores).
         #[arg(long)]
         threads: Option<usize>,
+        /// Folder of the render cache, shared by runs and pipelines (default: out/cache).
+        #[arg(long)]
+        cache: Option<PathBuf>,
+        /// Render everything afresh and store nothing.
+        #[arg(long)]
+        no_cache: bool,
     },
     /// Render a scene file to an image: .exr (linear float) or .png (sRGB, or raw sensor values
     /// when the scene has a [sensor]).
@@ -177,7 +183,11 @@ pub fn main() -> i32 {
         }
     };
     let result = match cli.command {
-        Command::Run { pipeline, out, threads } => run_pipeline(&pipeline, out, threads),
+        Command::Run { pipeline, out, threads, cache, no_cache } => {
+            let cache =
+                if no_cache { None } else { Some(cache.unwrap_or_else(|| PathBuf::from("out/cache"))) };
+            run_pipeline(&pipeline, out, threads, cache)
+        }
         Command::Render { scene, out, spp, max_depth, seed, threads, aov } => {
             render_cmd(&scene, &out, spp, max_depth, seed, threads, &aov).map(|_| 0)
         }
@@ -229,23 +239,34 @@ pub fn main() -> i32 {
 /// Exit code of `lumen run` when a metric missed its bound without a declared expected miss.
 const EXIT_METRIC_MISSED: i32 = 3;
 
-fn run_pipeline(path: &Path, out: Option<PathBuf>, threads: Option<usize>) -> Result<i32> {
+fn run_pipeline(
+    path: &Path,
+    out: Option<PathBuf>,
+    threads: Option<usize>,
+    cache: Option<PathBuf>,
+) -> Result<i32> {
     let file = pipeline::load(path)?;
     let name = pipeline::pipeline_name(&file, path);
     let out = out.unwrap_or_else(|| Path::new("out").join(&name));
-    let opts = pipeline::RunOptions { threads, progress: true, out_dir: out.clone() };
+    let opts = pipeline::RunOptions { threads, progress: true, cache_dir: cache };
     let report = pipeline::run(path, &file, &opts)?;
     report.write(&out)?;
     eprintln!("wrote {} and {}", out.join("report.json").display(), out.join("report.md").display());
+    let width = report.stages.iter().map(|s| s.case.chars().count()).max().unwrap_or(0);
     for s in &report.stages {
         let met = s.metrics.iter().filter(|m| m.pass == Some(true)).count();
-        let bounded = s.metrics.iter().filter(|m| m.bound.is_some()).count();
+        let bounded = s.metrics.iter().filter(|m| m.bound.is_some() && m.skipped.is_none()).count();
         eprintln!(
-            "  {:<10} {:<20} {met}/{bounded} bounds met, {:.2} s",
+            "  {:<11} {:<width$} {met}/{bounded} bounds met, {:>8.2} s, {} rendered, {} reused",
             s.stage,
             s.case,
-            s.timings_s.get("total").copied().unwrap_or(0.0)
+            s.timings_s.get("total").copied().unwrap_or(0.0),
+            s.renders.rendered,
+            s.renders.reused
         );
+    }
+    for w in &report.warnings {
+        eprintln!("warning: {w}");
     }
     let failures = report.failures();
     if failures.is_empty() {
@@ -505,17 +526,19 @@ fn calibrate_cmd(
     }
     let config =
         lumen::calib::Config { board, square, flags, detect: Default::default(), max_iterations: 100 };
+    let input = lumen::calib::Input { images };
     let t = std::time::Instant::now();
-    let (views, skipped) = lumen::calib::detect_views(&images, &config)?;
-    let size = images.first().map_or((0, 0), |(_, g)| (g.width as u32, g.height as u32));
-    let calibrated = lumen::calib::calibrate(&views, size, &config);
+    let calibrated = lumen::calib::run(&input, &config);
     let secs = t.elapsed().as_secs_f64();
     // Overlays first: they show why a calibration failed as much as what it used.
     if let Some(dir) = debug {
-        write_overlays(dir, &images, &views, board)?;
+        let views = match &calibrated {
+            Ok(o) => o.corners.clone(),
+            Err(_) => lumen::calib::detect_views(&input.images, &config).map(|(v, _)| v).unwrap_or_default(),
+        };
+        write_overlays(dir, &input.images, &views, board)?;
     }
-    let mut cal = calibrated?;
-    cal.skipped = skipped;
+    let cal = calibrated?.calibration;
     lumen::calib::file::write(out, &cal)?;
     for s in &cal.skipped {
         eprintln!("skipped {}: {}", s.name, s.reason);
@@ -644,12 +667,18 @@ fn ps_cmd(dir: &Path, model: &str, out: &Path) -> Result<()> {
     let t = std::time::Instant::now();
     let data = lumen::photometric::dataset::read(dir)?;
     let read_s = t.elapsed().as_secs_f64();
-    let result = lumen::photometric::run(&data, model);
-    lumen::photometric::write(out, &data, &result)?;
+    let result = lumen::photometric::run(&data.input, &lumen::photometric::Config::new(model))
+        .with_context(|| format!("--dataset {}", dir.display()))?;
+    let truth = data.truth.as_deref();
+    lumen::photometric::write(out, &data.input, &result, truth)?;
     let s = &result.summary;
-    let err = match (s.mean_angular_error_deg, s.median_angular_error_deg) {
-        (Some(m), Some(d)) => format!("mean angular error {m:.3}°, median {d:.3}°; "),
-        _ => String::new(),
+    let err = match truth.map(|t| lumen::photometric::accuracy(&result, t)) {
+        Some(Some(a)) => format!(
+            "mean angular error {:.3}°, median {:.3}°; ",
+            a.mean_angular_error_deg, a.median_angular_error_deg
+        ),
+        Some(None) => "no solved pixel has a ground-truth normal; ".to_string(),
+        None => String::new(),
     };
     eprintln!(
         "{:?}: {} pixels solved, {} masked; {err}{} lights, condition number {:.2}{}; read {read_s:.2} s, solved in {:.3} s ({:.1} M pixel-lights/s); wrote {}",

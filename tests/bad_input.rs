@@ -250,7 +250,7 @@ fn cli_pipeline_errors() {
     let out = dir.path().join("out");
     let run = |text: &str| {
         std::fs::write(&p, text).unwrap();
-        lumen(&["run", p.to_str().unwrap(), "--out", out.to_str().unwrap()])
+        lumen(&["run", p.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-cache"])
     };
     let head = format!(
         "seed = 1\n[[stages]]\nstage = \"render\"\ncase = \"f\"\nscene = \"{}\"\nspp = 2\n",

@@ -101,7 +101,9 @@ fn real_images() -> Option<Vec<(String, lumen::image::filter::Grey)>> {
 fn real_photographs() {
     let Some(images) = real_images() else { return };
     assert_eq!(images.len(), 13);
-    let c = calib::run(&images, &config()).unwrap();
+    let input = calib::Input { images };
+    let c = calib::run(&input, &config()).unwrap().calibration;
+    let images = input.images;
     assert!(c.skipped.is_empty(), "skipped: {:?}", c.skipped);
     assert_eq!(c.views.len(), 13);
     eprintln!("RMS {:.4} px, K {:?}, d {:?}", c.rms_px, c.camera_matrix, c.distortion_coefficients);

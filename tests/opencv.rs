@@ -104,7 +104,7 @@ fn corners_compared_per_view() {
     let theirs = cv::calibrate(&board, &cv_views, (640, 480), 30, f64::EPSILON).unwrap();
     let images: Vec<_> = files.iter().map(|f| (f.display().to_string(), common::grey(f))).collect();
     let config = config(100);
-    let ours = calib::run(&images, &config).unwrap();
+    let ours = calib::run(&calib::Input { images }, &config).unwrap().calibration;
     eprintln!("RMS reprojection error: lumen {:.4} px, OpenCV {:.4} px", ours.rms_px, theirs.rms_px);
     assert!(ours.rms_px < theirs.rms_px);
 }

@@ -3,7 +3,7 @@
 mod common;
 
 use glam::DVec3;
-use lumen::photometric::{self, dataset::Dataset, Model, Observations};
+use lumen::photometric::{self, dataset::Dataset, Input, Model, Observations};
 use std::process::Command;
 
 /// DiLiGenT's ball: least squares within 0.1° of the plain recipe's 4.29° (the folder's
@@ -13,35 +13,35 @@ use std::process::Command;
 fn diligent_ball() {
     let Some(data) = common::shared_data() else { return };
     let ds = photometric::dataset::read(&data.join("photometric/diligent-ball")).unwrap();
-    assert_eq!(ds.lights.len(), 96);
+    assert_eq!(ds.input.lights.len(), 96);
     assert!(ds.truth.is_some());
-    let plain = photometric::run(&ds, Model::Lambertian);
-    let robust = photometric::run(&ds, Model::Robust);
+    let plain = solve(&ds, Model::Lambertian);
+    let robust = solve(&ds, Model::Robust);
     let (p, r) =
-        (plain.summary.mean_angular_error_deg.unwrap(), robust.summary.mean_angular_error_deg.unwrap());
+        (accuracy(&ds, &plain).mean_angular_error_deg, accuracy(&ds, &robust).mean_angular_error_deg);
     eprintln!(
         "ball: least squares {p:.3}°, robust {r:.3}° (median {:.3}°)",
-        robust.summary.median_angular_error_deg.unwrap()
+        accuracy(&ds, &robust).median_angular_error_deg
     );
     assert!((p - 4.29).abs() <= 0.1, "least squares {p}°");
     assert!(r <= 2.0, "robust {r}°");
     assert_eq!(robust.summary.masked_pixels, 0);
-    let glossy = photometric::run(&ds, Model::BlinnPhong);
-    let b = glossy.summary.mean_angular_error_deg.unwrap();
-    eprintln!("ball: Blinn-Phong {b:.3}° (median {:.3}°)", glossy.summary.median_angular_error_deg.unwrap());
+    let glossy = solve(&ds, Model::BlinnPhong);
+    let b = accuracy(&ds, &glossy).mean_angular_error_deg;
+    eprintln!("ball: Blinn-Phong {b:.3}° (median {:.3}°)", accuracy(&ds, &glossy).median_angular_error_deg);
     assert!(b <= 2.0 && b < r, "Blinn-Phong {b}°, robust {r}°");
     assert_eq!(glossy.summary.masked_pixels, 0);
-    let curve = glossy.summary.mean_angular_error_by_iteration_deg.as_ref().unwrap();
+    let curve = accuracy(&ds, &glossy).mean_angular_error_by_iteration_deg.unwrap();
     assert_eq!(curve[0], r, "the curve starts from the robust Lambertian solution");
     assert!((curve[curve.len() - 1] - b).abs() < 1e-9, "and ends at the final error");
     let dir = tempfile::tempdir().unwrap();
-    photometric::write(dir.path(), &ds, &glossy).unwrap();
+    photometric::write(dir.path(), &ds.input, &glossy, ds.truth.as_deref()).unwrap();
     for f in ["specular.exr", "shininess.exr"] {
         assert!(dir.path().join(f).is_file(), "{f} missing");
     }
     assert!(!robust.summary.lights_nearly_coplanar);
     let dir = tempfile::tempdir().unwrap();
-    photometric::write(dir.path(), &ds, &robust).unwrap();
+    photometric::write(dir.path(), &ds.input, &robust, ds.truth.as_deref()).unwrap();
     for f in [
         "normals.exr",
         "normals.png",
@@ -60,7 +60,7 @@ fn diligent_ball() {
     assert_eq!(summary["pixels"], 15791);
     // Normals in the dataset's frame (y up): the ball's top rim points up.
     let n = lumen::image::io::read_exr(&dir.path().join("normals.exr")).unwrap();
-    let top = ds.pixels[0];
+    let top = ds.input.pixels[0];
     assert!(n.data[3 * top + 1] > 0.5, "top pixel normal {:?}", &n.data[3 * top..3 * top + 3]);
 }
 
@@ -95,15 +95,27 @@ fn glossy_sphere(size: usize, lights: &[DVec3], albedo: f64, sigma: f64, e: f64)
         }
     }
     Dataset {
-        width: size,
-        height: size,
-        lights: lights.to_vec(),
-        intensities: vec![[1.0; 3]; lights.len()],
-        pixels,
-        obs,
+        input: Input {
+            width: size,
+            height: size,
+            lights: lights.to_vec(),
+            intensities: vec![[1.0; 3]; lights.len()],
+            pixels,
+            obs,
+            views: None,
+        },
         truth: Some(normals),
-        views: None,
     }
+}
+
+/// The solver as the CLI and the pipeline call it, with the iteration trace kept.
+fn solve(ds: &Dataset, model: Model) -> photometric::Output {
+    photometric::run(&ds.input, &photometric::Config { model, trace: true }).unwrap()
+}
+
+/// The output against the dataset's truth, computed outside the solver.
+fn accuracy(ds: &Dataset, out: &photometric::Output) -> photometric::Accuracy {
+    photometric::accuracy(out, ds.truth.as_ref().unwrap()).unwrap()
 }
 
 /// Lights spread by the golden angle over elevations 20°–80°.
@@ -129,8 +141,8 @@ fn mean_error(ds: &Dataset, out: &photometric::Output) -> f64 {
 fn blinn_phong_spheres() {
     for (lights, e) in [(12, 10.0), (24, 30.0), (96, 100.0), (48, 300.0)] {
         let ds = glossy_sphere(48, &spread(lights), 0.12, 0.1, e);
-        let robust = mean_error(&ds, &photometric::run(&ds, Model::Robust));
-        let out = photometric::run(&ds, Model::BlinnPhong);
+        let robust = mean_error(&ds, &solve(&ds, Model::Robust));
+        let out = solve(&ds, Model::BlinnPhong);
         let fit = mean_error(&ds, &out);
         eprintln!("{lights} lights, e = {e}: Blinn-Phong {fit:.4}°, robust {robust:.3}°");
         assert!(fit < 0.05 && fit * 3.0 < robust, "Blinn-Phong {fit}°, robust {robust}°");
@@ -155,7 +167,7 @@ fn ring(n: usize, elevation_deg: f64) -> Vec<DVec3> {
 fn three_lights() {
     let lights = ring(3, 50.0);
     let ds = sphere(64, &lights, 0.6);
-    let out = photometric::run(&ds, Model::Lambertian);
+    let out = solve(&ds, Model::Lambertian);
     let truth = ds.truth.as_ref().unwrap();
     let mut lit_errors = Vec::new();
     for (k, n) in out.normals.iter().enumerate() {
@@ -168,10 +180,10 @@ fn three_lights() {
     assert!(lit_errors.len() > 1000);
     assert!(lit_errors.iter().all(|&e| e < 1e-4), "max {}", lit_errors.iter().fold(0.0f64, |a, &b| a.max(b)));
     for model in [Model::Robust, Model::BlinnPhong] {
-        let out = photometric::run(&ds, model);
+        let out = solve(&ds, model);
         assert!(out.normals.iter().flatten().all(|n| n.is_finite()));
         assert!(out.albedo.iter().flatten().all(|a| a.is_finite()));
-        assert_eq!(out.summary.masked_pixels + out.summary.pixels, ds.pixels.len());
+        assert_eq!(out.summary.masked_pixels + out.summary.pixels, ds.input.pixels.len());
     }
 }
 
@@ -183,14 +195,14 @@ fn grazing_lights() {
     lights.push(DVec3::Z);
     let ds = sphere(64, &lights, 0.5);
     for model in [Model::Robust, Model::BlinnPhong] {
-        let out = photometric::run(&ds, model);
+        let out = solve(&ds, model);
         assert!(out.summary.light_condition_number > 1.0);
         let mean = mean_error(&ds, &out);
         assert!(mean < 0.01, "{model:?}: mean error {mean}°");
     }
     // Only the ring, all at 5°: nearly coplanar, flagged.
     let ds = sphere(32, &ring(12, 5.0), 0.5);
-    let out = photometric::run(&ds, Model::Lambertian);
+    let out = solve(&ds, Model::Lambertian);
     assert!(out.summary.lights_nearly_coplanar, "condition number {}", out.summary.light_condition_number);
 }
 
@@ -199,11 +211,11 @@ fn grazing_lights() {
 fn coplanar_lights() {
     let ds = sphere(32, &ring(8, 0.0), 0.5);
     for model in [Model::Lambertian, Model::Robust, Model::BlinnPhong] {
-        let out = photometric::run(&ds, model);
+        let out = solve(&ds, model);
         assert!(out.summary.lights_nearly_coplanar);
         assert_eq!(out.summary.pixels, 0);
-        assert_eq!(out.summary.masked_pixels, ds.pixels.len());
-        assert_eq!(out.summary.mean_angular_error_deg, None);
+        assert_eq!(out.summary.masked_pixels, ds.input.pixels.len());
+        assert!(photometric::accuracy(&out, ds.truth.as_ref().unwrap()).is_none());
     }
 }
 
@@ -215,26 +227,26 @@ fn dark_albedo_and_saturation() {
     let lights = [ring(8, 30.0), ring(8, 60.0), vec![DVec3::Z]].concat();
     let dark = sphere(48, &lights, 0.002);
     for model in [Model::Robust, Model::BlinnPhong] {
-        let mean = mean_error(&dark, &photometric::run(&dark, model));
+        let mean = mean_error(&dark, &solve(&dark, model));
         assert!(mean < 0.01, "{model:?}: mean error {mean}°");
     }
     let mut bright = sphere(48, &lights, 1.6);
-    let n = bright.pixels.len();
+    let n = bright.input.pixels.len();
     let mut clipped = 0;
     for p in 0..n {
-        let obs: Vec<[f32; 3]> = bright.obs.pixel(p).to_vec();
+        let obs: Vec<[f32; 3]> = bright.input.obs.pixel(p).to_vec();
         for (j, o) in obs.iter().enumerate() {
             if o[0] > 1.0 {
                 clipped += 1;
             }
             // What a sensor records: clipped at its largest code.
-            bright.obs.set_raw(p, j, o.map(|v| v.min(1.0)), [1.0; 3]);
+            bright.input.obs.set_raw(p, j, o.map(|v| v.min(1.0)), [1.0; 3]);
         }
     }
     assert!(clipped > 1000);
-    let plain = photometric::run(&bright, Model::Lambertian).summary.mean_angular_error_deg.unwrap();
-    let robust = photometric::run(&bright, Model::Robust);
-    let r = robust.summary.mean_angular_error_deg.unwrap();
+    let plain = accuracy(&bright, &solve(&bright, Model::Lambertian)).mean_angular_error_deg;
+    let robust = solve(&bright, Model::Robust);
+    let r = accuracy(&bright, &robust).mean_angular_error_deg;
     eprintln!("saturated: least squares {plain:.2}°, robust {r:.3}°");
     assert!(r < 0.5 && r < plain / 3.0, "robust {r}°, least squares {plain}°");
 }
@@ -245,16 +257,16 @@ fn dark_albedo_and_saturation() {
 fn saturated_highlights() {
     let mut ds = glossy_sphere(48, &spread(48), 0.15, 0.3, 40.0);
     let mut clipped = 0;
-    for p in 0..ds.pixels.len() {
-        let obs: Vec<[f32; 3]> = ds.obs.pixel(p).to_vec();
+    for p in 0..ds.input.pixels.len() {
+        let obs: Vec<[f32; 3]> = ds.input.obs.pixel(p).to_vec();
         for (j, o) in obs.iter().enumerate() {
             clipped += (o[0] > 0.6) as usize;
-            ds.obs.set_raw(p, j, o.map(|v| (v / 0.6).min(1.0)), [1.0 / 0.6; 3]);
+            ds.input.obs.set_raw(p, j, o.map(|v| (v / 0.6).min(1.0)), [1.0 / 0.6; 3]);
         }
     }
     assert!(clipped > 500, "{clipped} clipped");
-    let robust = mean_error(&ds, &photometric::run(&ds, Model::Robust));
-    let fit = mean_error(&ds, &photometric::run(&ds, Model::BlinnPhong));
+    let robust = mean_error(&ds, &solve(&ds, Model::Robust));
+    let fit = mean_error(&ds, &solve(&ds, Model::BlinnPhong));
     eprintln!("saturated highlights: Blinn-Phong {fit:.4}°, robust {robust:.3}°");
     assert!(fit < 0.1 && fit * 3.0 < robust, "Blinn-Phong {fit}°, robust {robust}°");
 }

@@ -9,7 +9,14 @@ fn run(pipeline: &str, out: &std::path::Path) -> (i32, String) {
     let p = dir.join("p.toml");
     std::fs::write(&p, pipeline).unwrap();
     let o = Command::new(env!("CARGO_BIN_EXE_lumen"))
-        .args(["run", p.to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .args([
+            "run",
+            p.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--cache",
+            dir.join("cache").to_str().unwrap(),
+        ])
         .output()
         .unwrap();
     (o.status.code().unwrap_or(-1), String::from_utf8_lossy(&o.stderr).into_owned())

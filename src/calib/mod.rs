@@ -1,8 +1,9 @@
 //! Camera calibration from chessboard images: detection (`detect`), Zhang's closed form
 //! (`zhang`), joint refinement (`refine`), and the calibration file (`file`).
 //!
-//! `run` is the stage function the CLI and the pipeline call: it detects the board in every
-//! view (skipping, with the reason, views without a whole board), then calibrates.
+//! `run(&Input, &Config)` is the stage function the CLI (`lumen calibrate`) and the pipeline
+//! both call: it detects the board in every view (skipping, with the reason, views without a
+//! whole board), then calibrates.
 
 pub mod detect;
 pub mod file;
@@ -137,13 +138,25 @@ pub fn detect_views(images: &[(String, Grey)], config: &Config) -> Result<Detect
     Ok((views, skipped))
 }
 
+/// What calibration reads: named greyscale views of one camera.
+pub struct Input {
+    pub images: Vec<(String, Grey)>,
+}
+
+/// A calibration and the corners it was computed from.
+pub struct Output {
+    pub calibration: Calibration,
+    /// Detected corners of every view used, in `detect`'s order (`Calibration::views`' order).
+    pub corners: Vec<(String, Vec<DVec2>)>,
+}
+
 /// Detects the board in every image and calibrates from the views where it was found.
-pub fn run(images: &[(String, Grey)], config: &Config) -> Result<Calibration, Error> {
-    let (views, skipped) = detect_views(images, config)?;
-    let size = images.first().map_or((0, 0), |(_, g)| (g.width as u32, g.height as u32));
-    let mut cal = calibrate(&views, size, config)?;
-    cal.skipped = skipped;
-    Ok(cal)
+pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
+    let (views, skipped) = detect_views(&input.images, config)?;
+    let size = input.images.first().map_or((0, 0), |(_, g)| (g.width as u32, g.height as u32));
+    let mut calibration = calibrate(&views, size, config)?;
+    calibration.skipped = skipped;
+    Ok(Output { calibration, corners: views })
 }
 
 /// Calibrates from detected corners (`views`: name and corners in `detect`'s order).

@@ -79,3 +79,13 @@ pub fn agreement(
         tested,
     })
 }
+
+/// Root-mean-square difference over every channel of two images of one size (NaN when the
+/// sizes differ or either is empty, which a caller records as missing).
+pub fn rmse(a: &Image, b: &Image) -> f64 {
+    if (a.width, a.height, a.channels) != (b.width, b.height, b.channels) || a.data.is_empty() {
+        return f64::NAN;
+    }
+    let se: f64 = a.data.iter().zip(&b.data).map(|(x, y)| (*x as f64 - *y as f64).powi(2)).sum();
+    (se / a.data.len() as f64).sqrt()
+}

@@ -6,28 +6,17 @@
 //! height × width × 3). Directions and normals stay in the dataset's frame (x right, y up,
 //! z towards the camera): the solvers only need lights and normals in one frame.
 
-use super::{Error, Observations};
+use super::{Error, Input, Observations};
 use glam::DVec3;
 use rayon::prelude::*;
 use std::path::Path;
 
-/// A dataset read into memory, reduced to the pixels inside the mask.
+/// A dataset read into memory, reduced to the pixels inside the mask: what the solver reads,
+/// and the ground truth beside it (never inside it).
 pub struct Dataset {
-    pub width: usize,
-    pub height: usize,
-    /// Unit light directions (dataset frame).
-    pub lights: Vec<DVec3>,
-    /// Per-channel light intensities, one row per image.
-    pub intensities: Vec<[f64; 3]>,
-    /// Pixel indices (y·width + x) inside the mask, in raster order.
-    pub pixels: Vec<usize>,
-    /// Observations of those pixels, divided by the light intensities, saturation flagged.
-    pub obs: Observations,
+    pub input: Input,
     /// Ground-truth unit normals of the masked pixels, when the dataset has them.
     pub truth: Option<Vec<DVec3>>,
-    /// Unit directions from each masked pixel's surface point towards the camera; `None` for
-    /// an orthographic view along +z (DiLiGenT's assumption: its objects are small and far).
-    pub views: Option<Vec<DVec3>>,
 }
 
 fn bad(path: &Path, message: impl Into<String>) -> Error {
@@ -142,5 +131,5 @@ pub fn read(dir: &Path) -> Result<Dataset, Error> {
     } else {
         None
     };
-    Ok(Dataset { width, height, lights, intensities, pixels, obs, truth, views: None })
+    Ok(Dataset { input: Input { width, height, lights, intensities, pixels, obs, views: None }, truth })
 }

@@ -1,10 +1,13 @@
 //! Photometric stereo: per-pixel normals and albedo from images under known distant lights.
 //!
 //! `dataset` reads DiLiGenT's layout, `lambertian` holds the least-squares solvers (Woodham
-//! 1980) and their robust variant, `blinn_phong` the non-linear fit of a glossy model, `integrate` turns normals into a depth map and a mesh,
-//! `mat` reads MATLAB v5 ground truth. `run` solves every
-//! masked pixel with the chosen model and, when the dataset has ground truth, measures the
-//! angular error; `write` puts the result files in a folder.
+//! 1980) and their robust variant, `blinn_phong` the non-linear fit of a glossy model,
+//! `integrate` turns normals into a depth map and a mesh, `mat` reads MATLAB v5 ground truth.
+//!
+//! `run(&Input, &Config)` is the stage function the CLI (`lumen ps`) and the pipeline both
+//! call: it solves every masked pixel with the chosen model and never sees ground truth.
+//! `accuracy` measures an output against truth normals; `write` puts the result files in a
+//! folder.
 
 pub mod blinn_phong;
 pub mod dataset;
@@ -21,6 +24,8 @@ use std::path::{Path, PathBuf};
 pub enum Error {
     #[error("{path}: {message}")]
     BadInput { path: PathBuf, message: String },
+    #[error("{message}")]
+    Input { message: String },
     #[error(transparent)]
     Image(#[from] crate::image::io::Error),
     #[error("cannot write {path}: {message}")]
@@ -84,6 +89,40 @@ impl std::str::FromStr for Model {
     }
 }
 
+/// What the solver reads: the masked pixels' observations, the lights, and the view
+/// directions. Ground truth never reaches it (`dataset::Dataset` keeps truth beside it).
+pub struct Input {
+    pub width: usize,
+    pub height: usize,
+    /// Unit light directions (dataset frame).
+    pub lights: Vec<DVec3>,
+    /// Per-channel light intensities, one row per image.
+    pub intensities: Vec<[f64; 3]>,
+    /// Pixel indices (y·width + x) inside the mask, in raster order.
+    pub pixels: Vec<usize>,
+    /// Observations of those pixels, divided by the light intensities, saturation flagged.
+    pub obs: Observations,
+    /// Unit directions from each masked pixel's surface point towards the camera; `None` for
+    /// an orthographic view along +z (DiLiGenT's assumption: its objects are small and far).
+    pub views: Option<Vec<DVec3>>,
+}
+
+/// How to solve.
+#[derive(Clone, Copy, Debug)]
+pub struct Config {
+    pub model: Model,
+    /// Keep every pixel's normal after each Gauss-Newton iteration (Blinn-Phong), so the
+    /// error after k iterations can be measured against truth outside the solver. Costs
+    /// about 24 bytes per pixel and iteration (default false).
+    pub trace: bool,
+}
+
+impl Config {
+    pub fn new(model: Model) -> Config {
+        Config { model, trace: false }
+    }
+}
+
 /// The solution over the masked pixels, and what the report needs.
 pub struct Output {
     pub model: Model,
@@ -93,16 +132,17 @@ pub struct Output {
     /// Blinn-Phong only: specular albedo σ and shininess e per pixel (0 where the pixel kept
     /// the Lambertian solution or was not solved).
     pub specular: Option<Vec<[f64; 2]>>,
+    /// With `Config::trace`, Blinn-Phong: per pixel, its normal after each iteration, the
+    /// robust Lambertian start first (empty for unsolved pixels).
+    pub trace: Option<Vec<Vec<DVec3>>>,
     pub summary: Summary,
 }
 
-/// `summary.json`.
+/// What the solver says of its own run (`summary.json`, with the accuracy when the dataset
+/// has ground truth).
 #[derive(Clone, Debug, Serialize)]
 pub struct Summary {
     pub model: Model,
-    /// Mean and median angular error over the solved pixels (degrees), with ground truth.
-    pub mean_angular_error_deg: Option<f64>,
-    pub median_angular_error_deg: Option<f64>,
     /// Pixels inside the mask that got a normal.
     pub pixels: usize,
     /// Pixels inside the mask left without one (fewer than 3 usable observations, or their
@@ -126,15 +166,29 @@ pub struct Summary {
     /// Lambertian solution, or no observation sampled their lobe; `blinn_phong` docs).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pixels_without_specular: Option<usize>,
-    /// Blinn-Phong with ground truth: the mean angular error (degrees) of the normals after
-    /// k Gauss-Newton iterations, k = 0 (the robust Lambertian start), 1, 2, …; a pixel that
-    /// stopped earlier counts with its final normal.
+}
+
+/// Normals against ground truth: computed outside the solver, from its output.
+#[derive(Clone, Debug, Serialize)]
+pub struct Accuracy {
+    /// Mean and median angular error over the solved pixels that have a truth normal (degrees).
+    pub mean_angular_error_deg: f64,
+    pub median_angular_error_deg: f64,
+    /// Solved pixels left out of the error because their truth normal is zero or not finite
+    /// (a mask wider than the object).
+    pub pixels_without_truth: usize,
+    /// With a trace: the mean angular error of the normals after k Gauss-Newton iterations,
+    /// k = 0 (the robust Lambertian start), 1, 2, …; a pixel that stopped earlier counts with
+    /// its final normal.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub mean_angular_error_by_iteration_deg: Option<Vec<f64>>,
 }
 
-/// Condition number of the light matrix.
+/// Condition number of the light matrix (infinite for fewer than 3 lights).
 pub fn light_condition_number(lights: &[DVec3]) -> f64 {
+    if lights.len() < 3 {
+        return f64::INFINITY;
+    }
     let m = nalgebra::DMatrix::from_fn(lights.len(), 3, |r, c| lights[r][c]);
     let sv = m.singular_values();
     let (lo, hi) = (sv.min(), sv.max());
@@ -162,26 +216,50 @@ impl From<lambertian::Pixel> for Solved {
     }
 }
 
-/// Solves every masked pixel of a dataset with `model`.
-pub fn run(data: &dataset::Dataset, model: Model) -> Output {
+/// Solves every masked pixel with `config.model`. Fewer than 3 lights, an empty mask or
+/// observations that do not match the pixels and lights are bad input.
+pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
+    let bad = |message: String| Error::Input { message };
+    if input.lights.len() < 3 {
+        return Err(bad(format!("{} light(s): photometric stereo needs at least 3", input.lights.len())));
+    }
+    if input.pixels.is_empty() {
+        return Err(bad("the mask selects no pixel".into()));
+    }
+    if input.obs.lights != input.lights.len()
+        || input.obs.data.len() != input.pixels.len() * input.lights.len()
+    {
+        return Err(bad(format!(
+            "{} observations for {} pixels under {} lights",
+            input.obs.data.len(),
+            input.pixels.len(),
+            input.lights.len()
+        )));
+    }
+    if let Some(v) = &input.views {
+        if v.len() != input.pixels.len() {
+            return Err(bad(format!("{} view directions for {} pixels", v.len(), input.pixels.len())));
+        }
+    }
+    let model = config.model;
     let t = std::time::Instant::now();
-    let solved: Vec<Option<Solved>> = (0..data.pixels.len())
+    let solved: Vec<Option<Solved>> = (0..input.pixels.len())
         .into_par_iter()
         .map(|p| {
-            let obs = data.obs.pixel(p);
+            let obs = input.obs.pixel(p);
             match model {
-                Model::Lambertian => lambertian::solve_plain(&data.lights, obs).map(Solved::from),
+                Model::Lambertian => lambertian::solve_plain(&input.lights, obs).map(Solved::from),
                 Model::Robust => {
-                    lambertian::solve_robust(&data.lights, obs, data.obs.valid(p)).map(Solved::from)
+                    lambertian::solve_robust(&input.lights, obs, input.obs.valid(p)).map(Solved::from)
                 }
                 Model::BlinnPhong => {
-                    let view = data.views.as_ref().map_or(DVec3::Z, |v| v[p]);
-                    blinn_phong::solve(&data.lights, view, obs, data.obs.valid(p)).map(|b| Solved {
+                    let view = input.views.as_ref().map_or(DVec3::Z, |v| v[p]);
+                    blinn_phong::solve(&input.lights, view, obs, input.obs.valid(p)).map(|b| Solved {
                         normal: b.normal,
                         albedo: b.albedo,
                         used: b.used,
                         specular: [b.specular, b.exponent],
-                        history: b.history,
+                        history: if config.trace { b.history } else { Vec::new() },
                     })
                 }
             }
@@ -192,49 +270,59 @@ pub fn run(data: &dataset::Dataset, model: Model) -> Output {
     let albedo = solved.iter().map(|s| s.as_ref().map_or([0.0; 3], |p| p.albedo)).collect();
     let ok: Vec<&Solved> = solved.iter().flatten().collect();
     let used = ok.iter().map(|p| p.used as f64).sum::<f64>() / ok.len().max(1) as f64;
-    let (mean, median) = match &data.truth {
-        Some(truth) => {
-            let errs = angular_errors(&normals, truth);
-            (mean_of(&errs), median_of(&errs))
-        }
-        None => (None, None),
-    };
     let glossy = model == Model::BlinnPhong;
-    let by_iteration = match &data.truth {
-        Some(truth) if glossy => Some(error_by_iteration(&solved, truth)),
-        _ => None,
-    };
-    let cond = light_condition_number(&data.lights);
+    let cond = light_condition_number(&input.lights);
     let summary = Summary {
         model,
-        mean_angular_error_deg: mean,
-        median_angular_error_deg: median,
         pixels: ok.len(),
-        masked_pixels: data.pixels.len() - ok.len(),
-        lights: data.lights.len(),
+        masked_pixels: input.pixels.len() - ok.len(),
+        lights: input.lights.len(),
         light_condition_number: cond,
         lights_nearly_coplanar: !(cond <= 5.0),
         mean_observations_used: used,
         time_s,
-        pixel_lights_per_s: (data.pixels.len() * data.lights.len()) as f64 / time_s.max(1e-9),
-        time_per_megapixel_s: time_s / (data.pixels.len().max(1) as f64 / 1e6),
+        pixel_lights_per_s: (input.pixels.len() * input.lights.len()) as f64 / time_s.max(1e-9),
+        time_per_megapixel_s: time_s / (input.pixels.len() as f64 / 1e6),
         pixels_without_specular: glossy.then(|| ok.iter().filter(|p| p.specular[0] == 0.0).count()),
-        mean_angular_error_by_iteration_deg: by_iteration,
     };
     let specular =
         glossy.then(|| solved.iter().map(|s| s.as_ref().map_or([0.0; 2], |p| p.specular)).collect());
-    Output { model, normals, albedo, specular, summary }
+    let trace = (glossy && config.trace)
+        .then(|| solved.into_iter().map(|s| s.map_or_else(Vec::new, |p| p.history)).collect());
+    Ok(Output { model, normals, albedo, specular, trace, summary })
 }
 
-/// Mean angular error after each iteration (`Summary::mean_angular_error_by_iteration_deg`).
-fn error_by_iteration(solved: &[Option<Solved>], truth: &[DVec3]) -> Vec<f64> {
-    let longest = solved.iter().flatten().map(|p| p.history.len()).max().unwrap_or(0);
+/// A usable truth normal: finite and not zero.
+fn usable(t: &DVec3) -> bool {
+    t.is_finite() && t.length_squared() > 1e-12
+}
+
+/// The output's normals against truth normals (same pixels, dataset frame); `None` when no
+/// solved pixel has a usable truth normal.
+pub fn accuracy(out: &Output, truth: &[DVec3]) -> Option<Accuracy> {
+    let errs = angular_errors(&out.normals, truth);
+    let solved_with_truth = errs.len();
+    let mean = mean_of(&errs)?;
+    let median = median_of(&errs)?;
+    let solved = out.normals.iter().zip(truth).filter(|(n, _)| n.is_some()).count();
+    let by_iteration = out.trace.as_ref().map(|tr| error_by_iteration(tr, &out.normals, truth));
+    Some(Accuracy {
+        mean_angular_error_deg: mean,
+        median_angular_error_deg: median,
+        pixels_without_truth: solved - solved_with_truth,
+        mean_angular_error_by_iteration_deg: by_iteration,
+    })
+}
+
+/// Mean angular error after each iteration (`Accuracy::mean_angular_error_by_iteration_deg`).
+fn error_by_iteration(trace: &[Vec<DVec3>], normals: &[Option<DVec3>], truth: &[DVec3]) -> Vec<f64> {
+    let longest = trace.iter().map(Vec::len).max().unwrap_or(0);
     (0..longest)
         .map(|k| {
             let (mut sum, mut n) = (0.0, 0usize);
-            for (s, t) in solved.iter().zip(truth) {
-                if let Some(p) = s {
-                    let normal = p.history.get(k).or(p.history.last()).copied().unwrap_or(p.normal);
+            for ((hist, normal), t) in trace.iter().zip(normals).zip(truth) {
+                if let (Some(last), true) = (normal, usable(t)) {
+                    let normal = hist.get(k).or(hist.last()).copied().unwrap_or(*last);
                     sum += normal.dot(t.normalize()).clamp(-1.0, 1.0).acos().to_degrees();
                     n += 1;
                 }
@@ -244,11 +332,13 @@ fn error_by_iteration(solved: &[Option<Solved>], truth: &[DVec3]) -> Vec<f64> {
         .collect()
 }
 
-/// Angle in degrees between each solved normal and its truth (unsolved pixels left out).
+/// Angle in degrees between each solved normal and its truth (unsolved pixels and pixels
+/// without a usable truth normal left out).
 pub fn angular_errors(normals: &[Option<DVec3>], truth: &[DVec3]) -> Vec<f64> {
     normals
         .iter()
         .zip(truth)
+        .filter(|(_, t)| usable(t))
         .filter_map(|(n, t)| n.map(|n| n.dot(t.normalize()).clamp(-1.0, 1.0).acos().to_degrees()))
         .collect()
 }
@@ -274,7 +364,7 @@ fn median_of(v: &[f64]) -> Option<f64> {
 /// (orthographic, pixel units, mean 0) and `surface.obj`, and `summary.json` into `dir`. Normals are
 /// unit vectors in the dataset's frame, zero outside the mask; the PNG shows (n + 1)/2. The
 /// albedo PNG is scaled so that the brightest 1 % of pixels saturate.
-pub fn write(dir: &Path, data: &dataset::Dataset, out: &Output) -> Result<(), Error> {
+pub fn write(dir: &Path, data: &Input, out: &Output, truth: Option<&[DVec3]>) -> Result<(), Error> {
     use crate::image::{io, Image};
     std::fs::create_dir_all(dir).map_err(|e| Error::Write { path: dir.into(), message: e.to_string() })?;
     let (w, h) = (data.width as u32, data.height as u32);
@@ -308,10 +398,11 @@ pub fn write(dir: &Path, data: &dataset::Dataset, out: &Output) -> Result<(), Er
             io::write_exr(&dir.join(name), &img)?;
         }
     }
-    if let Some(truth) = &data.truth {
+    if let Some(truth) = truth {
         let mut err = vec![0u16; (w * h) as usize];
         for (k, &i) in data.pixels.iter().enumerate() {
             err[i] = match out.normals[k] {
+                Some(_) if !usable(&truth[k]) => 0,
                 Some(n) => {
                     let deg = n.dot(truth[k].normalize()).clamp(-1.0, 1.0).acos().to_degrees();
                     (deg / 20.0 * 255.0).round().clamp(0.0, 255.0) as u16
@@ -331,7 +422,15 @@ pub fn write(dir: &Path, data: &dataset::Dataset, out: &Output) -> Result<(), Er
         let path = dir.join("surface.obj");
         io::write_atomically(&path, |tmp| std::fs::write(tmp, obj).map_err(|e| e.to_string()))?;
     }
-    let json = serde_json::to_string_pretty(&out.summary)
+    #[derive(Serialize)]
+    struct Written<'a> {
+        #[serde(flatten)]
+        summary: &'a Summary,
+        #[serde(flatten)]
+        accuracy: Option<Accuracy>,
+    }
+    let written = Written { summary: &out.summary, accuracy: truth.and_then(|t| accuracy(out, t)) };
+    let json = serde_json::to_string_pretty(&written)
         .map_err(|e| Error::Write { path: dir.join("summary.json"), message: e.to_string() })?;
     let path = dir.join("summary.json");
     io::write_atomically(&path, |tmp| std::fs::write(tmp, json).map_err(|e| e.to_string()))?;
@@ -339,7 +438,7 @@ pub fn write(dir: &Path, data: &dataset::Dataset, out: &Output) -> Result<(), Er
 }
 
 /// Maps every channel value of the masked pixels with `f`; pixels outside the mask are 0.
-fn data_or_zero(img: &crate::image::Image, data: &dataset::Dataset, f: impl Fn(f32) -> u16) -> Vec<u16> {
+fn data_or_zero(img: &crate::image::Image, data: &Input, f: impl Fn(f32) -> u16) -> Vec<u16> {
     let mut out = vec![0u16; img.data.len()];
     for &i in &data.pixels {
         for c in 0..3 {

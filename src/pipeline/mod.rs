@@ -1,115 +1,52 @@
-//! Pipeline files: which stages run, on which scenes, with which seeds and bounds; the runner
-//! that runs them; and the report.
-//!
-//! A pipeline file (TOML) looks like
-//!
-//! ```toml
-//! name = "all"            # optional; default: the file's stem
-//! seed = 1                # seed of every stage that does not set its own
-//! [[stages]]
-//! stage = "render"        # which stage
-//! case = "cornell-box"    # the case's name in the report
-//! scene = "scenes/cornell-box.toml"   # paths are relative to the pipeline file
-//! spp = 256
-//! reference = "../../shared/data/scenes/cornell-box/reference.exr"
-//! reference_variance = "../../shared/data/scenes/cornell-box/reference_variance.exr"
-//! bounds = { mean_rel_err_r = 0.01, z_test_pass_fraction = 0.9975 }
-//! expected_miss = { some_metric = "why it is not met yet" }
-//! ```
-//!
-//! Stage dispatch is an enum and a match. Only listed stages run, and each renders only what
-//! it consumes.
+//! Pipelines: which stages run, on which scenes, with which seeds and bounds (`file`); the
+//! runner (`run`, the one `match` over the stages); the render cache (`cache`); metrics and
+//! their verdicts (`metric`); the report (`report`). Every stage is three plain functions
+//! (`stages` docs); only listed cases run, and each renders only what it consumes.
 
+pub mod cache;
+pub mod file;
+pub mod metric;
 pub mod report;
-pub mod stage_calibrate;
-pub mod stage_photometric;
-pub mod stage_render;
+pub mod stages;
 
-use report::{Metric, Report, StageReport};
-use serde::Deserialize;
-use std::collections::BTreeMap;
+pub use file::{load, PipelineFile};
+
+use file::{Case, Stage};
+use metric::Metric;
+use report::{Outcome, Renders, Report, StageFailure, StageReport};
+use stages::{run_case, CaseResult, Context, StageError};
+use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    #[error("cannot read pipeline {path}: {message}")]
-    Io { path: PathBuf, message: String },
+    #[error(transparent)]
+    File(#[from] file::Error),
+    #[error("{path}: stages[{entry}] (line {line}, case {case}): {kind} error: {source}")]
+    Stage { path: PathBuf, entry: usize, line: usize, case: String, kind: &'static str, source: StageError },
     #[error("{path}: {message}")]
-    Parse { path: PathBuf, message: String },
-    #[error("{path}: stage {stage} ({case}): {message}")]
-    Stage { path: PathBuf, stage: usize, case: String, message: String },
+    Bounds { path: PathBuf, message: String },
+    #[error("--threads {0}: expected 1 to {MAX_THREADS}")]
+    Threads(usize),
+    #[error("cannot start {0} worker threads: {1}")]
+    Pool(usize, String),
     #[error("cannot write {path}: {message}")]
     Write { path: PathBuf, message: String },
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct PipelineFile {
-    pub name: Option<String>,
-    #[serde(default = "default_seed")]
-    pub seed: u64,
-    pub stages: Vec<StageSpec>,
-}
-
-fn default_seed() -> u64 {
-    1
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(tag = "stage", rename_all = "lowercase")]
-pub enum StageSpec {
-    Render(stage_render::RenderStage),
-    Calibrate(stage_calibrate::CalibrateStage),
-    Photometric(stage_photometric::PhotometricStage),
-}
-
-/// What every stage entry has besides its own settings (each stage's file struct carries
-/// these fields itself: serde's `flatten` would silently switch off `deny_unknown_fields`).
-#[derive(Debug, Default)]
-pub struct Common {
-    pub case: String,
-    pub seed: Option<u64>,
-    /// Bound per metric name. Whether it is an upper or lower bound is the metric's own.
-    pub bounds: BTreeMap<String, f64>,
-    /// Metric name → why its bound is not met yet. Shown in the report; does not fail the run.
-    pub expected_miss: BTreeMap<String, String>,
-}
-
-impl StageSpec {
-    fn common(&self) -> Common {
-        match self {
-            StageSpec::Render(s) => s.common(),
-            StageSpec::Calibrate(s) => s.common(),
-            StageSpec::Photometric(s) => s.common(),
-        }
-    }
-    fn name(&self) -> &'static str {
-        match self {
-            StageSpec::Render(_) => "render",
-            StageSpec::Calibrate(_) => "calibrate",
-            StageSpec::Photometric(_) => "photometric",
-        }
-    }
-}
+/// Most worker threads a run may ask for: more than any machine lumen runs on has cores, few
+/// enough that a typo (`--threads 100000`) is refused rather than starving the machine.
+pub const MAX_THREADS: usize = 1024;
 
 /// Options of a run that are not in the pipeline file.
 #[derive(Clone, Debug, Default)]
 pub struct RunOptions {
+    /// Worker threads of the run's one pool (default: all cores).
     pub threads: Option<usize>,
+    /// Progress bars (on a terminal) and a line per case on stderr.
     pub progress: bool,
-    /// The output folder, where stages save images they are asked to keep.
-    pub out_dir: PathBuf,
-}
-
-pub fn load(path: &Path) -> Result<PipelineFile, Error> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| Error::Io { path: path.into(), message: e.to_string() })?;
-    let file: PipelineFile =
-        toml::from_str(&text).map_err(|e| Error::Parse { path: path.into(), message: e.to_string() })?;
-    if file.stages.is_empty() {
-        return Err(Error::Parse { path: path.into(), message: "`stages` is empty: nothing to run".into() });
-    }
-    Ok(file)
+    /// Where renders are cached (`None`: not cached).
+    pub cache_dir: Option<PathBuf>,
 }
 
 /// The name a pipeline's outputs go under: `name`, or the file's stem.
@@ -119,71 +56,154 @@ pub fn pipeline_name(file: &PipelineFile, path: &Path) -> String {
         .unwrap_or_else(|| path.file_stem().and_then(|s| s.to_str()).unwrap_or("pipeline").to_string())
 }
 
-/// Runs every stage of a pipeline file and returns the report (not yet written). With
-/// `opts.threads`, all of a stage's parallel work (rendering, detection, solving) shares that
-/// many threads.
+/// Runs every case of a pipeline file in one thread pool and returns the report (not yet
+/// written). A case whose error it did not declare stops the run with that error.
 pub fn run(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Report, Error> {
-    let pool = opts.threads.and_then(|n| rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build().ok());
-    match pool {
-        Some(pool) => pool.install(|| run_stages(path, file, opts)),
-        None => run_stages(path, file, opts),
-    }
+    let threads = match opts.threads {
+        Some(n) if n == 0 || n > MAX_THREADS => return Err(Error::Threads(n)),
+        Some(n) => n,
+        None => std::thread::available_parallelism().map_or(1, |n| n.get()),
+    };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| Error::Pool(threads, e.to_string()))?;
+    pool.install(|| run_cases(path, file, opts))
 }
 
-fn run_stages(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Report, Error> {
+fn run_cases(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Report, Error> {
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let cache = cache::Cache::new(opts.cache_dir.clone());
+    let bars = opts.progress && std::io::stderr().is_terminal();
+    let started = std::time::Instant::now();
     let mut stages = Vec::new();
-    for (i, spec) in file.stages.iter().enumerate() {
-        let common = spec.common();
-        let stage_err = |message: String| Error::Stage {
-            path: path.into(),
-            stage: i + 1,
-            case: common.case.clone(),
-            message,
-        };
-        let seed = common.seed.unwrap_or(file.seed);
+    let mut files = Vec::new();
+    let n = file.cases.len();
+    for (k, case) in file.cases.iter().enumerate() {
+        let seed = case.common.seed.unwrap_or(file.seed);
+        let ctx = Context { dir: &dir, case: &case.common.case, seed, cache: &cache, progress: bars };
+        if opts.progress {
+            eprintln!("[{}/{n}] {} {} ...", k + 1, case.stage.name(), case.common.case);
+        }
         let t = std::time::Instant::now();
-        let out = match spec {
-            StageSpec::Render(s) => stage_render::run(s, &dir, seed, opts).map_err(stage_err)?,
-            StageSpec::Calibrate(s) => stage_calibrate::run(s, &dir, seed, opts).map_err(stage_err)?,
-            StageSpec::Photometric(s) => stage_photometric::run(s, &dir, seed, opts).map_err(stage_err)?,
+        let result = match &case.stage {
+            Stage::Render(c) => run_case(
+                || stages::render::synthesize(c, &ctx),
+                |i| stages::render::solve(c, i),
+                |o, t| stages::render::validate(c, o, t),
+            ),
+            Stage::Calibrate(c) => run_case(
+                || stages::calibrate::synthesize(c, &ctx),
+                |i| stages::calibrate::solve(c, i),
+                |o, t| stages::calibrate::validate(c, o, t),
+            ),
+            Stage::Photometric(c) => run_case(
+                || stages::photometric::synthesize(c, &ctx),
+                |i| stages::photometric::solve(c, i),
+                |o, t| stages::photometric::validate(c, o, t),
+            ),
         };
-        let mut timings = out.timings_s;
-        timings.insert("total".into(), t.elapsed().as_secs_f64());
-        let metrics = apply_bounds(out.metrics, &common).map_err(stage_err)?;
-        stages.push(StageReport {
-            stage: spec.name().into(),
-            case: common.case.clone(),
-            mode: "alone".into(),
-            seed,
-            metrics,
-            timings_s: timings,
-            notes: out.notes,
-        });
+        let total = t.elapsed().as_secs_f64();
+        let (mut st, kept) = report_case(path, case, seed, result)?;
+        st.timings_s.insert("total".into(), total);
+        st.renders = Renders::from_events(&cache.events_of(&case.common.case));
+        if opts.progress {
+            let verdict = if st.failed() { "MISSED" } else { "ok" };
+            eprintln!(
+                "[{}/{n}] {} {}: {verdict}, {:.1} s ({} rendered, {} reused; {:.0} s elapsed)",
+                k + 1,
+                st.stage,
+                st.case,
+                total,
+                st.renders.rendered,
+                st.renders.reused,
+                started.elapsed().as_secs_f64()
+            );
+        }
+        stages.push(st);
+        files.extend(kept);
     }
-    Ok(Report::new(pipeline_name(file, path), file.seed, stages))
+    let mut report =
+        Report::new(pipeline_name(file, path), file.seed, stages, started.elapsed().as_secs_f64());
+    report.files = files;
+    report.warnings = cache.warnings();
+    Ok(report)
 }
 
-/// What a stage hands back: its metrics (bounds not yet applied), timings and notes.
-pub struct StageOutput {
-    pub metrics: Vec<Metric>,
-    pub timings_s: BTreeMap<String, f64>,
-    pub notes: Vec<String>,
+/// The case's report from its result, or the error that stops the run.
+fn report_case(
+    path: &Path,
+    case: &Case,
+    seed: u64,
+    result: Result<CaseResult, StageError>,
+) -> Result<(StageReport, Vec<(PathBuf, crate::image::Image)>), Error> {
+    let common = &case.common;
+    let declared = common.expect_error.as_ref().map_or("result".to_string(), |k| format!("error: {k}"));
+    let mut st = StageReport {
+        stage: case.stage.name().into(),
+        case: common.case.clone(),
+        group: case.group.clone(),
+        sweep: case.sweep.clone(),
+        mode: "alone".into(),
+        seed,
+        outcome: Outcome { declared, actual: "result".into() },
+        error: None,
+        metrics: Vec::new(),
+        timings_s: Default::default(),
+        renders: Renders::default(),
+        plot_metric: common.plot.clone().unwrap_or_else(|| case.stage.headline().to_string()),
+        notes: Vec::new(),
+    };
+    match result {
+        Ok(r) => {
+            st.metrics = apply_bounds(r.metrics, common).map_err(|message| Error::Bounds {
+                path: path.into(),
+                message: format!(
+                    "stages[{}] (line {}, case {}): {message}",
+                    case.entry - 1,
+                    case.line,
+                    common.case
+                ),
+            })?;
+            st.timings_s = r.timings_s;
+            st.notes = r.notes;
+            Ok((st, r.files))
+        }
+        Err(e) if common.expect_error.is_some() => {
+            st.outcome.actual = format!("error: {}", e.kind());
+            st.error = Some(StageFailure { kind: e.kind().into(), message: e.to_string() });
+            Ok((st, Vec::new()))
+        }
+        Err(source) => Err(Error::Stage {
+            path: path.into(),
+            entry: case.entry - 1,
+            line: case.line,
+            case: common.case.clone(),
+            kind: source.kind(),
+            source,
+        }),
+    }
 }
 
 /// Attaches each metric's bound and verdict. A bound or expected miss that names a metric the
-/// stage did not produce is an error, so a typo cannot silently disable a check.
-fn apply_bounds(mut metrics: Vec<Metric>, common: &Common) -> Result<Vec<Metric>, String> {
+/// stage did not produce is an error, so a typo cannot silently disable a check; a skipped
+/// metric keeps its bound but gets no verdict.
+fn apply_bounds(mut metrics: Vec<Metric>, common: &file::Common) -> Result<Vec<Metric>, String> {
     for name in common.bounds.keys().chain(common.expected_miss.keys()) {
         if !metrics.iter().any(|m| &m.name == name) {
             let known: Vec<&str> = metrics.iter().map(|m| m.name.as_str()).collect();
-            return Err(format!("bound or expected_miss names metric `{name}`, which this stage does not report (it reports: {})", known.join(", ")));
+            return Err(format!(
+                "bound or expected_miss names metric `{name}`, which this stage does not report (it reports: {})",
+                known.join(", ")
+            ));
         }
     }
     for m in &mut metrics {
         if let Some(&b) = common.bounds.get(&m.name) {
             m.bound = Some(b);
-            m.pass = Some(m.meets(b));
+            if m.skipped.is_none() {
+                m.pass = Some(m.meets(b));
+            }
         }
         m.expected_miss = common.expected_miss.get(&m.name).cloned();
     }

@@ -1,54 +1,53 @@
-//! The run report: `report.json` (machine-readable) and `report.md` (tables for a person).
+//! The run report: `report.json` (machine-readable), `report.md` (tables for a person) and,
+//! for every sweep, a plot of error against time with its Pareto front (`plots/*.svg`).
 //! The report is the only place that sees estimates and truth side by side.
 
+use super::cache::Event;
+use super::metric::{Better, Metric};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-#[derive(Clone, Copy, Debug, Serialize, PartialEq, Eq)]
-#[serde(rename_all = "lowercase")]
-pub enum Better {
-    Lower,
-    Higher,
-}
-
+/// What a case declared it would end with, and what it did.
 #[derive(Clone, Debug, Serialize)]
-pub struct Metric {
-    pub name: String,
-    pub value: f64,
-    pub unit: String,
-    /// Whether the bound is an upper (`lower` is better) or a lower bound.
-    pub better: Better,
-    pub bound: Option<f64>,
-    pub pass: Option<bool>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub expected_miss: Option<String>,
+pub struct Outcome {
+    /// `result` (metrics within their bounds) or `error: KIND`.
+    pub declared: String,
+    /// `result` or `error: KIND`.
+    pub actual: String,
 }
 
-impl Metric {
-    pub fn new(name: &str, value: f64, unit: &str, better: Better) -> Metric {
-        Metric {
-            name: name.into(),
-            value,
-            unit: unit.into(),
-            better,
-            bound: None,
-            pass: None,
-            expected_miss: None,
-        }
-    }
+/// A stage's error as the report shows it.
+#[derive(Clone, Debug, Serialize)]
+pub struct StageFailure {
+    pub kind: String,
+    pub message: String,
+}
 
-    pub fn meets(&self, bound: f64) -> bool {
-        match self.better {
-            Better::Lower => self.value <= bound,
-            Better::Higher => self.value >= bound,
-        }
-    }
+/// Renders a case asked for: how many were rendered and how many read back from the cache.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Renders {
+    pub rendered: usize,
+    pub reused: usize,
+    /// Seconds spent rendering (reading back is counted in `reused_s`).
+    pub rendered_s: f64,
+    pub reused_s: f64,
+}
 
-    /// A metric that missed its bound without a declared expected miss.
-    pub fn failed(&self) -> bool {
-        self.pass == Some(false) && self.expected_miss.is_none()
+impl Renders {
+    pub fn from_events(events: &[Event]) -> Renders {
+        let mut r = Renders::default();
+        for e in events {
+            if e.reused {
+                r.reused += 1;
+                r.reused_s += e.seconds;
+            } else {
+                r.rendered += 1;
+                r.rendered_s += e.seconds;
+            }
+        }
+        r
     }
 }
 
@@ -56,12 +55,31 @@ impl Metric {
 pub struct StageReport {
     pub stage: String,
     pub case: String,
+    /// The entry's case name; the cases of one sweep share it.
+    pub group: String,
+    /// The swept fields' values (empty outside a sweep).
+    pub sweep: BTreeMap<String, String>,
     /// `alone` (upstream quantities from truth) or `chained` (from the previous stage).
     pub mode: String,
     pub seed: u64,
+    pub outcome: Outcome,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<StageFailure>,
     pub metrics: Vec<Metric>,
+    /// `render` (synthesis), `solve`, `validate` and `total`, in seconds.
     pub timings_s: BTreeMap<String, f64>,
+    pub renders: Renders,
+    /// The metric this case's sweep plots against time.
+    pub plot_metric: String,
     pub notes: Vec<String>,
+}
+
+impl StageReport {
+    /// Whether the case failed: an outcome other than declared, or a metric that missed its
+    /// bound without a declared miss.
+    pub fn failed(&self) -> bool {
+        self.outcome.declared != self.outcome.actual || self.metrics.iter().any(Metric::failed)
+    }
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -70,44 +88,71 @@ pub struct Report {
     pub seed: u64,
     pub lumen_version: String,
     pub threads: usize,
+    /// Wall time of the whole run, in seconds.
+    pub total_s: f64,
     pub stages: Vec<StageReport>,
-    /// Every metric met its bound or has a declared expected miss.
+    /// Every case ended as declared and every metric met its bound or has a declared miss.
     pub passed: bool,
+    /// Problems that did not stop the run (e.g. the render cache could not be written).
+    pub warnings: Vec<String>,
+    /// Files cases asked to keep, written with the report.
+    #[serde(skip)]
+    pub files: Vec<(PathBuf, crate::image::Image)>,
 }
 
 impl Report {
-    pub fn new(pipeline: String, seed: u64, stages: Vec<StageReport>) -> Report {
-        let passed = !stages.iter().flat_map(|s| &s.metrics).any(Metric::failed);
+    pub fn new(pipeline: String, seed: u64, stages: Vec<StageReport>, total_s: f64) -> Report {
+        let passed = !stages.iter().any(StageReport::failed);
         Report {
             pipeline,
             seed,
             lumen_version: env!("CARGO_PKG_VERSION").into(),
             threads: rayon::current_num_threads(),
+            total_s,
             stages,
             passed,
+            warnings: Vec::new(),
+            files: Vec::new(),
         }
     }
 
-    /// `stage/case/metric` of every metric that failed.
+    /// One line per failed metric or case: `stage/case/metric = value unit, bound …`.
     pub fn failures(&self) -> Vec<String> {
         let mut v = Vec::new();
         for s in &self.stages {
-            for m in s.metrics.iter().filter(|m| m.failed()) {
-                let (op, b) = match m.better {
-                    Better::Lower => ("≤", m.bound.unwrap_or(f64::NAN)),
-                    Better::Higher => ("≥", m.bound.unwrap_or(f64::NAN)),
-                };
+            if s.outcome.declared != s.outcome.actual {
+                let why = s.error.as_ref().map(|e| format!(": {}", e.message)).unwrap_or_default();
                 v.push(format!(
-                    "{}/{}/{} = {} {}, bound {op} {b}",
+                    "{}/{} declared {}, ended with {}{why}",
+                    s.stage, s.case, s.outcome.declared, s.outcome.actual
+                ));
+            }
+            for m in s.metrics.iter().filter(|m| m.failed()) {
+                let op = if m.better == Better::Lower { "≤" } else { "≥" };
+                v.push(format!(
+                    "{}/{}/{} = {} {}, bound {op} {}",
                     s.stage,
                     s.case,
                     m.name,
-                    fmt_value(m.value),
-                    m.unit
+                    value_text(m),
+                    m.unit,
+                    m.bound.map_or("—".into(), fmt_value)
                 ));
             }
         }
         v
+    }
+
+    /// The sweeps: groups of more than one case, in file order.
+    fn sweeps(&self) -> Vec<(&str, Vec<&StageReport>)> {
+        let mut groups: Vec<(&str, Vec<&StageReport>)> = Vec::new();
+        for s in self.stages.iter().filter(|s| !s.sweep.is_empty()) {
+            match groups.iter_mut().find(|(g, _)| *g == s.group) {
+                Some((_, v)) => v.push(s),
+                None => groups.push((&s.group, vec![s])),
+            }
+        }
+        groups
     }
 
     pub fn to_markdown(&self) -> String {
@@ -115,68 +160,244 @@ impl Report {
         let _ = writeln!(s, "# lumen report: {}\n", self.pipeline);
         let _ = writeln!(
             s,
-            "seed {}, lumen {}, {} threads. Result: **{}**\n",
+            "seed {}, lumen {}, {} threads, {:.1} s in all. Result: **{}**\n",
             self.seed,
             self.lumen_version,
             self.threads,
+            self.total_s,
             if self.passed {
-                "all metrics met their bounds or declared misses"
+                "every case ended as declared, every metric met its bound or a declared miss"
             } else {
-                "a metric missed its bound"
+                "a case missed"
             }
         );
-        let _ = writeln!(s, "| stage | case | mode | time (s) | metrics met |\n|---|---|---|---:|---|");
+        let _ = writeln!(
+            s,
+            "Columns: *render* is the time to synthesise the case's input (renders and truth; renders \
+             read back from the cache cost almost nothing), *solve* the solver's own time; *renders* \
+             counts images rendered / reused from the cache; *metrics met* counts bounded metrics that \
+             met their bound, with declared misses and skipped metrics shown apart.\n"
+        );
+        let _ = writeln!(
+            s,
+            "| stage | case | outcome | render (s) | solve (s) | renders | metrics met |\n|---|---|---|---:|---:|---|---|"
+        );
         for st in &self.stages {
-            let bounded = st.metrics.iter().filter(|m| m.bound.is_some()).count();
+            let bounded = st.metrics.iter().filter(|m| m.bound.is_some() && m.skipped.is_none()).count();
             let met = st.metrics.iter().filter(|m| m.pass == Some(true)).count();
+            let declared =
+                st.metrics.iter().filter(|m| m.pass == Some(false) && m.expected_miss.is_some()).count();
+            let skipped = st.metrics.iter().filter(|m| m.skipped.is_some() && m.bound.is_some()).count();
+            let mut met_text = format!("{met}/{bounded}");
+            if declared > 0 {
+                met_text += &format!(" ({declared} declared miss)");
+            }
+            if skipped > 0 {
+                met_text += &format!(", {skipped} skipped");
+            }
+            let outcome = if st.outcome.declared == st.outcome.actual {
+                st.outcome.actual.clone()
+            } else {
+                format!("**{}** (declared {})", st.outcome.actual, st.outcome.declared)
+            };
+            let t = |k: &str| st.timings_s.get(k).copied().unwrap_or(0.0);
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {:.2} | {met}/{bounded} |",
+                "| {} | {} | {outcome} | {:.2} | {:.3} | {} / {} | {met_text} |",
                 st.stage,
                 st.case,
-                st.mode,
-                st.timings_s.get("total").copied().unwrap_or(0.0)
+                t("render"),
+                t("solve"),
+                st.renders.rendered,
+                st.renders.reused
             );
+        }
+        let sweeps = self.sweeps();
+        if !sweeps.is_empty() {
+            let _ = writeln!(s, "\n## Error against time\n");
+            for (group, cases) in &sweeps {
+                let _ = writeln!(s, "### {group}: {}\n", cases[0].plot_metric);
+                let _ = writeln!(s, "![{group}](plots/{}.svg)\n", file_stem(group));
+                let _ = writeln!(
+                    s,
+                    "| case | solve (s) | render (s) | {} | Pareto |\n|---|---:|---:|---:|---|",
+                    cases[0].plot_metric
+                );
+                let points = sweep_points(cases);
+                let front = pareto(&points);
+                for (k, (st, p)) in cases.iter().zip(&points).enumerate() {
+                    let value = p.map_or("—".into(), |(_, e)| fmt_value(e));
+                    let _ = writeln!(
+                        s,
+                        "| {} | {:.3} | {:.2} | {value} | {} |",
+                        st.case,
+                        st.timings_s.get("solve").copied().unwrap_or(0.0),
+                        st.timings_s.get("render").copied().unwrap_or(0.0),
+                        if front.contains(&k) { "yes" } else { "" }
+                    );
+                }
+                let _ = writeln!(s);
+            }
         }
         for st in &self.stages {
             let _ = writeln!(s, "\n## {} — {}\n", st.stage, st.case);
-            let _ = writeln!(s, "| metric | value | unit | bound | verdict |\n|---|---:|---|---:|---|");
+            if let Some(e) = &st.error {
+                let _ = writeln!(s, "Ended with a {} error: {}\n", e.kind, e.message);
+            }
+            if !st.metrics.is_empty() {
+                let _ = writeln!(s, "| metric | value | unit | bound | verdict |\n|---|---:|---|---:|---|");
+            }
             for m in &st.metrics {
                 let bound = match (m.bound, m.better) {
                     (Some(b), Better::Lower) => format!("≤ {}", fmt_value(b)),
                     (Some(b), Better::Higher) => format!("≥ {}", fmt_value(b)),
                     (None, _) => "—".into(),
                 };
-                let verdict = match (m.pass, &m.expected_miss) {
-                    (Some(true), _) => "pass".to_string(),
-                    (Some(false), Some(why)) => format!("expected miss: {why}"),
-                    (Some(false), None) => "**MISS**".to_string(),
-                    (None, _) => "—".to_string(),
+                let verdict = match (m.pass, &m.expected_miss, &m.skipped) {
+                    (_, _, Some(why)) => format!("skipped: {why}"),
+                    (Some(true), _, _) => "pass".to_string(),
+                    (Some(false), Some(why), _) => format!("expected miss: {why}"),
+                    (Some(false), None, _) => "**MISS**".to_string(),
+                    (None, _, _) => "—".to_string(),
                 };
-                let _ =
-                    writeln!(s, "| {} | {} | {} | {bound} | {verdict} |", m.name, fmt_value(m.value), m.unit);
+                let _ = writeln!(s, "| {} | {} | {} | {bound} | {verdict} |", m.name, value_text(m), m.unit);
             }
             let times: Vec<String> = st.timings_s.iter().map(|(k, v)| format!("{k} {v:.3} s")).collect();
-            let _ = writeln!(s, "\nTimings: {}.", times.join(", "));
+            let _ = writeln!(
+                s,
+                "\nTimings: {}. Renders: {} rendered ({:.2} s), {} reused from the cache ({:.2} s).",
+                times.join(", "),
+                st.renders.rendered,
+                st.renders.rendered_s,
+                st.renders.reused,
+                st.renders.reused_s
+            );
             for n in &st.notes {
                 let _ = writeln!(s, "\n- {n}");
             }
         }
+        for w in &self.warnings {
+            let _ = writeln!(s, "\nWarning: {w}");
+        }
         s
     }
 
-    /// Writes `report.json` and `report.md` into `dir`, each atomically.
+    /// Writes `report.json`, `report.md`, the sweeps' plots and the files cases asked to keep
+    /// into `dir`, each atomically.
     pub fn write(&self, dir: &Path) -> Result<(), super::Error> {
-        let json = serde_json::to_string_pretty(self)
-            .map_err(|e| super::Error::Write { path: dir.join("report.json"), message: e.to_string() })?;
+        let werr = |path: &Path, message: String| super::Error::Write { path: path.into(), message };
+        for (name, img) in &self.files {
+            let path = dir.join(name);
+            crate::image::io::write(&path, img).map_err(|e| werr(&path, e.to_string()))?;
+        }
+        for (group, cases) in self.sweeps() {
+            let path = dir.join("plots").join(format!("{}.svg", file_stem(group)));
+            let svg = plot_svg(group, &cases);
+            crate::image::io::write_atomically(&path, |tmp| {
+                std::fs::write(tmp, &svg).map_err(|e| e.to_string())
+            })
+            .map_err(|e| werr(&path, e.to_string()))?;
+        }
+        let json =
+            serde_json::to_string_pretty(self).map_err(|e| werr(&dir.join("report.json"), e.to_string()))?;
         for (name, text) in [("report.json", json), ("report.md", self.to_markdown())] {
             let path = dir.join(name);
             crate::image::io::write_atomically(&path, |tmp| {
                 std::fs::write(tmp, &text).map_err(|e| e.to_string())
             })
-            .map_err(|e| super::Error::Write { path: path.clone(), message: e.to_string() })?;
+            .map_err(|e| werr(&path, e.to_string()))?;
         }
         Ok(())
+    }
+}
+
+/// A case name as a file name: letters, digits, `-`, `_`, `.` kept, the rest `_`.
+fn file_stem(name: &str) -> String {
+    name.chars().map(|c| if c.is_ascii_alphanumeric() || "-_.".contains(c) { c } else { '_' }).collect()
+}
+
+/// Each case's (time, error): solve time for solver stages, the render's time for the
+/// render stage (there the renderer is what is measured); `None` where the error is missing.
+fn sweep_points(cases: &[&StageReport]) -> Vec<Option<(f64, f64)>> {
+    cases
+        .iter()
+        .map(|st| {
+            let t = st.timings_s.get("solve").copied()?;
+            let e = st.metrics.iter().find(|m| m.name == st.plot_metric)?.value?;
+            Some((t.max(1e-6), e))
+        })
+        .collect()
+}
+
+/// Indices of the points no other point beats in both time and error.
+pub fn pareto(points: &[Option<(f64, f64)>]) -> Vec<usize> {
+    (0..points.len())
+        .filter(|&i| {
+            let Some((ti, ei)) = points[i] else { return false };
+            !points.iter().enumerate().any(|(j, p)| {
+                p.is_some_and(|(tj, ej)| j != i && tj <= ti && ej <= ei && (tj < ti || ej < ei))
+            })
+        })
+        .collect()
+}
+
+/// Error against time on log-log axes, every case a point labelled with its swept values,
+/// the Pareto front as a line.
+fn plot_svg(group: &str, cases: &[&StageReport]) -> String {
+    use plotters::prelude::*;
+    let points = sweep_points(cases);
+    let metric = &cases[0].plot_metric;
+    let front = pareto(&points);
+    let valid: Vec<(f64, f64)> = points.iter().flatten().copied().filter(|(_, e)| *e > 0.0).collect();
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (720, 480)).into_drawing_area();
+        let _ = root.fill(&WHITE);
+        let span = |v: &mut dyn Iterator<Item = f64>| {
+            let (lo, hi) = v.fold((f64::INFINITY, 0.0f64), |(a, b), x| (a.min(x), b.max(x)));
+            if lo.is_finite() && hi > 0.0 {
+                (lo / 1.5, hi * 1.5)
+            } else {
+                (1e-3, 1.0)
+            }
+        };
+        let (t0, t1) = span(&mut valid.iter().map(|p| p.0));
+        let (e0, e1) = span(&mut valid.iter().map(|p| p.1));
+        let time_label = if cases[0].stage == "render" { "render time (s)" } else { "solve time (s)" };
+        let chart = ChartBuilder::on(&root)
+            .caption(format!("{group}: {metric} against time"), ("sans-serif", 20))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d((t0..t1).log_scale(), (e0..e1).log_scale());
+        if let Ok(mut chart) = chart {
+            let _ = chart.configure_mesh().x_desc(time_label).y_desc(metric.as_str()).draw();
+            let mut line: Vec<(f64, f64)> =
+                front.iter().filter_map(|&i| points[i]).filter(|p| p.1 > 0.0).collect();
+            line.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let _ = chart.draw_series(LineSeries::new(line, &RED)).map(|s| s.label("Pareto front"));
+            for (st, p) in cases.iter().zip(&points) {
+                if let Some((t, e)) = p.filter(|p| p.1 > 0.0) {
+                    let label: Vec<String> = st.sweep.iter().map(|(k, v)| format!("{k}={v}")).collect();
+                    let _ = chart.draw_series(std::iter::once(Circle::new((t, e), 4, BLUE.filled())));
+                    let _ = chart.draw_series(std::iter::once(Text::new(
+                        label.join(","),
+                        (t, e),
+                        ("sans-serif", 12).into_font(),
+                    )));
+                }
+            }
+        }
+        let _ = root.present();
+    }
+    svg
+}
+
+fn value_text(m: &Metric) -> String {
+    match (m.value, &m.missing) {
+        (Some(v), _) => fmt_value(v),
+        (None, Some(why)) if m.skipped.is_none() => format!("— ({why})"),
+        _ => "—".into(),
     }
 }
 
@@ -188,5 +409,18 @@ pub fn fmt_value(v: f64) -> String {
         s.to_string()
     } else {
         format!("{v:.3e}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::pareto;
+
+    #[test]
+    fn pareto_front_keeps_the_undominated() {
+        let p =
+            [Some((1.0, 5.0)), Some((2.0, 3.0)), Some((3.0, 4.0)), None, Some((4.0, 1.0)), Some((2.0, 3.0))];
+        // (3, 4) is beaten by (2, 3); the two equal points do not beat each other.
+        assert_eq!(pareto(&p), vec![0, 1, 4, 5]);
     }
 }

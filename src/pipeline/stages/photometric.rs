@@ -13,32 +13,30 @@
 //! normal a Lambertian pixel's brightness is linear in; pixels whose footprint holds normals
 //! more than 10° from that mean (the object occluding itself, creases) are left out.
 //!
+//! The solver is `photometric::run`, the function `lumen ps` calls; it never sees the truth.
+//! Each light's render goes through the render cache.
+//!
 //! Metrics: `mean_angular_error_deg`, `median_angular_error_deg`, `masked_pixels` (mask
 //! pixels left without a normal), `mean_albedo_rel_err` (|π·ρ − kd|/kd against the truth
 //! albedo image, over channels and solved pixels), `light_condition_number`, `pixel_lights_per_s`,
 //! `time_per_megapixel_s`; with `model = "blinn-phong"` also the robust Lambertian model's
 //! error on the same images (`robust_lambertian_mean_angular_error_deg`), the ratio of the
 //! two (`improvement_over_lambertian`, higher is better), `pixels_without_specular`, and a
-//! note with the mean error after each Gauss-Newton iteration.
+//! note with the mean error after each Gauss-Newton iteration (from the solver's trace of
+//! normals, compared with truth here).
 
-use super::report::{Better, Metric};
-use super::{Common, RunOptions, StageOutput};
-use crate::photometric::{self, dataset::Dataset, Model, Observations};
+use super::{apply_overrides, Context, Findings, SettingsKey, StageError};
+use crate::image::Image;
+use crate::photometric::{self, Model, Observations};
+use crate::pipeline::cache::scene_digest;
+use crate::pipeline::metric::{Better, Metric};
 use crate::render::{self, scene::Light};
 use glam::{DVec3, Vec3A};
-use serde::Deserialize;
-use std::collections::BTreeMap;
-use std::path::Path;
+use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct PhotometricStage {
-    pub case: String,
-    pub seed: Option<u64>,
-    #[serde(default)]
-    pub bounds: BTreeMap<String, f64>,
-    #[serde(default)]
-    pub expected_miss: BTreeMap<String, String>,
+pub struct Config {
     /// Scene file with the object and camera, relative to the pipeline file; its own point and
     /// directional lights are replaced by the stage's.
     pub scene: String,
@@ -84,17 +82,6 @@ fn default_model() -> String {
     "robust".into()
 }
 
-impl PhotometricStage {
-    pub fn common(&self) -> Common {
-        Common {
-            case: self.case.clone(),
-            seed: self.seed,
-            bounds: self.bounds.clone(),
-            expected_miss: self.expected_miss.clone(),
-        }
-    }
-}
-
 /// Light directions in the dataset frame (module docs).
 pub fn light_directions(n: usize, elevation_deg: [f64; 2]) -> Vec<DVec3> {
     (0..n)
@@ -107,27 +94,64 @@ pub fn light_directions(n: usize, elevation_deg: [f64; 2]) -> Vec<DVec3> {
         .collect()
 }
 
-pub fn run(s: &PhotometricStage, dir: &Path, seed: u64, opts: &RunOptions) -> Result<StageOutput, String> {
-    let model: Model = s.model.parse()?;
-    if s.lights < 3 {
-        return Err(format!("lights = {}: photometric stereo needs at least 3", s.lights));
+/// What validation compares with, per masked pixel: the footprint-mean normal (dataset
+/// frame) and the renderer's albedo kd.
+pub struct Truth {
+    normals: Vec<DVec3>,
+    albedo: Vec<[f64; 3]>,
+    object_pixels: usize,
+}
+
+/// The solver's output, and for Blinn-Phong the robust Lambertian model's on the same data.
+pub struct Output {
+    main: photometric::Output,
+    baseline: Option<photometric::Output>,
+}
+
+/// One light's render, as the cache keys it.
+#[derive(Serialize)]
+struct LightRecipe<'a> {
+    product: &'static str,
+    scene: &'a str,
+    diffuse_only: bool,
+    shininess: Option<f64>,
+    to_light: [f32; 3],
+    irradiance: f64,
+    settings: SettingsKey,
+}
+
+pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Truth, Vec<String>), StageError> {
+    let model: Model = c.model.parse().map_err(StageError::Config)?;
+    if c.lights < 3 {
+        return Err(StageError::Config(format!(
+            "lights = {}: photometric stereo needs at least 3",
+            c.lights
+        )));
     }
-    let [e0, e1] = s.elevation_deg;
+    let [e0, e1] = c.elevation_deg;
     if !(0.0..=90.0).contains(&e0) || !(0.0..=90.0).contains(&e1) {
-        return Err(format!("elevation_deg = {:?}: expected angles in [0, 90]", s.elevation_deg));
+        return Err(StageError::Config(format!(
+            "elevation_deg = {:?}: expected angles in [0, 90]",
+            c.elevation_deg
+        )));
     }
-    if !(s.irradiance.is_finite() && s.irradiance > 0.0) {
-        return Err(format!("irradiance = {}: expected a positive number", s.irradiance));
+    if !(c.irradiance.is_finite() && c.irradiance > 0.0 && c.irradiance < 1e30) {
+        return Err(StageError::Config(format!(
+            "irradiance = {}: expected a positive number below 1e30",
+            c.irradiance
+        )));
     }
-    let mut scene = render::load(&dir.join(&s.scene)).map_err(|e| e.to_string())?;
-    if s.diffuse_only {
+    let scene_path = ctx.dir.join(&c.scene);
+    let mut scene = render::load(&scene_path)?;
+    let digest = scene_digest(&scene_path)?;
+    if c.diffuse_only {
         for m in &mut scene.materials {
             m.bsdf = render::bsdf::Bsdf::Lambertian;
         }
     }
-    if let Some(e) = s.shininess {
-        if !(e.is_finite() && e > 0.0) {
-            return Err(format!("shininess = {e}: expected a positive number"));
+    if let Some(e) = c.shininess {
+        if !(e.is_finite() && e > 0.0 && e <= 1e4) {
+            return Err(StageError::Config(format!("shininess = {e}: expected a positive number up to 1e4")));
         }
         for m in &mut scene.materials {
             if let render::bsdf::Bsdf::BlinnPhong { exponent, .. } = &mut m.bsdf {
@@ -136,15 +160,12 @@ pub fn run(s: &PhotometricStage, dir: &Path, seed: u64, opts: &RunOptions) -> Re
         }
     }
     let mut settings = render::Settings::from_scene(&scene);
-    settings.threads = opts.threads;
-    if let Some(n) = s.spp {
-        settings.spp = n.max(1);
-    }
-    if let Some(d) = s.max_depth {
-        if d < 2 {
-            return Err(format!("max_depth = {d}: the object is lit only from depth 2 on"));
-        }
-        settings.max_depth = d;
+    apply_overrides(&mut settings, c.spp, c.max_depth)?;
+    if settings.max_depth < 2 {
+        return Err(StageError::Config(format!(
+            "max_depth = {}: the object is lit only from depth 2 on",
+            settings.max_depth
+        )));
     }
     let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
 
@@ -157,7 +178,7 @@ pub fn run(s: &PhotometricStage, dir: &Path, seed: u64, opts: &RunOptions) -> Re
         .map(|(x, y)| y * w + x)
         .collect();
     if pixels.is_empty() {
-        return Err(format!("{}: the object covers no whole pixel", s.scene));
+        return Err(StageError::Config(format!("{}: the object covers no whole pixel", c.scene)));
     }
     // OpenCV camera frame (x right, y down, z forward) to the dataset's: flip y and z.
     let to_dataset = |v: DVec3| DVec3::new(v.x, -v.y, -v.z);
@@ -173,11 +194,14 @@ pub fn run(s: &PhotometricStage, dir: &Path, seed: u64, opts: &RunOptions) -> Re
         .filter_map(|(&i, m)| m.filter(|m| m.1 <= MAX_SPREAD_DEG).map(|m| (i, to_dataset(m.0))))
         .unzip();
     if pixels.is_empty() {
-        return Err(format!("{}: no pixel sees one smooth piece of the object", s.scene));
+        return Err(StageError::Config(format!("{}: no pixel sees one smooth piece of the object", c.scene)));
     }
+    let albedo =
+        pixels.iter().map(|&i| std::array::from_fn(|ch| truth.albedo.data[3 * i + ch] as f64)).collect();
 
     // Towards the camera from each pixel's surface point: the reversed ray through the pixel
-    // centre (OpenCV pixel coordinates), from the calibrated camera, not from truth.
+    // centre (OpenCV pixel coordinates), from the scene's camera model, as a calibrated setup
+    // would give it (the camera is an input of photometric stereo, not what it estimates).
     let views: Vec<DVec3> = pixels
         .iter()
         .map(|&i| {
@@ -186,112 +210,144 @@ pub fn run(s: &PhotometricStage, dir: &Path, seed: u64, opts: &RunOptions) -> Re
             to_dataset(-ray)
         })
         .collect();
-    let dirs = light_directions(s.lights, s.elevation_deg);
+    let dirs = light_directions(c.lights, c.elevation_deg);
     let rot = scene.t_world_cam.rotation;
-    let t0 = std::time::Instant::now();
-    let bar = render::progress_bar(s.lights as u64, "lights", opts.progress);
-    let mut obs = Observations::new(pixels.len(), s.lights);
+    let bar = render::progress_bar(c.lights as u64, &format!("{} lights", ctx.case), ctx.progress);
+    let mut obs = Observations::new(pixels.len(), c.lights);
     for (j, d) in dirs.iter().enumerate() {
         let to_light = (rot * to_dataset(*d)).as_vec3();
         scene.replace_lights(&[Light::Directional {
             to_light: Vec3A::from(to_light),
-            irradiance: Vec3A::splat(s.irradiance as f32),
+            irradiance: Vec3A::splat(c.irradiance as f32),
         }]);
-        settings.seed = render::sampler::mix64(seed ^ (j as u64 + 1));
-        let film = render::render(&scene, &settings);
+        settings.seed = render::sampler::mix64(ctx.seed ^ (j as u64 + 1));
+        let recipe = LightRecipe {
+            product: "photometric-film",
+            scene: &digest,
+            diffuse_only: c.diffuse_only,
+            shininess: c.shininess,
+            to_light: to_light.to_array(),
+            irradiance: c.irradiance,
+            settings: SettingsKey::from(&settings),
+        };
+        let film = ctx.cache.images(ctx.case, &format!("light {j}"), &recipe, || {
+            Ok::<_, StageError>(vec![render::render(&scene, &settings).mean])
+        })?;
+        let Some(img) = film.first().filter(|f: &&Image| f.data.len() == 3 * w * h) else {
+            return Err(StageError::Config(format!("light {j}: the cached render has the wrong size")));
+        };
         for (p, &i) in pixels.iter().enumerate() {
-            let v = &film.mean.data[3 * i..3 * i + 3];
-            obs.set_raw(p, j, [v[0], v[1], v[2]], [s.irradiance; 3]);
+            let v = &img.data[3 * i..3 * i + 3];
+            obs.set_raw(p, j, [v[0], v[1], v[2]], [c.irradiance; 3]);
         }
         bar.inc(1);
     }
     bar.finish_and_clear();
-    let render_s = t0.elapsed().as_secs_f64();
-
-    let data = Dataset {
+    let notes = vec![format!(
+        "{} lights at {e0}°–{e1}° elevation, {} object pixels in the mask ({} more left out: their \
+         footprint straddles an occlusion edge or crease), {}x{} px, {} spp, model {}.",
+        c.lights,
+        pixels.len(),
+        object_pixels - pixels.len(),
+        w,
+        h,
+        settings.spp,
+        model_name(model)
+    )];
+    let input = photometric::Input {
         width: w,
         height: h,
         lights: dirs,
-        intensities: vec![[s.irradiance; 3]; s.lights],
+        intensities: vec![[c.irradiance; 3]; c.lights],
         pixels,
         obs,
-        truth: Some(normals),
         views: Some(views),
     };
-    let out = photometric::run(&data, model);
-    let sm = &out.summary;
-    let mut m = Vec::new();
-    m.push(Metric::new(
+    Ok((input, Truth { normals, albedo, object_pixels }, notes))
+}
+
+fn model_name(m: Model) -> &'static str {
+    match m {
+        Model::Lambertian => "lambertian",
+        Model::Robust => "robust",
+        Model::BlinnPhong => "blinn-phong",
+    }
+}
+
+pub fn solve(c: &Config, input: &photometric::Input) -> Result<Output, StageError> {
+    let model: Model = c.model.parse().map_err(StageError::Config)?;
+    let config = photometric::Config { model, trace: model == Model::BlinnPhong };
+    let main = photometric::run(input, &config)?;
+    // The Lambertian baseline on the same images, for the improvement the glossy model buys.
+    let baseline = (model == Model::BlinnPhong)
+        .then(|| photometric::run(input, &photometric::Config::new(Model::Robust)))
+        .transpose()?;
+    Ok(Output { main, baseline })
+}
+
+pub fn validate(_c: &Config, out: &Output, truth: &Truth) -> Findings {
+    let mut f = Findings::default();
+    let sm = &out.main.summary;
+    let acc = photometric::accuracy(&out.main, &truth.normals);
+    let none = "no solved pixel";
+    let m = &mut f.metrics;
+    m.push(Metric::maybe(
         "mean_angular_error_deg",
-        sm.mean_angular_error_deg.unwrap_or(f64::INFINITY),
+        acc.as_ref().map(|a| a.mean_angular_error_deg),
         "°",
         Better::Lower,
+        none,
     ));
-    m.push(Metric::new(
+    m.push(Metric::maybe(
         "median_angular_error_deg",
-        sm.median_angular_error_deg.unwrap_or(f64::INFINITY),
+        acc.as_ref().map(|a| a.median_angular_error_deg),
         "°",
         Better::Lower,
+        none,
     ));
     m.push(Metric::new("masked_pixels", sm.masked_pixels as f64, "pixels", Better::Lower));
     // Albedo: the solvers' ρ is kd/π in the renderer's terms (observations are radiance over
-    // irradiance), so π·ρ is compared with the truth albedo image, relative, per channel.
+    // irradiance), so π·ρ is compared with the truth albedo, relative, per channel.
     let mut rel = Vec::new();
-    for (k, &i) in data.pixels.iter().enumerate() {
-        if out.normals[k].is_some() {
-            for c in 0..3 {
-                let kd = truth.albedo.data[3 * i + c] as f64;
-                if kd > 0.0 {
-                    rel.push((std::f64::consts::PI * out.albedo[k][c] - kd).abs() / kd);
+    for (k, kd) in truth.albedo.iter().enumerate() {
+        if out.main.normals[k].is_some() {
+            for ch in 0..3 {
+                if kd[ch] > 0.0 {
+                    rel.push((std::f64::consts::PI * out.main.albedo[k][ch] - kd[ch]).abs() / kd[ch]);
                 }
             }
         }
     }
-    let albedo_err = if rel.is_empty() { f64::INFINITY } else { rel.iter().sum::<f64>() / rel.len() as f64 };
-    m.push(Metric::new("mean_albedo_rel_err", albedo_err, "", Better::Lower));
+    let albedo_err = (!rel.is_empty()).then(|| rel.iter().sum::<f64>() / rel.len() as f64);
+    m.push(Metric::maybe("mean_albedo_rel_err", albedo_err, "", Better::Lower, none));
     m.push(Metric::new("light_condition_number", sm.light_condition_number, "", Better::Lower));
     m.push(Metric::new("pixel_lights_per_s", sm.pixel_lights_per_s, "1/s", Better::Higher));
     m.push(Metric::new("time_per_megapixel_s", sm.time_per_megapixel_s, "s", Better::Lower));
-    let mut notes = Vec::new();
-    if model == Model::BlinnPhong {
-        // The Lambertian baseline on the same images, for the improvement the glossy model buys.
-        let base = photometric::run(&data, Model::Robust).summary.mean_angular_error_deg.unwrap_or(f64::NAN);
-        let ours = sm.mean_angular_error_deg.unwrap_or(f64::INFINITY);
-        m.push(Metric::new("robust_lambertian_mean_angular_error_deg", base, "°", Better::Lower));
-        m.push(Metric::new("improvement_over_lambertian", base / ours.max(1e-12), "×", Better::Higher));
+    if let Some(base) = &out.baseline {
+        let base = photometric::accuracy(base, &truth.normals).map(|a| a.mean_angular_error_deg);
+        let ours = acc.as_ref().map(|a| a.mean_angular_error_deg);
+        m.push(Metric::maybe("robust_lambertian_mean_angular_error_deg", base, "°", Better::Lower, none));
+        let ratio = base.zip(ours).map(|(b, o)| b / o.max(1e-12));
+        m.push(Metric::maybe("improvement_over_lambertian", ratio, "×", Better::Higher, none));
         m.push(Metric::new(
             "pixels_without_specular",
             sm.pixels_without_specular.unwrap_or(0) as f64,
             "pixels",
             Better::Lower,
         ));
-        if let Some(curve) = &sm.mean_angular_error_by_iteration_deg {
+        if let Some(curve) = acc.as_ref().and_then(|a| a.mean_angular_error_by_iteration_deg.as_ref()) {
             let shown: Vec<String> = curve
                 .iter()
                 .enumerate()
                 .filter(|&(k, _)| k <= 8 || k.is_power_of_two() || k + 1 == curve.len())
                 .map(|(k, e)| format!("{k}: {e:.4}°"))
                 .collect();
-            notes.push(format!("Mean angular error after k Gauss-Newton iterations: {}.", shown.join(", ")));
+            f.notes
+                .push(format!("Mean angular error after k Gauss-Newton iterations: {}.", shown.join(", ")));
         }
     }
-    notes.insert(
-        0,
-        format!(
-            "{} lights at {e0}°–{e1}° elevation, {} object pixels in the mask ({} more left out: their \
-             footprint straddles an occlusion edge or crease), {}x{} px, {} spp, model {}.",
-            s.lights,
-            data.pixels.len(),
-            object_pixels - data.pixels.len(),
-            w,
-            h,
-            settings.spp,
-            s.model
-        ),
-    );
-    let mut timings_s = BTreeMap::new();
-    timings_s.insert("render".into(), render_s);
-    timings_s.insert("solve".into(), sm.time_s);
-    timings_s.insert("total".into(), render_s + sm.time_s);
-    Ok(StageOutput { metrics: m, timings_s, notes })
+    if truth.object_pixels == 0 {
+        f.notes.push("the object covers no pixel".into());
+    }
+    f
 }

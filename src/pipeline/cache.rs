@@ -1,0 +1,220 @@
+//! The render cache: every image a stage synthesises is stored on disk under a key that is a
+//! hash of a serialisable description of what was rendered (the recipe: the scene file and
+//! every file it names, the stage's changes to the scene, the render settings, the seed, the
+//! product kept, lumen's version). A second run, and cases that share renders (a sweep over
+//! the number of views or a solver setting), read the images back instead of rendering them.
+//!
+//! Entries are content-keyed and written to a unique temporary name, then renamed, so a
+//! reader never sees half a file and two processes writing the same key do no harm. An entry
+//! that cannot be read back whole is rendered again and replaced. The cache never changes a
+//! number: an entry holds the exact f32 values the renderer produced.
+//!
+//! The key is FNV-1a over 128 bits of the recipe's JSON, written here rather than taken from a
+//! crate because it must stay the same across toolchains and crate versions (std's hasher
+//! does not promise that) and is ten lines.
+
+use crate::image::Image;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+/// What happened to one requested render.
+#[derive(Clone, Debug, Serialize)]
+pub struct Event {
+    pub case: String,
+    /// What was rendered, e.g. `view 3` or `light 12`.
+    pub what: String,
+    /// Read back from the cache (true) or rendered (false).
+    pub reused: bool,
+    /// Time to render it, or to read it back.
+    pub seconds: f64,
+}
+
+pub struct Cache {
+    /// `None`: nothing is stored (every image is rendered).
+    dir: Option<PathBuf>,
+    events: Mutex<Vec<Event>>,
+    warnings: Mutex<Vec<String>>,
+}
+
+/// FNV-1a, 128 bits.
+pub fn fnv128(bytes: &[u8]) -> u128 {
+    const OFFSET: u128 = 0x6c62272e07bb014262b821756295c58d;
+    const PRIME: u128 = 0x0000000001000000000000000000013B;
+    bytes.iter().fold(OFFSET, |h, &b| (h ^ b as u128).wrapping_mul(PRIME))
+}
+
+/// A digest of a scene file and of every file it names (meshes, textures, environment maps),
+/// so that editing any of them changes the key of every render of the scene.
+pub fn scene_digest(path: &Path) -> Result<String, crate::render::Error> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| crate::render::Error::Io { path: path.to_path_buf(), message: e.to_string() })?;
+    let value: toml::Value = toml::from_str(&text)
+        .map_err(|e| crate::render::Error::Parse { path: path.to_path_buf(), message: e.to_string() })?;
+    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let mut bytes = text.into_bytes();
+    let mut strings = Vec::new();
+    collect_strings(&value, &mut strings);
+    for s in strings {
+        let f = dir.join(&s);
+        if f.is_file() {
+            if let Ok(content) = std::fs::read(&f) {
+                bytes.extend_from_slice(s.as_bytes());
+                bytes.extend_from_slice(&fnv128(&content).to_le_bytes());
+            }
+        }
+    }
+    Ok(format!("{:032x}", fnv128(&bytes)))
+}
+
+fn collect_strings(v: &toml::Value, out: &mut Vec<String>) {
+    match v {
+        toml::Value::String(s) => out.push(s.clone()),
+        toml::Value::Array(a) => a.iter().for_each(|x| collect_strings(x, out)),
+        toml::Value::Table(t) => t.values().for_each(|x| collect_strings(x, out)),
+        _ => {}
+    }
+}
+
+const MAGIC: &[u8; 8] = b"LUMENC01";
+
+impl Cache {
+    pub fn new(dir: Option<PathBuf>) -> Cache {
+        Cache { dir, events: Mutex::new(Vec::new()), warnings: Mutex::new(Vec::new()) }
+    }
+
+    /// The images `recipe` describes: read back when the cache holds them, otherwise made by
+    /// `make` and stored. `case` and `what` only label the event in the report.
+    pub fn images<E>(
+        &self,
+        case: &str,
+        what: &str,
+        recipe: &impl Serialize,
+        make: impl FnOnce() -> Result<Vec<Image>, E>,
+    ) -> Result<Vec<Image>, E> {
+        let t = std::time::Instant::now();
+        let path = self.dir.as_ref().and_then(|dir| {
+            let json = serde_json::to_string(&(env!("CARGO_PKG_VERSION"), recipe)).ok()?;
+            Some(dir.join(format!("{:032x}.bin", fnv128(json.as_bytes()))))
+        });
+        if let Some(images) = path.as_deref().and_then(read_entry) {
+            self.log(case, what, true, t.elapsed().as_secs_f64());
+            return Ok(images);
+        }
+        let images = make()?;
+        self.log(case, what, false, t.elapsed().as_secs_f64());
+        if let Some(path) = &path {
+            if let Err(e) = write_entry(path, &images) {
+                if let Ok(mut w) = self.warnings.lock() {
+                    w.push(format!("render cache: cannot write {}: {e}", path.display()));
+                }
+            }
+        }
+        Ok(images)
+    }
+
+    fn log(&self, case: &str, what: &str, reused: bool, seconds: f64) {
+        if let Ok(mut ev) = self.events.lock() {
+            ev.push(Event { case: case.into(), what: what.into(), reused, seconds });
+        }
+    }
+
+    /// The events of one case, in request order.
+    pub fn events_of(&self, case: &str) -> Vec<Event> {
+        self.events
+            .lock()
+            .map(|ev| ev.iter().filter(|e| e.case == case).cloned().collect())
+            .unwrap_or_default()
+    }
+
+    /// Problems writing the cache (the run goes on without the entry).
+    pub fn warnings(&self) -> Vec<String> {
+        self.warnings.lock().map(|w| w.clone()).unwrap_or_default()
+    }
+}
+
+fn read_entry(path: &Path) -> Option<Vec<Image>> {
+    let bytes = std::fs::read(path).ok()?;
+    let rest = bytes.strip_prefix(MAGIC)?;
+    let u32_at = |b: &[u8], i: usize| b.get(i..i + 4).map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]));
+    let count = u32_at(rest, 0)? as usize;
+    let mut at = 4;
+    let mut images = Vec::with_capacity(count.min(16));
+    for _ in 0..count {
+        let (w, h, c) = (u32_at(rest, at)?, u32_at(rest, at + 4)?, u32_at(rest, at + 8)?);
+        at += 12;
+        let n = (w as usize).checked_mul(h as usize)?.checked_mul(c as usize)?;
+        let body = rest.get(at..at.checked_add(n.checked_mul(4)?)?)?;
+        let data = body.chunks_exact(4).map(|s| f32::from_le_bytes([s[0], s[1], s[2], s[3]])).collect();
+        images.push(Image { width: w, height: h, channels: c, data });
+        at += 4 * n;
+    }
+    (at == rest.len()).then_some(images)
+}
+
+fn write_entry(path: &Path, images: &[Image]) -> std::io::Result<()> {
+    let mut bytes = MAGIC.to_vec();
+    bytes.extend_from_slice(&(images.len() as u32).to_le_bytes());
+    for img in images {
+        for v in [img.width, img.height, img.channels] {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+        for v in &img.data {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
+    // A name no other process uses, renamed into place: readers see all of the entry or none.
+    let nanos =
+        std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
+    let tmp = path.with_extension(format!("tmp.{}.{nanos}", std::process::id()));
+    std::fs::write(&tmp, &bytes)?;
+    std::fs::rename(&tmp, path).inspect_err(|_| {
+        let _ = std::fs::remove_file(&tmp);
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip_and_reuse() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = Cache::new(Some(dir.path().to_path_buf()));
+        let img = Image {
+            width: 2,
+            height: 1,
+            channels: 3,
+            data: vec![1.0, -2.5, 3.0, f32::MIN_POSITIVE, 0.0, 7.0],
+        };
+        let recipe = ("film", 42u64);
+        let a = cache.images("c", "x", &recipe, || Ok::<_, ()>(vec![img.clone(), img.clone()])).unwrap();
+        let b =
+            cache.images("c", "x", &recipe, || -> Result<Vec<Image>, ()> { panic!("not reused") }).unwrap();
+        assert_eq!(a, b);
+        let ev = cache.events_of("c");
+        assert_eq!((ev[0].reused, ev[1].reused), (false, true));
+        // Another recipe is another entry.
+        let c = cache.images("c", "y", &("film", 43u64), || Ok::<_, ()>(vec![])).unwrap();
+        assert!(c.is_empty());
+        // A truncated entry is rendered again.
+        for e in std::fs::read_dir(dir.path()).unwrap() {
+            let p = e.unwrap().path();
+            let bytes = std::fs::read(&p).unwrap();
+            std::fs::write(&p, &bytes[..bytes.len().saturating_sub(3)]).unwrap();
+        }
+        let d = cache.images("c", "x", &recipe, || Ok::<_, ()>(vec![img.clone()])).unwrap();
+        assert_eq!(d.len(), 1);
+        assert!(!cache.events_of("c")[3].reused);
+    }
+
+    #[test]
+    fn fnv_reference_values() {
+        // FNV-1a 128 of "" and "a" (the published test vectors).
+        assert_eq!(fnv128(b""), 0x6c62272e07bb014262b821756295c58d);
+        assert_eq!(fnv128(b"a"), 0xd228cb696f1a8caf78912b704e4a8964);
+    }
+}

@@ -1,0 +1,310 @@
+//! Pipeline files. An entry of `[[stages]]` is parsed in two passes, both refusing unknown
+//! keys: first the fields every entry has (`Common`), then the rest as the stage's own
+//! `Config`. (serde's `flatten` would do it in one pass but silently switches off
+//! `deny_unknown_fields`.) A `sweep` expands one entry into several cases.
+//!
+//! ```toml
+//! name = "all"            # optional; default: the file's stem
+//! seed = 1                # seed of every case that does not set its own
+//! [[stages]]
+//! stage = "calibrate"     # which stage
+//! case = "barrel-noisy"   # the case's name in the report (unique in the file)
+//! seed = 2                # optional
+//! scene = "scenes/calib-board.toml"   # the stage's own fields; paths relative to this file
+//! views = 64
+//! bounds = { fx_rel_err = 0.001 }     # metric → bound (upper or lower: the metric's own)
+//! expected_miss = { some_metric = "why it is not met yet" }
+//! sweep = { views = [8, 16, 32, 64] } # one case per value, named "barrel-noisy[views=8]" …
+//! plot = "fx_rel_err"     # the error a sweep's plot shows (default: the stage's headline)
+//! expect_error = "numerical"          # the case must fail with this kind of error
+//! ```
+
+use super::stages::{self, ERROR_KINDS};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("cannot read pipeline {path}: {message}")]
+    Io { path: PathBuf, message: String },
+    #[error("{path}: {message}")]
+    Parse { path: PathBuf, message: String },
+}
+
+/// The stage of an entry, with its own settings.
+#[derive(Debug)]
+pub enum Stage {
+    Render(stages::render::Config),
+    Calibrate(stages::calibrate::Config),
+    Photometric(stages::photometric::Config),
+}
+
+impl Stage {
+    pub fn name(&self) -> &'static str {
+        match self {
+            Stage::Render(_) => "render",
+            Stage::Calibrate(_) => "calibrate",
+            Stage::Photometric(_) => "photometric",
+        }
+    }
+
+    /// The error metric a sweep's plot shows unless the entry names another.
+    pub fn headline(&self) -> &'static str {
+        match self {
+            Stage::Render(c) if c.reference.is_some() => "rmse",
+            Stage::Render(_) => "mean_rel_err",
+            Stage::Calibrate(_) => "fx_rel_err",
+            Stage::Photometric(_) => "mean_angular_error_deg",
+        }
+    }
+}
+
+/// What every entry has besides its stage's settings.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Common {
+    pub case: String,
+    /// Seed (default: the pipeline's).
+    pub seed: Option<u64>,
+    /// Bound per metric name. Whether it is an upper or lower bound is the metric's own.
+    #[serde(default)]
+    pub bounds: BTreeMap<String, f64>,
+    /// Metric name → why its bound is not met yet. Shown in the report; does not fail the run.
+    #[serde(default)]
+    pub expected_miss: BTreeMap<String, String>,
+    /// Stage field → values: one case per value (per combination, with several fields).
+    #[serde(default)]
+    pub sweep: BTreeMap<String, Vec<toml::Value>>,
+    /// The metric a sweep's error-against-time plot shows.
+    pub plot: Option<String>,
+    /// The kind of error the case must end with (`bad-input`, `numerical` or `io`): a stiff
+    /// case whose right outcome is a clear refusal.
+    pub expect_error: Option<String>,
+}
+
+/// One case to run: an entry, or one point of an entry's sweep.
+#[derive(Debug)]
+pub struct Case {
+    pub common: Common,
+    pub stage: Stage,
+    /// The entry's position in the file (1-based) and its line.
+    pub entry: usize,
+    pub line: usize,
+    /// The entry's own case name: the group a sweep's cases are plotted in.
+    pub group: String,
+    /// The swept fields' values of this case (empty outside a sweep).
+    pub sweep: BTreeMap<String, String>,
+}
+
+#[derive(Debug)]
+pub struct PipelineFile {
+    pub name: Option<String>,
+    pub seed: u64,
+    pub cases: Vec<Case>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFile {
+    name: Option<String>,
+    #[serde(default = "default_seed")]
+    seed: u64,
+    stages: Vec<toml::Spanned<toml::Table>>,
+}
+
+fn default_seed() -> u64 {
+    1
+}
+
+const COMMON_KEYS: [&str; 8] =
+    ["stage", "case", "seed", "bounds", "expected_miss", "sweep", "plot", "expect_error"];
+
+/// Largest number of cases one entry's sweep may expand into.
+pub const MAX_SWEEP_CASES: usize = 256;
+
+pub fn load(path: &Path) -> Result<PipelineFile, Error> {
+    let text =
+        std::fs::read_to_string(path).map_err(|e| Error::Io { path: path.into(), message: e.to_string() })?;
+    parse(&text, path)
+}
+
+pub fn parse(text: &str, path: &Path) -> Result<PipelineFile, Error> {
+    let raw: RawFile =
+        toml::from_str(text).map_err(|e| Error::Parse { path: path.into(), message: e.to_string() })?;
+    if raw.stages.is_empty() {
+        return Err(Error::Parse { path: path.into(), message: "`stages` is empty: nothing to run".into() });
+    }
+    let mut cases: Vec<Case> = Vec::new();
+    for (i, spanned) in raw.stages.iter().enumerate() {
+        let line = text[..spanned.span().start.min(text.len())].lines().count().max(1);
+        let err = |message: String| Error::Parse {
+            path: path.into(),
+            message: format!("stages[{i}] (line {line}): {message}"),
+        };
+        let table = spanned.get_ref();
+        let (mut common_t, mut own) = (toml::Table::new(), toml::Table::new());
+        for (k, v) in table {
+            if COMMON_KEYS.contains(&k.as_str()) {
+                common_t.insert(k.clone(), v.clone());
+            } else {
+                own.insert(k.clone(), v.clone());
+            }
+        }
+        let stage_name = match common_t.remove("stage") {
+            Some(toml::Value::String(s)) => s,
+            Some(other) => return Err(err(format!("`stage` = {other}: expected a stage name"))),
+            None => return Err(err("missing `stage` (render, calibrate or photometric)".into())),
+        };
+        let common: Common = from_table(common_t).map_err(err)?;
+        let err = |message: String| Error::Parse {
+            path: path.into(),
+            message: format!("stages[{i}] (line {line}, case {}): {message}", common.case),
+        };
+        check_common(&common).map_err(err)?;
+        for (key, values) in &common.sweep {
+            if COMMON_KEYS.contains(&key.as_str()) {
+                return Err(err(format!("sweep.{key}: only a stage's own fields can be swept")));
+            }
+            if values.is_empty() {
+                return Err(err(format!("sweep.{key} is empty: give at least one value")));
+            }
+        }
+        let count = common.sweep.values().try_fold(1usize, |n, v| n.checked_mul(v.len()));
+        if count.is_none_or(|n| n > MAX_SWEEP_CASES) {
+            return Err(err(format!("the sweep expands into more than {MAX_SWEEP_CASES} cases")));
+        }
+        for point in sweep_points(&common.sweep) {
+            let mut t = own.clone();
+            let mut shown = BTreeMap::new();
+            for (k, v) in &point {
+                t.insert(k.clone(), v.clone());
+                shown.insert(k.clone(), v.to_string());
+            }
+            let stage = parse_stage(&stage_name, t).map_err(|m| err(m))?;
+            let mut c = Common {
+                case: common.case.clone(),
+                seed: common.seed,
+                bounds: common.bounds.clone(),
+                expected_miss: common.expected_miss.clone(),
+                sweep: BTreeMap::new(),
+                plot: common.plot.clone(),
+                expect_error: common.expect_error.clone(),
+            };
+            if !shown.is_empty() {
+                let label: Vec<String> = shown.iter().map(|(k, v)| format!("{k}={v}")).collect();
+                c.case = format!("{}[{}]", common.case, label.join(","));
+            }
+            if cases.iter().any(|x| x.common.case == c.case) {
+                return Err(err(format!("case `{}` is named twice: case names must be unique", c.case)));
+            }
+            cases.push(Case {
+                common: c,
+                stage,
+                entry: i + 1,
+                line,
+                group: common.case.clone(),
+                sweep: shown,
+            });
+        }
+    }
+    Ok(PipelineFile { name: raw.name, seed: raw.seed, cases })
+}
+
+fn check_common(c: &Common) -> Result<(), String> {
+    if c.case.trim().is_empty() {
+        return Err("`case` is empty: give the case a name".into());
+    }
+    for (name, b) in &c.bounds {
+        if !b.is_finite() {
+            return Err(format!("bounds.{name} = {b}: expected a finite number"));
+        }
+    }
+    if let Some(k) = &c.expect_error {
+        if !ERROR_KINDS.contains(&k.as_str()) {
+            return Err(format!("expect_error = \"{k}\": expected one of {}", ERROR_KINDS.join(", ")));
+        }
+    }
+    Ok(())
+}
+
+/// Every combination of the swept values (one empty point without a sweep).
+fn sweep_points(sweep: &BTreeMap<String, Vec<toml::Value>>) -> Vec<Vec<(String, toml::Value)>> {
+    let mut points = vec![Vec::new()];
+    for (k, values) in sweep {
+        points = points
+            .into_iter()
+            .flat_map(|p| {
+                values.iter().map(move |v| {
+                    let mut q = p.clone();
+                    q.push((k.clone(), v.clone()));
+                    q
+                })
+            })
+            .collect();
+    }
+    points
+}
+
+/// Deserialises a table, naming the key at fault in the error.
+fn from_table<T: serde::de::DeserializeOwned>(t: toml::Table) -> Result<T, String> {
+    serde_path_to_error::deserialize(toml::Value::Table(t)).map_err(|e| {
+        let path = e.path().to_string();
+        let inner = e.into_inner().message().trim().to_string();
+        if path == "." {
+            inner
+        } else {
+            format!("`{path}`: {inner}")
+        }
+    })
+}
+
+fn parse_stage(name: &str, own: toml::Table) -> Result<Stage, String> {
+    Ok(match name {
+        "render" => Stage::Render(from_table(own)?),
+        "calibrate" => Stage::Calibrate(from_table(own)?),
+        "photometric" => Stage::Photometric(from_table(own)?),
+        other => return Err(format!("unknown stage `{other}`: expected render, calibrate or photometric")),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse_str(s: &str) -> Result<PipelineFile, Error> {
+        parse(s, Path::new("p.toml"))
+    }
+
+    const ENTRY: &str = "[[stages]]\nstage = \"render\"\ncase = \"f\"\nscene = \"s.toml\"\n";
+
+    #[test]
+    fn two_passes_refuse_unknown_keys_in_either() {
+        let f = parse_str(ENTRY).unwrap();
+        assert_eq!(f.cases.len(), 1);
+        let e = parse_str(&format!("{ENTRY}spp_typo = 3\n")).unwrap_err().to_string();
+        assert!(e.contains("spp_typo") && e.contains("line 1") && e.contains("case f"), "{e}");
+        let e = parse_str(&format!("{ENTRY}bounds = {{ x = nan }}\n")).unwrap_err().to_string();
+        assert!(e.contains("bounds.x = NaN"), "{e}");
+        let e = parse_str("[[stages]]\nstage = \"teleport\"\ncase = \"x\"\n").unwrap_err().to_string();
+        assert!(e.contains("unknown stage `teleport`"), "{e}");
+        let e = parse_str(&format!("{ENTRY}{ENTRY}")).unwrap_err().to_string();
+        assert!(e.contains("named twice"), "{e}");
+    }
+
+    #[test]
+    fn sweeps_expand_into_named_cases() {
+        let f = parse_str(&format!("{ENTRY}sweep = {{ spp = [4, 16], max_depth = [2, 3, 4] }}\n")).unwrap();
+        assert_eq!(f.cases.len(), 6);
+        assert_eq!(f.cases[0].common.case, "f[max_depth=2,spp=4]");
+        assert!(f.cases.iter().all(|c| c.group == "f"));
+        match &f.cases[5].stage {
+            Stage::Render(c) => assert_eq!((c.spp, c.max_depth), (Some(16), Some(4))),
+            _ => panic!("a render case"),
+        }
+        let e = parse_str(&format!("{ENTRY}sweep = {{ spp = [\"many\"] }}\n")).unwrap_err().to_string();
+        assert!(e.contains("`spp`: invalid type: string \"many\""), "{e}");
+        let e = parse_str(&format!("{ENTRY}sweep = {{ seed = [1, 2] }}\n")).unwrap_err().to_string();
+        assert!(e.contains("only a stage's own fields"), "{e}");
+    }
+}

@@ -1,0 +1,320 @@
+//! The `calibrate` stage: renders a chessboard scene from many camera poses through the
+//! scene's camera (known intrinsics and distortion) and sensor, runs the same calibration the
+//! CLI runs on the images, and compares with the truth.
+//!
+//! Poses: view k puts the board's centre on a point of a 4×4 grid spanning 12 %–88 % of the
+//! image (so boards reach the image corners, where distortion is strongest), tilted by 30°–40°
+//! about an in-board axis that turns from view to view, rolled by up to ±20°, drawn from the
+//! stage's seed, as close as the whole board fits in the image.
+//!
+//! The solver is `calib::run`, the function `lumen calibrate` calls, with the entry's
+//! `fix_*` and `max_iterations` settings.
+//!
+//! Metrics:
+//! - `views_detected`: views where the whole board was found;
+//! - `corner_rms_px`: detected corners against the projected true corners;
+//! - `fx_rel_err`, `fy_rel_err`: |estimate − truth| / truth;
+//! - `cx_err_px`, `cy_err_px`: |estimate − truth| in pixels;
+//! - `distortion_field_max_px`: the largest difference between the true and estimated
+//!   distortion displacement (pixel − K·undistort(pixel), each with its own K) over every
+//!   detected corner position, that is over the part of the image the boards covered;
+//! - `rms_px`: the calibration's own reprojection error.
+
+use super::{apply_overrides, Context, Findings, SettingsKey, StageError};
+use crate::calib::{self, detect::BoardSize};
+use crate::image::{filter::Grey, Image};
+use crate::math::{CameraModel, Pose};
+use crate::pipeline::cache::scene_digest;
+use crate::pipeline::metric::{Better, Metric};
+use crate::render::{self, sampler::Sampler};
+use glam::{DMat3, DVec2, DVec3};
+use serde::{Deserialize, Serialize};
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// Scene file with the board (its inner corner (0, 0) at `board_origin`, in the z = 0
+    /// plane), relative to the pipeline file.
+    pub scene: String,
+    /// Number of views (default 16). View k's pose does not depend on the count, so a sweep
+    /// over `views` renders each view once.
+    #[serde(default = "default_views")]
+    pub views: usize,
+    /// Samples per pixel (default: the scene's).
+    pub spp: Option<u32>,
+    /// Inner corners [cols, rows] (default [9, 6]) and square side in scene units (default 0.025).
+    #[serde(default = "default_board")]
+    pub board: [usize; 2],
+    #[serde(default = "default_square")]
+    pub square: f64,
+    /// World position of inner corner 0 (default [square, square, 0]).
+    pub board_origin: Option<[f64; 3]>,
+    /// Whether the scene's sensor adds noise and quantises (default true); without it the
+    /// linear radiance image is used.
+    #[serde(default = "yes")]
+    pub sensor: bool,
+    /// The solver's settings, as `lumen calibrate`'s flags of the same names (default false).
+    #[serde(default)]
+    pub fix_aspect_ratio: bool,
+    #[serde(default)]
+    pub fix_principal_point: bool,
+    #[serde(default)]
+    pub zero_tangential: bool,
+    #[serde(default)]
+    pub fix_k3: bool,
+    /// Levenberg–Marquardt iteration limit (default 100, as `lumen calibrate`).
+    #[serde(default = "default_iterations")]
+    pub max_iterations: usize,
+}
+
+fn default_views() -> usize {
+    16
+}
+fn default_board() -> [usize; 2] {
+    [9, 6]
+}
+fn default_square() -> f64 {
+    0.025
+}
+fn default_iterations() -> usize {
+    100
+}
+fn yes() -> bool {
+    true
+}
+
+impl Config {
+    /// The solver's configuration: what `lumen calibrate` builds from its flags.
+    pub fn solver(&self) -> calib::Config {
+        calib::Config {
+            board: BoardSize { cols: self.board[0], rows: self.board[1] },
+            square: self.square,
+            flags: calib::refine::Flags {
+                fix_aspect_ratio: self.fix_aspect_ratio,
+                fix_principal_point: self.fix_principal_point,
+                zero_tangential: self.zero_tangential,
+                fix_k3: self.fix_k3,
+            },
+            detect: Default::default(),
+            max_iterations: self.max_iterations,
+        }
+    }
+}
+
+/// What validation compares with: the scene's camera and each view's true corners.
+pub struct Truth {
+    camera: CameraModel,
+    corners: Vec<(String, Vec<DVec2>)>,
+}
+
+/// Board-to-camera poses for `n` views (see the module docs).
+pub fn poses(cam: &CameraModel, board: BoardSize, square: f64, n: usize, seed: u64) -> Vec<(DMat3, DVec3)> {
+    let centre =
+        DVec3::new((board.cols - 1) as f64 * square / 2.0, (board.rows - 1) as f64 * square / 2.0, 0.0);
+    // The board's outline: its outer squares' far corners.
+    let outline = [
+        (-1.0, -1.0),
+        (board.cols as f64, -1.0),
+        (-1.0, board.rows as f64),
+        (board.cols as f64, board.rows as f64),
+    ]
+    .map(|(i, j)| DVec3::new(i * square, j * square, 0.0));
+    let (w, h) = (cam.width as f64, cam.height as f64);
+    (0..n)
+        .map(|k| {
+            let mut s = Sampler::new(seed ^ 0xca1b, k as u64, 0);
+            let mut u = || s.next() as f64 * 2.0 - 1.0;
+            let (gx, gy) = ((k % 4) as f64, ((k / 4) % 4) as f64);
+            let target = DVec2::new((0.12 + 0.76 * gx / 3.0) * w, (0.12 + 0.76 * gy / 3.0) * h);
+            // A strong tilt (30°–40°) constrains the focal length through foreshortening,
+            // where frontal views hardly do; its axis lies in the board and turns by 3/8 of a
+            // turn from view to view, so the tilts point every way.
+            let phi = 2.356 * k as f64 + 0.3 * u();
+            let tilt = (35.0 + 5.0 * u()).to_radians();
+            let r = Pose::rotation_from_rvec(DVec3::new(0.0, 0.0, 0.35 * u()))
+                * Pose::rotation_from_rvec(DVec3::new(phi.cos(), phi.sin(), 0.0) * tilt);
+            let ray = cam.pixel_ray(target).unwrap_or(DVec3::Z);
+            let mut dist = 0.2;
+            for _ in 0..60 {
+                let t = ray * dist - r * centre;
+                let inside = outline.iter().all(|x| {
+                    cam.project(r * *x + t)
+                        .is_some_and(|p| p.x > 4.0 && p.y > 4.0 && p.x < w - 5.0 && p.y < h - 5.0)
+                });
+                if inside {
+                    break;
+                }
+                dist *= 1.04;
+            }
+            (r, ray * dist - r * centre)
+        })
+        .collect()
+}
+
+/// Distortion displacement of a model at pixel p: p − K·undistort(p).
+fn displacement(cam: &CameraModel, p: DVec2) -> Option<DVec2> {
+    cam.undistort_pixel(p).map(|n| p - cam.normalized_to_pixel(n))
+}
+
+/// One view's render, as the cache keys it.
+#[derive(Serialize)]
+struct ViewRecipe<'a> {
+    product: &'static str,
+    scene: &'a str,
+    t_world_cam: [f64; 12],
+    settings: SettingsKey,
+    sensor: bool,
+}
+
+pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Vec<String>), StageError> {
+    let scene_path = ctx.dir.join(&c.scene);
+    let mut scene = render::load(&scene_path)?;
+    let digest = scene_digest(&scene_path)?;
+    if c.views < 2 {
+        return Err(StageError::Config(format!("views = {}: calibration needs at least 2", c.views)));
+    }
+    let board = BoardSize { cols: c.board[0], rows: c.board[1] };
+    if board.cols < 2 || board.rows < 2 || !(c.square.is_finite() && c.square > 0.0) {
+        return Err(StageError::Config(format!(
+            "board = {:?}, square = {}: need ≥ 2×2 corners and a finite positive square",
+            c.board, c.square
+        )));
+    }
+    let origin = DVec3::from_array(c.board_origin.unwrap_or([c.square, c.square, 0.0]));
+    if !origin.is_finite() {
+        return Err(StageError::Config(format!("board_origin = {origin}: expected finite numbers")));
+    }
+    let camera = scene.camera;
+    let mut settings = render::Settings::from_scene(&scene);
+    apply_overrides(&mut settings, c.spp, None)?;
+    let sensor = if c.sensor { scene.sensor.clone() } else { None };
+    let board_pts = calib::board_points(board, c.square);
+    let bar = render::progress_bar(c.views as u64, &format!("{} views", ctx.case), ctx.progress);
+    let mut images = Vec::new();
+    let mut corners = Vec::new();
+    for (k, (r, t)) in poses(&camera, board, c.square, c.views, ctx.seed).into_iter().enumerate() {
+        let name = format!("view{k:02}");
+        let true_corners = board_pts.iter().map(|x| camera.project(r * *x + t)).collect::<Option<Vec<_>>>();
+        let Some(true_corners) = true_corners else {
+            return Err(StageError::Config(format!(
+                "{name}: a board corner falls behind the camera (square = {} may not suit the scene)",
+                c.square
+            )));
+        };
+        // Camera from world: X_cam = R (X_world − origin) + t.
+        let cam_from_world = Pose { rotation: r, translation: t - r * origin };
+        scene.t_world_cam = cam_from_world.inverse();
+        settings.seed = render::sampler::mix64(ctx.seed ^ (k as u64 + 1));
+        let p = scene.t_world_cam;
+        let mut pose = [0.0; 12];
+        pose[..9].copy_from_slice(&p.rotation.to_cols_array());
+        pose[9..].copy_from_slice(&p.translation.to_array());
+        let recipe = ViewRecipe {
+            product: "calibrate-grey",
+            scene: &digest,
+            t_world_cam: pose,
+            settings: SettingsKey::from(&settings),
+            sensor: sensor.is_some(),
+        };
+        let mut grey = ctx.cache.images(ctx.case, &name, &recipe, || {
+            let film = render::render(&scene, &settings);
+            let grey = match &sensor {
+                Some(sn) => {
+                    let codes = sn.expose(&film.mean, settings.seed);
+                    let max = sn.max_code() as f32;
+                    codes
+                        .chunks_exact(3)
+                        .map(|c| (c[0] as f32 + c[1] as f32 + c[2] as f32) / (3.0 * max))
+                        .collect()
+                }
+                None => Grey::from_image(&film.mean).data,
+            };
+            Ok::<_, StageError>(vec![Image {
+                width: camera.width,
+                height: camera.height,
+                channels: 1,
+                data: grey,
+            }])
+        })?;
+        let img =
+            grey.pop().filter(|g| g.channels == 1 && g.data.len() == (camera.width * camera.height) as usize);
+        let img =
+            img.ok_or_else(|| StageError::Config(format!("{name}: the cached render has the wrong size")))?;
+        images.push((
+            name.clone(),
+            Grey { width: img.width as usize, height: img.height as usize, data: img.data },
+        ));
+        corners.push((name, true_corners));
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let notes = vec![format!(
+        "{} views of {}×{} corners, {}x{} px, {} spp, sensor {}.",
+        c.views,
+        board.cols,
+        board.rows,
+        camera.width,
+        camera.height,
+        settings.spp,
+        if sensor.is_some() { "on" } else { "off" }
+    )];
+    Ok((calib::Input { images }, Truth { camera, corners }, notes))
+}
+
+pub fn solve(c: &Config, input: &calib::Input) -> Result<calib::Output, StageError> {
+    Ok(calib::run(input, &c.solver())?)
+}
+
+pub fn validate(_c: &Config, out: &calib::Output, truth: &Truth) -> Findings {
+    let cal = &out.calibration;
+    let mut f = Findings::default();
+    for sk in &cal.skipped {
+        f.notes.push(format!("{} skipped: {}", sk.name, sk.reason));
+    }
+    let m = &mut f.metrics;
+    m.push(Metric::new("views_detected", cal.views.len() as f64, "views", Better::Higher));
+    // Detected corners against the projected true corners.
+    let (mut sq, mut count) = (0.0, 0usize);
+    for (name, found) in &out.corners {
+        if let Some((_, true_corners)) = truth.corners.iter().find(|(n, _)| n == name) {
+            for (a, b) in found.iter().zip(true_corners) {
+                sq += a.distance_squared(*b);
+                count += 1;
+            }
+        }
+    }
+    let rms = (count > 0).then(|| (sq / count as f64).sqrt());
+    m.push(Metric::maybe("corner_rms_px", rms, "px", Better::Lower, "no corner was detected"));
+    let est = cal.camera();
+    let (kt, ke) = (truth.camera.intrinsics, est.intrinsics);
+    m.push(Metric::new("fx_rel_err", (ke.fx - kt.fx).abs() / kt.fx, "", Better::Lower));
+    m.push(Metric::new("fy_rel_err", (ke.fy - kt.fy).abs() / kt.fy, "", Better::Lower));
+    m.push(Metric::new("cx_err_px", (ke.cx - kt.cx).abs(), "px", Better::Lower));
+    m.push(Metric::new("cy_err_px", (ke.cy - kt.cy).abs(), "px", Better::Lower));
+    // Over every detected corner position, that is over the part of the image the boards covered.
+    let mut worst = Some(0.0f64);
+    for p in out.corners.iter().flat_map(|(_, c)| c) {
+        worst = match (worst, displacement(&truth.camera, *p), displacement(&est, *p)) {
+            (Some(w), Some(a), Some(b)) => Some(w.max(a.distance(b))),
+            _ => None,
+        };
+    }
+    m.push(Metric::maybe(
+        "distortion_field_max_px",
+        worst,
+        "px",
+        Better::Lower,
+        "a detected corner lies where a distortion model cannot be inverted",
+    ));
+    m.push(Metric::new("rms_px", cal.rms_px, "px", Better::Lower));
+    let sd = &cal.std_dev;
+    let kt = truth.camera.intrinsics;
+    f.notes.push(format!(
+        "estimate (± standard deviation) fx {:.3} ± {:.3}, fy {:.3} ± {:.3}, cx {:.3} ± {:.3}, cy {:.3} ± {:.3}, d {:?}; \
+         truth fx {} fy {} cx {} cy {}, d {:?}.",
+        ke.fx, sd.fx, ke.fy, sd.fy, ke.cx, sd.cx, ke.cy, sd.cy,
+        est.distortion.to_array().map(|v| (v * 1e5).round() / 1e5),
+        kt.fx, kt.fy, kt.cx, kt.cy, truth.camera.distortion.to_array()
+    ));
+    f
+}

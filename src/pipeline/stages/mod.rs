@@ -1,0 +1,155 @@
+//! The stages, one file each. Every stage is three plain functions around its solver:
+//!
+//! - `synthesize(&Config, &Context) -> (Input, Truth, notes)`: renders the stage's input
+//!   through the render cache and keeps the truth beside it;
+//! - `solve(&Config, &Input) -> Output`: the solver module's `run`, the function the CLI
+//!   calls too, with a `Config` built from the pipeline entry;
+//! - `validate(&Config, &Output, &Truth) -> Findings`: the only place that holds an
+//!   estimate and its truth together.
+//!
+//! `run_case` times the three apart, so a solver is never credited or blamed for the
+//! renderer.
+
+pub mod calibrate;
+pub mod photometric;
+pub mod render;
+
+use super::cache::Cache;
+use super::metric::Metric;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// A stage's failure, by whose fault it is.
+#[derive(Debug, thiserror::Error)]
+pub enum StageError {
+    /// A setting of the pipeline entry is out of range or inconsistent.
+    #[error("{0}")]
+    Config(String),
+    #[error(transparent)]
+    Render(#[from] crate::render::Error),
+    #[error(transparent)]
+    Image(#[from] crate::image::io::Error),
+    #[error(transparent)]
+    Calib(#[from] crate::calib::Error),
+    #[error(transparent)]
+    Photometric(#[from] crate::photometric::Error),
+}
+
+/// The kinds a pipeline entry can declare with `expect_error`.
+pub const ERROR_KINDS: [&str; 3] = ["bad-input", "numerical", "io"];
+
+impl StageError {
+    /// `bad-input` (the entry, a scene or a data file is wrong), `numerical` (a solver could
+    /// not reach an answer) or `io` (a file could not be read or written).
+    pub fn kind(&self) -> &'static str {
+        use crate::calib::Error as C;
+        use crate::image::io::Error as I;
+        use crate::photometric::Error as P;
+        use crate::render::Error as R;
+        match self {
+            StageError::Config(_) => "bad-input",
+            StageError::Render(R::Io { .. }) | StageError::Image(I::Read { .. } | I::Write { .. }) => "io",
+            StageError::Render(R::Image(I::Read { .. })) => "io",
+            StageError::Render(_) | StageError::Image(_) => "bad-input",
+            StageError::Calib(C::Numerical(_)) => "numerical",
+            StageError::Calib(C::BadInput(_)) => "bad-input",
+            StageError::Calib(C::File { .. }) => "io",
+            StageError::Photometric(P::Write { .. }) => "io",
+            StageError::Photometric(P::Image(I::Read { .. })) => "io",
+            StageError::Photometric(_) => "bad-input",
+        }
+    }
+}
+
+/// What a stage needs from the run besides its own settings.
+pub struct Context<'a> {
+    /// The pipeline file's folder: paths in an entry are relative to it.
+    pub dir: &'a Path,
+    /// The case's name (labels the cache's events and progress bars).
+    pub case: &'a str,
+    pub seed: u64,
+    pub cache: &'a Cache,
+    pub progress: bool,
+}
+
+/// What one case produced.
+pub struct CaseResult {
+    pub metrics: Vec<Metric>,
+    pub notes: Vec<String>,
+    /// `render` (synthesis: renders and truth), `solve` and `validate`, in seconds.
+    pub timings_s: BTreeMap<String, f64>,
+    /// Files to write into the output folder with the report (name, image).
+    pub files: Vec<(PathBuf, crate::image::Image)>,
+}
+
+/// What `validate` finds: metrics, notes for the report, files to keep.
+#[derive(Default)]
+pub struct Findings {
+    pub metrics: Vec<Metric>,
+    pub notes: Vec<String>,
+    pub files: Vec<(PathBuf, crate::image::Image)>,
+}
+
+/// Runs one case: synthesis, solve, validation, each timed.
+pub fn run_case<I, T, O>(
+    synthesize: impl FnOnce() -> Result<(I, T, Vec<String>), StageError>,
+    solve: impl FnOnce(&I) -> Result<O, StageError>,
+    validate: impl FnOnce(&O, &T) -> Findings,
+) -> Result<CaseResult, StageError> {
+    let t = std::time::Instant::now();
+    let (input, truth, mut notes) = synthesize()?;
+    let render_s = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let output = solve(&input)?;
+    let solve_s = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let found = validate(&output, &truth);
+    let validate_s = t.elapsed().as_secs_f64();
+    notes.extend(found.notes);
+    let timings_s = BTreeMap::from([
+        ("render".into(), render_s),
+        ("solve".into(), solve_s),
+        ("validate".into(), validate_s),
+    ]);
+    Ok(CaseResult { metrics: found.metrics, notes, timings_s, files: found.files })
+}
+
+/// The one rule for an entry's render overrides: `spp` and `max_depth` replace the scene's
+/// when given and must be at least 1 (as `lumen render` requires).
+pub fn apply_overrides(
+    settings: &mut crate::render::Settings,
+    spp: Option<u32>,
+    max_depth: Option<u32>,
+) -> Result<(), StageError> {
+    if let Some(n) = spp {
+        if n == 0 {
+            return Err(StageError::Config("spp = 0: expected at least 1 sample per pixel".into()));
+        }
+        settings.spp = n;
+    }
+    if let Some(d) = max_depth {
+        if d == 0 {
+            return Err(StageError::Config("max_depth = 0: expected at least 1 path segment".into()));
+        }
+        settings.max_depth = d;
+    }
+    // The run's one thread pool is installed around every case: the renderer must not build
+    // its own per image.
+    settings.threads = None;
+    Ok(())
+}
+
+/// The render settings a cache key depends on.
+#[derive(serde::Serialize)]
+pub struct SettingsKey {
+    pub spp: u32,
+    pub max_depth: u32,
+    pub seed: u64,
+    pub sampler: crate::render::sampler::SamplerKind,
+}
+
+impl From<&crate::render::Settings> for SettingsKey {
+    fn from(s: &crate::render::Settings) -> SettingsKey {
+        SettingsKey { spp: s.spp, max_depth: s.max_depth, seed: s.seed, sampler: s.sampler }
+    }
+}
