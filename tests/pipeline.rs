@@ -209,3 +209,190 @@ fn photometric_stage() {
     assert_eq!(code, 1);
     assert!(err.contains("shininess = -5"), "{err}");
 }
+
+fn run_with(
+    pipeline: &str,
+    dir: &std::path::Path,
+    out: &str,
+    args: &[&str],
+) -> (i32, String, serde_json::Value) {
+    let p = dir.join("p.toml");
+    std::fs::write(&p, pipeline).unwrap();
+    let out = dir.join(out);
+    let o = Command::new(env!("CARGO_BIN_EXE_lumen"))
+        .args(["run", p.to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .args(args)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    let report = std::fs::read_to_string(out.join("report.json"))
+        .map(|t| serde_json::from_str(&t).unwrap())
+        .unwrap_or(serde_json::Value::Null);
+    (o.status.code().unwrap_or(-1), err, report)
+}
+
+/// Every case's metrics that do not depend on the machine's speed, by case and name.
+fn numbers(report: &serde_json::Value) -> Vec<(String, String, serde_json::Value)> {
+    let mut v = Vec::new();
+    for st in report["stages"].as_array().unwrap() {
+        for m in st["metrics"].as_array().unwrap() {
+            if !["s", "1/s", "M/s"].contains(&m["unit"].as_str().unwrap()) {
+                v.push((st["case"].to_string(), m["name"].to_string(), m["value"].clone()));
+            }
+        }
+    }
+    v
+}
+
+fn case<'a>(report: &'a serde_json::Value, name: &str) -> &'a serde_json::Value {
+    report["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["case"] == name)
+        .unwrap_or_else(|| panic!("no case {name}"))
+}
+
+/// A small pipeline of every stage, two of them swept: the sweep's cases share renders
+/// through the cache, the report plots them, and the numbers are the same on 1 and 2 threads,
+/// with a fresh cache or a full one.
+#[test]
+fn sweeps_share_renders_and_numbers_do_not_depend_on_threads() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = common::root().join("pipelines/scenes");
+    let text = format!(
+        "name = \"small\"\nseed = 5\n\
+         [[stages]]\nstage = \"render\"\ncase = \"furnace\"\nscene = \"{0}/furnace.toml\"\nexpect_uniform = [1.0, 1.0, 1.0]\nsweep = {{ spp = [4, 16] }}\n\
+         [[stages]]\nstage = \"calibrate\"\ncase = \"board\"\nscene = \"{0}/calib-board.toml\"\nspp = 4\nsweep = {{ views = [4, 5] }}\nbounds = {{ views_missed = 0 }}\n\
+         [[stages]]\nstage = \"photometric\"\ncase = \"sphere\"\nscene = \"{0}/ps-sphere.toml\"\nspp = 4\nlights = 8\nbounds = {{ masked_pixels = 0 }}\n",
+        root.display()
+    );
+    let cache = dir.path().join("cache");
+    let c = cache.to_str().unwrap();
+    let (code, err, one) = run_with(&text, dir.path(), "one", &["--threads", "1", "--cache", c]);
+    assert_eq!(code, 0, "{err}");
+    // Line-per-case progress, also when stderr is not a terminal.
+    assert!(
+        err.contains("[1/5] render furnace[spp=4] ...") && err.contains("[5/5] photometric sphere: ok"),
+        "{err}"
+    );
+    assert_eq!(one["threads"], 1);
+    // View k's pose does not depend on the count: the 5-view case renders one view more.
+    let (a, b) = (case(&one, "board[views=4]"), case(&one, "board[views=5]"));
+    assert_eq!((a["renders"]["rendered"].as_u64(), a["renders"]["reused"].as_u64()), (Some(4), Some(0)));
+    assert_eq!((b["renders"]["rendered"].as_u64(), b["renders"]["reused"].as_u64()), (Some(1), Some(4)));
+    assert!(b["timings_s"]["solve"].as_f64().unwrap() > 0.0 && b["timings_s"]["render"].as_f64().is_some());
+    assert_eq!(b["sweep"]["views"], "5");
+    assert_eq!(b["group"], "board");
+    for plot in ["furnace.svg", "board.svg"] {
+        let svg = std::fs::read_to_string(dir.path().join("one/plots").join(plot)).unwrap();
+        assert!(svg.contains("<svg") && svg.contains("circle"), "{plot}");
+    }
+    let md = std::fs::read_to_string(dir.path().join("one/report.md")).unwrap();
+    assert!(md.contains("## Error against time") && md.contains("![board](plots/board.svg)"), "{md}");
+    // Two threads, nothing cached: the same numbers.
+    let (code, err, two) = run_with(&text, dir.path(), "two", &["--threads", "2", "--no-cache"]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(two["threads"], 2);
+    assert_eq!(numbers(&one), numbers(&two));
+    assert_eq!(
+        case(&two, "board[views=5]")["renders"]["rendered"],
+        5,
+        "without a cache every view is rendered"
+    );
+    // Again with the full cache: nothing is rendered, the numbers stay.
+    let (code, err, again) = run_with(&text, dir.path(), "again", &["--threads", "2", "--cache", c]);
+    assert_eq!(code, 0, "{err}");
+    for name in ["board[views=4]", "board[views=5]", "sphere"] {
+        assert_eq!(case(&again, name)["renders"]["rendered"], 0, "{name} rendered again");
+    }
+    assert_eq!(case(&again, "sphere")["renders"]["reused"], 8);
+    assert_eq!(numbers(&one), numbers(&again));
+}
+
+/// A stiff case can declare the error it must end with; a case that ends otherwise fails the
+/// run (exit 3) with both outcomes in the report; an undeclared error stops the run (exit 1)
+/// naming the case, the kind and the field.
+#[test]
+fn declared_errors_are_outcomes() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = common::root().join("pipelines/scenes/calib-board.toml");
+    let entry = |extra: &str| {
+        format!(
+            "[[stages]]\nstage = \"calibrate\"\ncase = \"one-view\"\nscene = \"{}\"\nviews = 1\n{extra}",
+            scene.display()
+        )
+    };
+    let (code, err, r) = run_with(&entry("expect_error = \"bad-input\"\n"), dir.path(), "a", &["--no-cache"]);
+    assert_eq!(code, 0, "{err}");
+    let st = &r["stages"][0];
+    assert_eq!(st["outcome"]["declared"], "error: bad-input");
+    assert_eq!(st["outcome"]["actual"], "error: bad-input");
+    assert!(st["error"]["message"].as_str().unwrap().contains("views = 1"), "{st}");
+    let (code, err, r) = run_with(&entry("expect_error = \"numerical\"\n"), dir.path(), "b", &["--no-cache"]);
+    assert_eq!(code, 3, "{err}");
+    assert!(err.contains("declared error: numerical, ended with error: bad-input"), "{err}");
+    assert_eq!(r["passed"], false);
+    let (code, err, _) = run_with(&entry(""), dir.path(), "c", &["--no-cache"]);
+    assert_eq!(code, 1, "{err}");
+    assert!(
+        err.contains("case one-view") && err.contains("bad-input error") && err.contains("views = 1"),
+        "{err}"
+    );
+    assert!(!dir.path().join("c").exists(), "a stopped run wrote output");
+    let (code, err, _) = run_with(&entry("expect_error = \"flood\"\n"), dir.path(), "d", &["--no-cache"]);
+    assert_eq!(code, 1);
+    assert!(err.contains("expect_error = \"flood\""), "{err}");
+    let (code, err, _) = run_with(&entry(""), dir.path(), "e", &["--threads", "100000"]);
+    assert_eq!(code, 1);
+    assert!(err.contains("--threads 100000: expected 1 to"), "{err}");
+}
+
+/// `lumen calibrate` and `lumen ps` on the inputs a pipeline kept give the pipeline's numbers:
+/// both call the same solver function with the same settings.
+#[test]
+fn cli_on_the_pipelines_inputs_gives_its_numbers() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = common::root().join("pipelines/scenes");
+    let text = format!(
+        "[[stages]]\nstage = \"calibrate\"\ncase = \"board\"\nscene = \"{0}/calib-board.toml\"\nspp = 4\nviews = 5\nsave_views = true\n\
+         [[stages]]\nstage = \"photometric\"\ncase = \"sphere\"\nscene = \"{0}/ps-sphere.toml\"\nspp = 4\nlights = 8\nsave_dataset = true\n",
+        root.display()
+    );
+    let (code, err, r) = run_with(&text, dir.path(), "out", &["--no-cache"]);
+    assert_eq!(code, 0, "{err}");
+    let metric = |case_name: &str, name: &str| {
+        case(&r, case_name)["metrics"].as_array().unwrap().iter().find(|m| m["name"] == name).unwrap()
+            ["value"]
+            .as_f64()
+            .unwrap()
+    };
+    let out = dir.path().join("out");
+    let cam = dir.path().join("cam.json");
+    let views = out.join("board/*.exr");
+    let o = Command::new(env!("CARGO_BIN_EXE_lumen"))
+        .args(["calibrate", "--images", views.to_str().unwrap(), "--board", "9x6", "--square", "0.025"])
+        .args(["--out", cam.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let cal: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&cam).unwrap()).unwrap();
+    assert_eq!(cal["views"].as_array().unwrap().len(), 5);
+    let (cli, pipe) = (cal["rms_px"].as_f64().unwrap(), metric("board", "rms_px"));
+    assert!(cli == pipe, "lumen calibrate RMS {cli} px, the pipeline's {pipe} px");
+    let ps = dir.path().join("ps");
+    let o = Command::new(env!("CARGO_BIN_EXE_lumen"))
+        .args(["ps", "--dataset", out.join("sphere").to_str().unwrap(), "--model", "robust"])
+        .args(["--out", ps.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(ps.join("summary.json")).unwrap()).unwrap();
+    let (cli, pipe) =
+        (s["mean_angular_error_deg"].as_f64().unwrap(), metric("sphere", "mean_angular_error_deg"));
+    // Light directions pass through text and are normalised again on reading: equal to
+    // rounding, far below the error itself.
+    assert!((cli - pipe).abs() <= 1e-9 * pipe, "lumen ps {cli}°, the pipeline's {pipe}°");
+    assert_eq!(s["masked_pixels"].as_f64().unwrap(), metric("sphere", "masked_pixels"));
+}

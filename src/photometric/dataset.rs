@@ -1,5 +1,6 @@
 //! Reading a photometric-stereo dataset in DiLiGenT's layout (Shi et al. 2016/2019):
-//! `filenames.txt` (the images, in order; 16-bit PNGs read at full depth),
+//! `filenames.txt` (the images, in order; 16-bit PNGs read at full depth, EXRs as linear
+//! values),
 //! `light_directions.txt` (one unit vector per image, from the object towards the light),
 //! `light_intensities.txt` (per-channel intensity per image), `mask.png` (any non-zero channel
 //! marks the object) and, optionally, `Normal_gt.mat` (MATLAB v5, variable `Normal_gt`,
@@ -21,6 +22,43 @@ pub struct Dataset {
 
 fn bad(path: &Path, message: impl Into<String>) -> Error {
     Error::BadInput { path: path.to_path_buf(), message: message.into() }
+}
+
+/// Writes `input` (and `truth`, as `Normal_gt.mat`) in the layout `read` reads, into `dir`
+/// as (file name, bytes) pairs: `images` are the raw per-light images (linear, EXR) whose
+/// masked pixels, divided by the intensities, are `input`'s observations. Light directions are
+/// written with every digit, so reading the files back gives the same numbers.
+pub fn layout(
+    input: &Input,
+    images: Vec<(String, crate::image::Image)>,
+    truth: Option<&[DVec3]>,
+) -> (Vec<(String, crate::image::Image)>, Vec<(String, Vec<u8>)>) {
+    let mut files = Vec::new();
+    let names: Vec<&str> = images.iter().map(|(n, _)| n.as_str()).collect();
+    files.push(("filenames.txt".to_string(), (names.join("\n") + "\n").into_bytes()));
+    let rows = |v: Vec<[f64; 3]>| -> Vec<u8> {
+        v.iter().map(|r| format!("{:?} {:?} {:?}\n", r[0], r[1], r[2])).collect::<String>().into_bytes()
+    };
+    files.push(("light_directions.txt".into(), rows(input.lights.iter().map(|l| l.to_array()).collect())));
+    files.push(("light_intensities.txt".into(), rows(input.intensities.clone())));
+    let (w, h) = (input.width, input.height);
+    if let Some(truth) = truth {
+        // Column-major height × width × 3, zero outside the mask.
+        let mut values = vec![0.0; w * h * 3];
+        for (&i, n) in input.pixels.iter().zip(truth) {
+            for k in 0..3 {
+                values[i / w + h * (i % w + w * k)] = n[k];
+            }
+        }
+        files.push(("Normal_gt.mat".into(), super::mat::write_variable("Normal_gt", &[h, w, 3], &values)));
+    }
+    let mut mask = crate::image::Image::new(w as u32, h as u32, 1);
+    for &i in &input.pixels {
+        mask.data[i] = 1.0;
+    }
+    let mut out_images = images;
+    out_images.push(("mask.png".into(), mask));
+    (out_images, files)
 }
 
 /// Rows of whitespace-separated numbers, each with exactly `cols` values.
@@ -91,7 +129,7 @@ pub fn read(dir: &Path) -> Result<Dataset, Error> {
         .par_iter()
         .map(|name| {
             let path = dir.join(name);
-            let img = crate::image::io::read_raw(&path)?;
+            let img = crate::image::io::read(&path)?;
             if (img.width as usize, img.height as usize) != (width, height) {
                 return Err(bad(
                     &path,

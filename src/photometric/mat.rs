@@ -127,6 +127,37 @@ pub fn read_variable(bytes: &[u8], name: &str) -> Result<Array, String> {
     Err(format!("no variable `{name}` (the file holds {seen:?})"))
 }
 
+/// One data element: tag, payload, zero padding to 8 bytes.
+fn tag(ty: u32, data: &[u8]) -> Vec<u8> {
+    let mut v = ty.to_le_bytes().to_vec();
+    v.extend((data.len() as u32).to_le_bytes());
+    v.extend(data);
+    while v.len() % 8 != 0 {
+        v.push(0);
+    }
+    v
+}
+
+/// An uncompressed `miMATRIX` element holding a real double array.
+fn matrix_element(name: &str, dims: &[usize], values: &[f64]) -> Vec<u8> {
+    let mut p = tag(MI_UINT32, &[6, 0, 0, 0, 0, 0, 0, 0]); // mxDOUBLE_CLASS, no flags
+    p.extend(tag(MI_INT32, &dims.iter().flat_map(|&d| (d as i32).to_le_bytes()).collect::<Vec<u8>>()));
+    p.extend(tag(MI_INT8, name.as_bytes()));
+    p.extend(tag(MI_DOUBLE, &values.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>()));
+    tag(MI_MATRIX, &p)
+}
+
+/// A little-endian MAT-file holding one double array `name` of dimensions `dims`, its values
+/// in MATLAB's column-major order (what `read_variable` reads back).
+pub fn write_variable(name: &str, dims: &[usize], values: &[f64]) -> Vec<u8> {
+    let mut file = b"MATLAB 5.0 MAT-file, written by lumen".to_vec();
+    file.resize(116, b' ');
+    file.extend([0u8; 8]); // no subsystem data
+    file.extend([0, 1, b'I', b'M']); // version 0x0100, little-endian
+    file.extend(matrix_element(name, dims, values));
+    file
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -134,28 +165,9 @@ mod tests {
     /// A hand-built file: an uncompressed 2×3 double array `A` and a compressed 1×2 `B`.
     #[test]
     fn reads_plain_and_compressed_arrays() {
-        fn tag(ty: u32, data: &[u8]) -> Vec<u8> {
-            let mut v = ty.to_le_bytes().to_vec();
-            v.extend((data.len() as u32).to_le_bytes());
-            v.extend(data);
-            while v.len() % 8 != 0 {
-                v.push(0);
-            }
-            v
-        }
-        fn mat(name: &str, dims: &[i32], values: &[f64]) -> Vec<u8> {
-            let mut p = tag(MI_UINT32, &[6, 0, 0, 0, 0, 0, 0, 0]);
-            p.extend(tag(MI_INT32, &dims.iter().flat_map(|d| d.to_le_bytes()).collect::<Vec<u8>>()));
-            p.extend(tag(MI_INT8, name.as_bytes()));
-            p.extend(tag(MI_DOUBLE, &values.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>()));
-            tag(MI_MATRIX, &p)
-        }
-        let mut file = b"MATLAB 5.0 MAT-file, test".to_vec();
-        file.resize(124, b' ');
-        file.extend([0, 1, b'I', b'M']);
-        file.extend(mat("A", &[2, 3], &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]));
+        let mut file = write_variable("A", &[2, 3], &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
         let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
-        std::io::Write::write_all(&mut z, &mat("B", &[1, 2], &[-0.5, 0.25])).unwrap();
+        std::io::Write::write_all(&mut z, &matrix_element("B", &[1, 2], &[-0.5, 0.25])).unwrap();
         let packed = z.finish().unwrap();
         file.extend(MI_COMPRESSED.to_le_bytes());
         file.extend((packed.len() as u32).to_le_bytes());

@@ -136,7 +136,7 @@ fn report_case(
     case: &Case,
     seed: u64,
     result: Result<CaseResult, StageError>,
-) -> Result<(StageReport, Vec<(PathBuf, crate::image::Image)>), Error> {
+) -> Result<(StageReport, Vec<(PathBuf, stages::Kept)>), Error> {
     let common = &case.common;
     let declared = common.expect_error.as_ref().map_or("result".to_string(), |k| format!("error: {k}"));
     let mut st = StageReport {

@@ -97,7 +97,7 @@ pub struct Report {
     pub warnings: Vec<String>,
     /// Files cases asked to keep, written with the report.
     #[serde(skip)]
-    pub files: Vec<(PathBuf, crate::image::Image)>,
+    pub files: Vec<(PathBuf, super::stages::Kept)>,
 }
 
 impl Report {
@@ -286,9 +286,15 @@ impl Report {
     /// into `dir`, each atomically.
     pub fn write(&self, dir: &Path) -> Result<(), super::Error> {
         let werr = |path: &Path, message: String| super::Error::Write { path: path.into(), message };
-        for (name, img) in &self.files {
+        for (name, kept) in &self.files {
             let path = dir.join(name);
-            crate::image::io::write(&path, img).map_err(|e| werr(&path, e.to_string()))?;
+            match kept {
+                super::stages::Kept::Image(img) => crate::image::io::write(&path, img).map(|_| ()),
+                super::stages::Kept::Bytes(b) => crate::image::io::write_atomically(&path, |tmp| {
+                    std::fs::write(tmp, b).map_err(|e| e.to_string())
+                }),
+            }
+            .map_err(|e| werr(&path, e.to_string()))?;
         }
         for (group, cases) in self.sweeps() {
             let path = dir.join("plots").join(format!("{}.svg", file_stem(group)));
@@ -312,7 +318,7 @@ impl Report {
 }
 
 /// A case name as a file name: letters, digits, `-`, `_`, `.` kept, the rest `_`.
-fn file_stem(name: &str) -> String {
+pub fn file_stem(name: &str) -> String {
     name.chars().map(|c| if c.is_ascii_alphanumeric() || "-_.".contains(c) { c } else { '_' }).collect()
 }
 

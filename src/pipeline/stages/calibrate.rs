@@ -11,7 +11,7 @@
 //! `fix_*` and `max_iterations` settings.
 //!
 //! Metrics:
-//! - `views_detected`: views where the whole board was found;
+//! - `views_detected`: views where the whole board was found; `views_missed`: the others;
 //! - `corner_rms_px`: detected corners against the projected true corners;
 //! - `fx_rel_err`, `fy_rel_err`: |estimate − truth| / truth;
 //! - `cx_err_px`, `cy_err_px`: |estimate − truth| in pixels;
@@ -20,7 +20,7 @@
 //!   detected corner position, that is over the part of the image the boards covered;
 //! - `rms_px`: the calibration's own reprojection error.
 
-use super::{apply_overrides, Context, Findings, SettingsKey, StageError};
+use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError};
 use crate::calib::{self, detect::BoardSize};
 use crate::image::{filter::Grey, Image};
 use crate::math::{CameraModel, Pose};
@@ -65,6 +65,11 @@ pub struct Config {
     /// Levenberg–Marquardt iteration limit (default 100, as `lumen calibrate`).
     #[serde(default = "default_iterations")]
     pub max_iterations: usize,
+    /// Keep the views the solver reads, as `<case>/viewNN.exr` (one linear channel; the case
+    /// name with characters other than letters, digits, `-`, `_`, `.` as `_`) in the output
+    /// folder, so `lumen calibrate` can be run on exactly them (default false).
+    #[serde(default)]
+    pub save_views: bool,
 }
 
 fn default_views() -> usize {
@@ -166,7 +171,7 @@ struct ViewRecipe<'a> {
     sensor: bool,
 }
 
-pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Vec<String>), StageError> {
+pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Findings), StageError> {
     let scene_path = ctx.dir.join(&c.scene);
     let mut scene = render::load(&scene_path)?;
     let digest = scene_digest(&scene_path)?;
@@ -248,7 +253,16 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Vec
         bar.inc(1);
     }
     bar.finish_and_clear();
-    let notes = vec![format!(
+    let mut found = Findings::default();
+    if c.save_views {
+        for (name, g) in &images {
+            let img =
+                Image { width: g.width as u32, height: g.height as u32, channels: 1, data: g.data.clone() };
+            let folder = crate::pipeline::report::file_stem(ctx.case);
+            found.files.push((std::path::Path::new(&folder).join(format!("{name}.exr")), Kept::Image(img)));
+        }
+    }
+    found.notes.push(format!(
         "{} views of {}×{} corners, {}x{} px, {} spp, sensor {}.",
         c.views,
         board.cols,
@@ -257,8 +271,8 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Vec
         camera.height,
         settings.spp,
         if sensor.is_some() { "on" } else { "off" }
-    )];
-    Ok((calib::Input { images }, Truth { camera, corners }, notes))
+    ));
+    Ok((calib::Input { images }, Truth { camera, corners }, found))
 }
 
 pub fn solve(c: &Config, input: &calib::Input) -> Result<calib::Output, StageError> {
@@ -273,6 +287,7 @@ pub fn validate(_c: &Config, out: &calib::Output, truth: &Truth) -> Findings {
     }
     let m = &mut f.metrics;
     m.push(Metric::new("views_detected", cal.views.len() as f64, "views", Better::Higher));
+    m.push(Metric::new("views_missed", cal.skipped.len() as f64, "views", Better::Lower));
     // Detected corners against the projected true corners.
     let (mut sq, mut count) = (0.0, 0usize);
     for (name, found) in &out.corners {

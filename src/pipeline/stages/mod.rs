@@ -1,7 +1,8 @@
 //! The stages, one file each. Every stage is three plain functions around its solver:
 //!
-//! - `synthesize(&Config, &Context) -> (Input, Truth, notes)`: renders the stage's input
-//!   through the render cache and keeps the truth beside it;
+//! - `synthesize(&Config, &Context) -> (Input, Truth, Findings)`: renders the stage's input
+//!   through the render cache and keeps the truth beside it (its findings: notes, and the
+//!   input files an entry asks to keep);
 //! - `solve(&Config, &Input) -> Output`: the solver module's `run`, the function the CLI
 //!   calls too, with a `Config` built from the pipeline entry;
 //! - `validate(&Config, &Output, &Truth) -> Findings`: the only place that holds an
@@ -78,40 +79,51 @@ pub struct CaseResult {
     pub notes: Vec<String>,
     /// `render` (synthesis: renders and truth), `solve` and `validate`, in seconds.
     pub timings_s: BTreeMap<String, f64>,
-    /// Files to write into the output folder with the report (name, image).
-    pub files: Vec<(PathBuf, crate::image::Image)>,
+    /// Files to write into the output folder with the report.
+    pub files: Vec<(PathBuf, Kept)>,
 }
 
-/// What `validate` finds: metrics, notes for the report, files to keep.
+/// A file a case asks to keep in the output folder, written with the report.
+#[derive(Clone, Debug)]
+pub enum Kept {
+    /// Written by extension (.exr linear float, .png 8-bit).
+    Image(crate::image::Image),
+    Bytes(Vec<u8>),
+}
+
+/// What a stage finds: metrics, notes for the report, files to keep (path relative to the
+/// output folder).
 #[derive(Default)]
 pub struct Findings {
     pub metrics: Vec<Metric>,
     pub notes: Vec<String>,
-    pub files: Vec<(PathBuf, crate::image::Image)>,
+    pub files: Vec<(PathBuf, Kept)>,
 }
 
 /// Runs one case: synthesis, solve, validation, each timed.
 pub fn run_case<I, T, O>(
-    synthesize: impl FnOnce() -> Result<(I, T, Vec<String>), StageError>,
+    synthesize: impl FnOnce() -> Result<(I, T, Findings), StageError>,
     solve: impl FnOnce(&I) -> Result<O, StageError>,
     validate: impl FnOnce(&O, &T) -> Findings,
 ) -> Result<CaseResult, StageError> {
     let t = std::time::Instant::now();
-    let (input, truth, mut notes) = synthesize()?;
+    let (input, truth, mut found) = synthesize()?;
     let render_s = t.elapsed().as_secs_f64();
     let t = std::time::Instant::now();
     let output = solve(&input)?;
     let solve_s = t.elapsed().as_secs_f64();
     let t = std::time::Instant::now();
-    let found = validate(&output, &truth);
+    let more = validate(&output, &truth);
     let validate_s = t.elapsed().as_secs_f64();
-    notes.extend(found.notes);
+    found.metrics.extend(more.metrics);
+    found.notes.extend(more.notes);
+    found.files.extend(more.files);
     let timings_s = BTreeMap::from([
         ("render".into(), render_s),
         ("solve".into(), solve_s),
         ("validate".into(), validate_s),
     ]);
-    Ok(CaseResult { metrics: found.metrics, notes, timings_s, files: found.files })
+    Ok(CaseResult { metrics: found.metrics, notes: found.notes, timings_s, files: found.files })
 }
 
 /// The one rule for an entry's render overrides: `spp` and `max_depth` replace the scene's

@@ -15,7 +15,7 @@
 //! When the reference files are absent (`../shared` is not beside the checkout) the reference
 //! metrics are reported as skipped, with the missing file named.
 
-use super::{apply_overrides, Context, Findings, StageError};
+use super::{apply_overrides, Context, Findings, Kept, StageError};
 use crate::image::{io, metrics, Image};
 use crate::pipeline::metric::{Better, Metric};
 use crate::render;
@@ -68,7 +68,7 @@ pub struct Output {
     seconds: f64,
 }
 
-pub fn synthesize(c: &Config, ctx: &Context) -> Result<(Input, Truth, Vec<String>), StageError> {
+pub fn synthesize(c: &Config, ctx: &Context) -> Result<(Input, Truth, Findings), StageError> {
     let scene = render::load(&ctx.dir.join(&c.scene))?;
     let mut settings = render::Settings::from_scene(&scene);
     settings.seed = ctx.seed;
@@ -104,7 +104,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(Input, Truth, Vec<String
             return Err(StageError::Config(format!("reference {}: holds non-finite pixels", path.display())));
         }
     }
-    Ok((Input { scene, settings }, Truth { reference, uniform: c.expect_uniform }, Vec::new()))
+    Ok((Input { scene, settings }, Truth { reference, uniform: c.expect_uniform }, Findings::default()))
 }
 
 /// A path without `dir/../` detours, for messages.
@@ -196,7 +196,7 @@ pub fn validate(c: &Config, out: &Output, truth: &Truth) -> Findings {
         f.metrics.push(Metric::maybe("mean_rel_err", finite.then_some(sum_rel / n), "", Better::Lower, why));
     }
     if let Some(name) = &c.save {
-        f.files.push((PathBuf::from(name), film.mean.clone()));
+        f.files.push((PathBuf::from(name), Kept::Image(film.mean.clone())));
     }
     f
 }
