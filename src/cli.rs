@@ -303,6 +303,12 @@ fn render_cmd(
         }
     }
     let scene = render::load(scene_path)?;
+    if scene.lights.is_empty() {
+        eprintln!(
+            "warning: {} has no light (or only black emitters): the image is black",
+            scene_path.display()
+        );
+    }
     let mut settings = render::Settings::from_scene(&scene);
     if let Some(s) = spp {
         if s == 0 {

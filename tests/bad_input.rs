@@ -268,3 +268,40 @@ fn cli_pipeline_errors() {
     assert!(err.contains("teleport"), "{err}");
     assert!(!out.exists(), "a failed pipeline wrote output");
 }
+
+/// The Cornell box with its light off: rendered black with a warning by `lumen render`,
+/// `lumen bench render` and `lumen run`, never a crash (the eight-lane tracer once gathered
+/// from an empty light table).
+#[test]
+fn a_scene_without_light_renders_black() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(common::root().join("pipelines/scenes/cornell-box.toml")).unwrap();
+    let start = text.find("emission = [").unwrap();
+    let end = start + text[start..].find(']').unwrap() + 1;
+    let dark = format!("{}emission = [0.0, 0.0, 0.0]{}", &text[..start], &text[end..]);
+    let scene = common::root().join("pipelines/scenes/dark-box-test.toml");
+    // Beside the original, so its relative mesh paths resolve.
+    std::fs::write(&scene, dark).unwrap();
+    let out = dir.path().join("d.exr");
+    let (code, err) =
+        lumen(&["render", scene.to_str().unwrap(), "--spp", "2", "--out", out.to_str().unwrap()]);
+    let (bench_code, bench_err) =
+        lumen(&["bench", "render", "--scene", scene.to_str().unwrap(), "--spp", "1", "--repeat", "1"]);
+    let p = dir.path().join("p.toml");
+    std::fs::write(
+        &p,
+        format!("[[stages]]\nstage = \"render\"\ncase = \"dark\"\nscene = \"{}\"\nspp = 2\nbounds = {{ nonfinite_samples = 0 }}\n", scene.display()),
+    )
+    .unwrap();
+    let (run_code, run_err) =
+        lumen(&["run", p.to_str().unwrap(), "--out", dir.path().join("o").to_str().unwrap(), "--no-cache"]);
+    let _ = std::fs::remove_file(&scene);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("has no light"), "{err}");
+    let img = lumen::image::io::read_exr(&out).unwrap();
+    assert!(img.data.iter().all(|&v| v == 0.0));
+    assert_eq!(bench_code, 0, "{bench_err}");
+    assert_eq!(run_code, 0, "{run_err}");
+    let md = std::fs::read_to_string(dir.path().join("o/report.md")).unwrap();
+    assert!(md.contains("no light"), "{md}");
+}

@@ -311,3 +311,37 @@ fn bad_input() {
     assert!(err.contains("--model") && err.contains("phong"), "{err}");
     assert!(!out.exists());
 }
+
+/// Fewer than 3 lights (none at all included) or a mask that selects nothing: a clear error
+/// from `lumen ps`, never a panic or "0 pixels solved".
+#[test]
+fn too_few_lights_or_an_empty_mask() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = d.join("out");
+    let run = || lumen(&["ps", "--dataset", d.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    for f in ["filenames.txt", "light_directions.txt", "light_intensities.txt"] {
+        std::fs::write(d.join(f), "").unwrap();
+    }
+    image::save_buffer(d.join("mask.png"), &[255u8; 16], 4, 4, image::ExtendedColorType::L8).unwrap();
+    let (code, err) = run();
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("0 light(s): photometric stereo needs at least 3"), "{err}");
+    std::fs::write(d.join("filenames.txt"), "a.png\nb.png\n").unwrap();
+    std::fs::write(d.join("light_directions.txt"), "0 0 1\n0 1 0\n").unwrap();
+    std::fs::write(d.join("light_intensities.txt"), "1 1 1\n1 1 1\n").unwrap();
+    for f in ["a.png", "b.png", "c.png"] {
+        image::save_buffer(d.join(f), &[9u8; 16], 4, 4, image::ExtendedColorType::L8).unwrap();
+    }
+    let (code, err) = run();
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("2 light(s)"), "{err}");
+    std::fs::write(d.join("filenames.txt"), "a.png\nb.png\nc.png\n").unwrap();
+    std::fs::write(d.join("light_directions.txt"), "0 0 1\n0 1 0\n1 0 0\n").unwrap();
+    std::fs::write(d.join("light_intensities.txt"), "1 1 1\n1 1 1\n1 1 1\n").unwrap();
+    image::save_buffer(d.join("mask.png"), &[0u8; 16], 4, 4, image::ExtendedColorType::L8).unwrap();
+    let (code, err) = run();
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("the mask selects no pixel"), "{err}");
+    assert!(!out.exists());
+}

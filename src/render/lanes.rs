@@ -48,6 +48,9 @@ use glam::Vec3A;
 pub fn supported(scene: &Scene, settings: &Settings) -> bool {
     simd::available()
         && settings.max_depth >= 1
+        // The light pick gathers from the light table: a scene without a light (or whose
+        // emitters are all black) takes the one-path loop, which renders it black.
+        && !scene.lights.is_empty()
         && scene.environment_light.is_none()
         && scene.materials.iter().all(|m| matches!(m.bsdf, Bsdf::Lambertian) && m.roughness.is_none())
         && scene.lights.iter().all(|l| match *l {

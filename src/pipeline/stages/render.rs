@@ -104,7 +104,14 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(Input, Truth, Findings),
             return Err(StageError::Config(format!("reference {}: holds non-finite pixels", path.display())));
         }
     }
-    Ok((Input { scene, settings }, Truth { reference, uniform: c.expect_uniform }, Findings::default()))
+    let mut found = Findings::default();
+    if scene.lights.is_empty() {
+        found.notes.push(format!(
+            "{}: the scene has no light (or only black emitters): the image is black.",
+            c.scene
+        ));
+    }
+    Ok((Input { scene, settings }, Truth { reference, uniform: c.expect_uniform }, found))
 }
 
 /// A path without `dir/../` detours, for messages.
