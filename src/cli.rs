@@ -549,6 +549,9 @@ fn calibrate_cmd(
     for s in &cal.skipped {
         eprintln!("skipped {}: {}", s.name, s.reason);
     }
+    for w in cal.conditioning.warnings() {
+        eprintln!("warning: {w}");
+    }
     let k = &cal.camera_matrix;
     let d = &cal.distortion_coefficients;
     eprintln!(

@@ -122,5 +122,6 @@ fn from_yaml(text: &str) -> Result<Calibration, String> {
         std_dev: StdDev { fx: 0.0, fy: 0.0, cx: 0.0, cy: 0.0, distortion: [0.0; 5] },
         views: Vec::new(),
         skipped: Vec::new(),
+        conditioning: Default::default(),
     })
 }

@@ -80,6 +80,45 @@ pub struct Calibration {
     /// Views left out, each with the reason.
     #[serde(default)]
     pub skipped: Vec<Skipped>,
+    /// Condition numbers of the linear systems the closed form solves (`zhang` docs); written
+    /// for a person, not read back.
+    #[serde(skip_deserializing)]
+    pub conditioning: Conditioning,
+}
+
+/// How well the closed form's linear systems determine their solutions: σ_max / σ₂ of each
+/// system (σ₂ the second-smallest singular value). Above `zhang::CONDITION_WARNING` the
+/// estimate may be poor and a warning is given.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct Conditioning {
+    /// Zhang's system for the image of the absolute conic.
+    pub zhang: f64,
+    /// The worst view's normalised homography DLT, and which view.
+    pub homography_worst: f64,
+    pub homography_worst_view: String,
+}
+
+impl Conditioning {
+    /// Warnings for the systems above `zhang::CONDITION_WARNING`.
+    pub fn warnings(&self) -> Vec<String> {
+        let mut w = Vec::new();
+        if !(self.zhang <= zhang::CONDITION_WARNING) {
+            w.push(format!(
+                "Zhang's system has condition number {:.3e} (above {:.0e}): the views barely determine the intrinsics; tilt the board more, and differently between views",
+                self.zhang,
+                zhang::CONDITION_WARNING
+            ));
+        }
+        if !(self.homography_worst <= zhang::CONDITION_WARNING) {
+            w.push(format!(
+                "{}: its homography's system has condition number {:.3e} (above {:.0e}): the board is nearly edge-on or too small in the image",
+                self.homography_worst_view,
+                self.homography_worst,
+                zhang::CONDITION_WARNING
+            ));
+        }
+        w
+    }
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -177,6 +216,7 @@ pub fn calibrate(
     let board = board_points(config.board, config.square);
     let plane: Vec<DVec2> = board.iter().map(|p| p.truncate()).collect();
     let mut hs = Vec::new();
+    let mut conditioning = Conditioning::default();
     for (name, corners) in views {
         if corners.len() != board.len() {
             return Err(Error::BadInput(format!(
@@ -185,12 +225,16 @@ pub fn calibrate(
                 board.len()
             )));
         }
-        hs.push(
-            zhang::homography(&plane, corners)
-                .ok_or_else(|| Error::Numerical(format!("{name}: no homography")))?,
-        );
+        let (h, cond) = zhang::homography_conditioned(&plane, corners)
+            .ok_or_else(|| Error::Numerical(format!("{name}: no homography")))?;
+        if !(cond <= conditioning.homography_worst) {
+            conditioning.homography_worst = cond;
+            conditioning.homography_worst_view = name.clone();
+        }
+        hs.push(h);
     }
-    let k = zhang::intrinsics(&hs, size).map_err(Error::Numerical)?;
+    let (k, zhang_cond) = zhang::intrinsics_conditioned(&hs, size).map_err(Error::Numerical)?;
+    conditioning.zhang = zhang_cond;
     let mut poses = Vec::new();
     for (h, (name, _)) in hs.iter().zip(views) {
         poses.push(zhang::extrinsics(h, &k).ok_or_else(|| Error::Numerical(format!("{name}: no pose")))?);
@@ -257,11 +301,27 @@ pub fn calibrate(
             })
             .collect(),
         skipped: Vec::new(),
+        conditioning,
     };
     let finite =
         out.camera_matrix.iter().flatten().chain(&out.distortion_coefficients).all(|v| v.is_finite());
     if !finite || !out.rms_px.is_finite() {
         return Err(Error::Numerical("the refinement diverged".into()));
+    }
+    // A focal length known to worse than this fraction (one standard deviation) is not a
+    // calibration: boards (nearly) parallel to the image plane leave it unobservable, and
+    // the refinement then returns a number with an uncertainty as large as itself. Checked
+    // for the residuals measured, and for corners good to 0.1 px (a sharp image and a good
+    // detector), so that noise-free data from a degenerate set of views are refused too.
+    const MAX_FOCAL_REL_SD: f64 = 0.1;
+    let (fx, fy) = (out.camera_matrix[0][0], out.camera_matrix[1][1]);
+    let u = sol.unit_std_intrinsics;
+    let determined = |sd: f64, unit_sd: f64, f: f64| sd <= MAX_FOCAL_REL_SD * f && 0.1 * unit_sd <= MAX_FOCAL_REL_SD * f;
+    if !(determined(out.std_dev.fx, u[0], fx) && determined(out.std_dev.fy, u[1], fy)) {
+        return Err(Error::Numerical(format!(
+            "the views do not determine the focal length (fx {fx:.1} ± {:.1}, fy {fy:.1} ± {:.1} px): the boards are (nearly) parallel to the image plane; tilt the board by 10° or more, differently between views",
+            out.std_dev.fx, out.std_dev.fy
+        )));
     }
     Ok(out)
 }

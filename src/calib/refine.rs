@@ -35,6 +35,9 @@ pub struct Solution {
     pub residuals: Vec<Vec<DVec2>>,
     /// Standard deviations of (fx, fy, cx, cy, k1, k2, p1, p2, k3); 0 for a fixed one.
     pub std_intrinsics: [f64; 9],
+    /// The same for corners with 1 px of noise per coordinate: how well the views' geometry
+    /// determines each parameter, whatever the residuals happen to be.
+    pub unit_std_intrinsics: [f64; 9],
     /// Standard deviations of each view's rotation (small-angle, radians) and translation.
     pub std_views: Vec<[f64; 6]>,
     pub iterations: usize,
@@ -237,11 +240,17 @@ pub fn refine(
         .ok_or("the calibration is degenerate: the normal equations are singular at the optimum")?;
     let sd = |k: usize| (sigma2 * cov[(k, k)]).max(0.0).sqrt();
     let mut std_intrinsics = [0.0; NI];
+    let mut unit_std_intrinsics = [0.0; NI];
     for (col, &p) in free.iter().enumerate() {
         std_intrinsics[p] = sd(col);
+        // A negative variance is the inverse of numerically singular normal equations: the
+        // parameter is not determined at all.
+        let v = cov[(col, col)];
+        unit_std_intrinsics[p] = if v >= 0.0 { v.sqrt() } else { f64::INFINITY };
     }
     if flags.fix_aspect_ratio {
         std_intrinsics[1] = aspect * std_intrinsics[0];
+        unit_std_intrinsics[1] = aspect * unit_std_intrinsics[0];
     }
     let std_views = (0..nv).map(|v| std::array::from_fn(|c| sd(nf + 6 * v + c))).collect();
     let mut residuals = Vec::with_capacity(nv);
@@ -250,5 +259,13 @@ pub fn refine(
         residuals.push((0..pts.len()).map(|k| DVec2::new(r[row + 2 * k], r[row + 2 * k + 1])).collect());
         row += 2 * pts.len();
     }
-    Ok(Solution { camera: camera_from(&intr, w, h), poses, residuals, std_intrinsics, std_views, iterations })
+    Ok(Solution {
+        camera: camera_from(&intr, w, h),
+        poses,
+        residuals,
+        std_intrinsics,
+        unit_std_intrinsics,
+        std_views,
+        iterations,
+    })
 }

@@ -8,7 +8,11 @@
 //!   h₁ᵀ B h₂ = 0,   h₁ᵀ B h₁ − h₂ᵀ B h₂ = 0
 //!
 //! two linear equations per view; b is the null vector of the stacked system (≥ 3 views, or 2
-//! with zero skew added as an equation). K follows from B in closed form. Image coordinates are
+//! with zero skew added as an equation). K follows from B in closed form. Where B comes out
+//! indefinite (slightly tilted boards through a distorting lens), the principal point is fixed
+//! at the image centre and the focal lengths solved alone, as OpenCV's initIntrinsicParams2D
+//! does; the refinement frees the principal point and reports how well the focal length is
+//! determined (`calib::calibrate` refuses it beyond 10 %). Image coordinates are
 //! first scaled to about ±1 so the system is well conditioned (Hartley 1997).
 
 use glam::{DMat3, DVec2, DVec3};
@@ -34,9 +38,21 @@ fn apply(h: &Matrix3<f64>, p: DVec2) -> DVec2 {
     )
 }
 
+/// Condition numbers above this are reported as a warning. A homography's entries and Zhang's
+/// b come out of their systems with relative errors up to the condition number times the
+/// data's: corners good to 0.05 px on a board spanning 500 px give 10⁻⁴, so above 10³ the
+/// intrinsics may be off by 10 % or more.
+pub const CONDITION_WARNING: f64 = 1e3;
+
 /// Homography from ≥ 4 correspondences: normalised DLT, then Levenberg–Marquardt on the
 /// reprojection error in the image.
 pub fn homography(board: &[DVec2], image: &[DVec2]) -> Option<Homography> {
+    homography_conditioned(board, image).map(|(h, _)| h)
+}
+
+/// The homography and the condition number of its normalised DLT system (σ_max over the
+/// second-smallest singular value: how well the solution is separated from other directions).
+pub fn homography_conditioned(board: &[DVec2], image: &[DVec2]) -> Option<(Homography, f64)> {
     if board.len() < 4 || board.len() != image.len() {
         return None;
     }
@@ -51,22 +67,30 @@ pub fn homography(board: &[DVec2], image: &[DVec2]) -> Option<Homography> {
             a[(2 * k + 1, c)] = row1[c];
         }
     }
-    let h = null_vector(&a)?;
+    let (h, cond) = null_vector(&a)?;
     let hn = Matrix3::from_row_slice(h.as_slice());
     let mut h = ti.try_inverse()? * hn * tb;
     h /= h[(2, 2)];
     refine_homography(&mut h, board, image);
-    h.iter().all(|v| v.is_finite()).then_some(h)
+    h.iter().all(|v| v.is_finite()).then_some((h, cond))
 }
 
-/// The right singular vector of the smallest singular value.
-fn null_vector(a: &DMatrix<f64>) -> Option<DVector<f64>> {
-    // AᵀA is small (≤ 9×9); its eigenvector of the smallest eigenvalue is the null vector.
+/// The right singular vector of the smallest singular value, and the system's condition
+/// number for it: σ_max / σ₂, σ₂ the second-smallest singular value of A.
+fn null_vector(a: &DMatrix<f64>) -> Option<(DVector<f64>, f64)> {
+    // AᵀA is small (≤ 9×9); its eigenvector of the smallest eigenvalue is the null vector,
+    // and its eigenvalues are A's singular values squared.
     let ata = a.transpose() * a;
     let svd = SVD::new(ata, false, true);
     let vt = svd.v_t?;
     let (k, _) = svd.singular_values.iter().enumerate().min_by(|x, y| x.1.total_cmp(y.1))?;
-    Some(vt.row(k).transpose())
+    let mut sv: Vec<f64> = svd.singular_values.iter().copied().collect();
+    sv.sort_by(|x, y| x.total_cmp(y));
+    let cond = match sv.as_slice() {
+        [_, second, .., max] if *second > 0.0 => (max / second).sqrt(),
+        _ => f64::INFINITY,
+    };
+    Some((vt.row(k).transpose(), cond))
 }
 
 /// Gauss–Newton with Levenberg damping on the 8 free entries of H (H₃₃ = 1).
@@ -128,6 +152,11 @@ const UNOBSERVABLE: &str =
 
 /// Intrinsics (fx, fy, cx, cy; zero skew) from ≥ 2 homographies, `size` = image (w, h).
 pub fn intrinsics(hs: &[Homography], size: (u32, u32)) -> Result<DMat3, String> {
+    intrinsics_conditioned(hs, size).map(|(k, _)| k)
+}
+
+/// The intrinsics and the condition number of Zhang's system for b (as `null_vector`).
+pub fn intrinsics_conditioned(hs: &[Homography], size: (u32, u32)) -> Result<(DMat3, f64), String> {
     if hs.len() < 2 {
         return Err(format!("{} view(s): Zhang's method needs at least 2", hs.len()));
     }
@@ -165,22 +194,57 @@ pub fn intrinsics(hs: &[Homography], size: (u32, u32)) -> Result<DMat3, String> 
     if sv[1] <= 1e-10 * sv[5] {
         return Err(UNOBSERVABLE.into());
     }
-    let b = null_vector(&a).ok_or("the homographies give no solution")?;
+    let (b, cond) = null_vector(&a).ok_or("the homographies give no solution")?;
     let (b11, b12, b22, b13, b23, b33) = (b[0], b[1], b[2], b[3], b[4], b[5]);
     let den = b11 * b22 - b12 * b12;
     let v0 = (b12 * b13 - b11 * b23) / den;
     let lambda = b33 - (b13 * b13 + v0 * (b12 * b13 - b11 * b23)) / b11;
     let alpha2 = lambda / b11;
     let beta2 = lambda * b11 / den;
-    if !(alpha2 > 0.0 && beta2 > 0.0 && den.abs() > 0.0) || !alpha2.is_finite() || !beta2.is_finite() {
-        return Err(UNOBSERVABLE.into());
-    }
-    let (alpha, beta) = (alpha2.sqrt(), beta2.sqrt());
-    let u0 = -b13 * alpha2 / lambda;
-    let kn = Matrix3::new(alpha, 0.0, u0, 0.0, beta, v0, 0.0, 0.0, 1.0);
+    let (kn, cond) = if alpha2 > 0.0 && beta2 > 0.0 && den.abs() > 0.0 && alpha2.is_finite() && beta2.is_finite() {
+        let (alpha, beta) = (alpha2.sqrt(), beta2.sqrt());
+        let u0 = -b13 * alpha2 / lambda;
+        (Matrix3::new(alpha, 0.0, u0, 0.0, beta, v0, 0.0, 0.0, 1.0), cond)
+    } else {
+        // Slightly tilted boards seen through a distorting lens leave the principal point too
+        // weakly determined for the full closed form (B comes out indefinite). Fix it at the
+        // image centre and solve for the focal lengths alone, as OpenCV's
+        // initIntrinsicParams2D does; the refinement frees it again.
+        centred_focal(hs, &n)?
+    };
     let k = n.try_inverse().ok_or("singular normaliser")? * kn;
     let k = k / k[(2, 2)];
-    Ok(DMat3::from_cols_array(&[k[(0, 0)], 0.0, 0.0, 0.0, k[(1, 1)], 0.0, k[(0, 2)], k[(1, 2)], 1.0]))
+    Ok((DMat3::from_cols_array(&[k[(0, 0)], 0.0, 0.0, 0.0, k[(1, 1)], 0.0, k[(0, 2)], k[(1, 2)], 1.0]), cond))
+}
+
+/// Focal lengths with the principal point at the image centre (zero in the normalised
+/// coordinates `n` gives): with B = diag(1/α², 1/β², 1), each view's two equations are linear
+/// in (1/α², 1/β²): h₁₁h₁₂/α² + h₂₁h₂₂/β² = −h₃₁h₃₂ and (h₁₁² − h₁₂²)/α² + (h₂₁² − h₂₂²)/β²
+/// = −(h₃₁² − h₃₂²). Returns K in normalised coordinates and the system's condition number.
+fn centred_focal(hs: &[Homography], n: &Matrix3<f64>) -> Result<(Matrix3<f64>, f64), String> {
+    let mut a = DMatrix::<f64>::zeros(2 * hs.len(), 2);
+    let mut rhs = DVector::<f64>::zeros(2 * hs.len());
+    for (k, h) in hs.iter().enumerate() {
+        let h = n * h;
+        let h = h / h.column(0).norm().max(h.column(1).norm());
+        a[(2 * k, 0)] = h[(0, 0)] * h[(0, 1)];
+        a[(2 * k, 1)] = h[(1, 0)] * h[(1, 1)];
+        rhs[2 * k] = -h[(2, 0)] * h[(2, 1)];
+        a[(2 * k + 1, 0)] = h[(0, 0)] * h[(0, 0)] - h[(0, 1)] * h[(0, 1)];
+        a[(2 * k + 1, 1)] = h[(1, 0)] * h[(1, 0)] - h[(1, 1)] * h[(1, 1)];
+        rhs[2 * k + 1] = -(h[(2, 0)] * h[(2, 0)] - h[(2, 1)] * h[(2, 1)]);
+    }
+    let svd = SVD::new(a.clone(), true, true);
+    let sv = &svd.singular_values;
+    let cond = if sv.min() > 0.0 { sv.max() / sv.min() } else { f64::INFINITY };
+    let x = svd.solve(&rhs, 1e-300).map_err(|_| UNOBSERVABLE.to_string())?;
+    // Noise and distortion can push a poorly determined 1/α² below zero: take its size, as
+    // OpenCV does, and leave the rest to the refinement (which reports the uncertainty).
+    let (ia2, ib2) = (x[0].abs(), x[1].abs());
+    if !(ia2 > 0.0 && ib2 > 0.0 && ia2.is_finite() && ib2.is_finite()) {
+        return Err(UNOBSERVABLE.into());
+    }
+    Ok((Matrix3::new(1.0 / ia2.sqrt(), 0.0, 0.0, 0.0, 1.0 / ib2.sqrt(), 0.0, 0.0, 0.0, 1.0), cond))
 }
 
 /// Board-to-camera pose from a homography and K: (R, t) with the board in front.

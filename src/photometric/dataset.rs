@@ -1,6 +1,6 @@
 //! Reading a photometric-stereo dataset in DiLiGenT's layout (Shi et al. 2016/2019):
-//! `filenames.txt` (the images, in order; 16-bit PNGs read at full depth, EXRs as linear
-//! values),
+//! `filenames.txt` (the images, in order; 16-bit PNGs read at full depth, their largest codes
+//! flagged as saturated; EXRs as linear values, never clipped),
 //! `light_directions.txt` (one unit vector per image, from the object towards the light),
 //! `light_intensities.txt` (per-channel intensity per image), `mask.png` (any non-zero channel
 //! marks the object) and, optionally, `Normal_gt.mat` (MATLAB v5, variable `Normal_gt`,
@@ -148,8 +148,15 @@ pub fn read(dir: &Path) -> Result<Dataset, Error> {
         .collect::<Result<_, Error>>()?;
     let mut obs = Observations::new(pixels.len(), names.len());
     for (j, img) in per_image.iter().enumerate() {
+        // Code values (PNG, JPEG) saturate at the largest code; linear float images (EXR) are
+        // not clipped at 1.
+        let linear = names[j].to_ascii_lowercase().ends_with(".exr");
         for (p, v) in img.iter().enumerate() {
-            obs.set_raw(p, j, *v, intensities[j]);
+            if linear {
+                obs.set_linear(p, j, *v, intensities[j]);
+            } else {
+                obs.set_raw(p, j, *v, intensities[j]);
+            }
         }
     }
 

@@ -26,6 +26,9 @@ pub enum Error {
     BadInput { path: PathBuf, message: String },
     #[error("{message}")]
     Input { message: String },
+    /// The data determine no pixel's normal (e.g. every light in one plane).
+    #[error("no pixel could be solved: {message}")]
+    Unsolvable { message: String },
     #[error(transparent)]
     Image(#[from] crate::image::io::Error),
     #[error("cannot write {path}: {message}")]
@@ -54,6 +57,13 @@ impl Observations {
         let k = pixel * self.lights + light;
         self.data[k] = std::array::from_fn(|c| (raw[c] as f64 / intensity[c]) as f32);
         self.valid[k] = raw.iter().all(|&v| v < SATURATED);
+    }
+    /// Stores a linear observation that no sensor clipped (a render's radiance, which may
+    /// exceed 1): always usable.
+    pub fn set_linear(&mut self, pixel: usize, light: usize, radiance: [f32; 3], intensity: [f64; 3]) {
+        let k = pixel * self.lights + light;
+        self.data[k] = std::array::from_fn(|c| (radiance[c] as f64 / intensity[c]) as f32);
+        self.valid[k] = true;
     }
     /// All observations of one pixel, in light order.
     pub fn pixel(&self, pixel: usize) -> &[[f32; 3]] {
@@ -217,7 +227,8 @@ impl From<lambertian::Pixel> for Solved {
 }
 
 /// Solves every masked pixel with `config.model`. Fewer than 3 lights, an empty mask or
-/// observations that do not match the pixels and lights are bad input.
+/// observations that do not match the pixels and lights are bad input; data that leave every
+/// pixel unsolved (coplanar lights, all in shadow) are `Error::Unsolvable`.
 pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     let bad = |message: String| Error::Input { message };
     if input.lights.len() < 3 {
@@ -266,6 +277,16 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
         })
         .collect();
     let time_s = t.elapsed().as_secs_f64();
+    if solved.iter().all(Option::is_none) {
+        let cond = light_condition_number(&input.lights);
+        return Err(Error::Unsolvable {
+            message: format!(
+                "{} pixels under {} lights (light matrix condition number {cond:.3e}): every pixel has fewer than 3 usable observations or lights in one plane",
+                input.pixels.len(),
+                input.lights.len()
+            ),
+        });
+    }
     let normals: Vec<Option<DVec3>> = solved.iter().map(|s| s.as_ref().map(|p| p.normal)).collect();
     let albedo = solved.iter().map(|s| s.as_ref().map_or([0.0; 3], |p| p.albedo)).collect();
     let ok: Vec<&Solved> = solved.iter().flatten().collect();

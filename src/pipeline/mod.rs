@@ -22,8 +22,8 @@ use std::path::{Path, PathBuf};
 pub enum Error {
     #[error(transparent)]
     File(#[from] file::Error),
-    #[error("{path}: stages[{entry}] (line {line}, case {case}): {kind} error: {source}")]
-    Stage { path: PathBuf, entry: usize, line: usize, case: String, kind: &'static str, source: StageError },
+    #[error("{path}: stages[{entry}] (line {line}, case {case}): {kind} error: {error}")]
+    Stage { path: PathBuf, entry: usize, line: usize, case: String, kind: &'static str, error: StageError },
     #[error("{path}: {message}")]
     Bounds { path: PathBuf, message: String },
     #[error("--threads {0}: expected 1 to {MAX_THREADS}")]
@@ -174,13 +174,13 @@ fn report_case(
             st.error = Some(StageFailure { kind: e.kind().into(), message: e.to_string() });
             Ok((st, Vec::new()))
         }
-        Err(source) => Err(Error::Stage {
+        Err(error) => Err(Error::Stage {
             path: path.into(),
             entry: case.entry - 1,
             line: case.line,
             case: common.case.clone(),
-            kind: source.kind(),
-            source,
+            kind: error.kind(),
+            error,
         }),
     }
 }

@@ -12,6 +12,20 @@ pub enum Texture {
     Checker { squares: [u32; 2], even: Vec3A, odd: Vec3A },
 }
 
+impl Texture {
+    /// Multiplies every value by `s` (in [0, 1], so an albedo stays an albedo).
+    pub fn scale(&mut self, s: f32) {
+        match self {
+            Texture::Constant(v) => *v *= s,
+            Texture::Image { texels, .. } => texels.iter_mut().for_each(|t| *t *= s),
+            Texture::Checker { even, odd, .. } => {
+                *even *= s;
+                *odd *= s;
+            }
+        }
+    }
+}
+
 /// An albedo above 1 would create energy; each value must lie in [0, 1].
 fn albedo3(v: [f64; 3], path: &Path, field: &str) -> Result<Vec3A, Error> {
     if v.iter().all(|c| c.is_finite() && (0.0..=1.0).contains(c)) {

@@ -4,6 +4,7 @@
 //!
 //! Poses: view k puts the board's centre on a point of a 4×4 grid spanning 12 %–88 % of the
 //! image (so boards reach the image corners, where distortion is strongest), tilted by 30°–40°
+//! (`tilt_deg`)
 //! about an in-board axis that turns from view to view, rolled by up to ±20°, drawn from the
 //! stage's seed, as close as the whole board fits in the image.
 //!
@@ -15,10 +16,14 @@
 //! - `corner_rms_px`: detected corners against the projected true corners;
 //! - `fx_rel_err`, `fy_rel_err`: |estimate − truth| / truth;
 //! - `cx_err_px`, `cy_err_px`: |estimate − truth| in pixels;
+//! - `fx_err_sigmas`, `cx_err_sigmas`: |estimate − truth| over the standard deviation the
+//!   calibration reports for it (a bound of 3 checks that the reported uncertainty is honest);
 //! - `distortion_field_max_px`: the largest difference between the true and estimated
 //!   distortion displacement (pixel − K·undistort(pixel), each with its own K) over every
 //!   detected corner position, that is over the part of the image the boards covered;
-//! - `rms_px`: the calibration's own reprojection error.
+//! - `rms_px`: the calibration's own reprojection error;
+//! - `zhang_condition_number`, `homography_condition_number_max`: how well the closed form's
+//!   linear systems determine their solutions (`calib::Conditioning`; warned above 10³).
 
 use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError};
 use crate::calib::{self, detect::BoardSize};
@@ -42,6 +47,11 @@ pub struct Config {
     pub views: usize,
     /// Samples per pixel (default: the scene's).
     pub spp: Option<u32>,
+    /// Range of the board's tilt away from the camera, in degrees (default [30, 40]); views
+    /// tilted by less than a few degrees leave the focal length unobservable, boards beyond
+    /// about 80° are nearly edge-on.
+    #[serde(default = "default_tilt")]
+    pub tilt_deg: [f64; 2],
     /// Inner corners [cols, rows] (default [9, 6]) and square side in scene units (default 0.025).
     #[serde(default = "default_board")]
     pub board: [usize; 2],
@@ -74,6 +84,9 @@ pub struct Config {
 
 fn default_views() -> usize {
     16
+}
+fn default_tilt() -> [f64; 2] {
+    [30.0, 40.0]
 }
 fn default_board() -> [usize; 2] {
     [9, 6]
@@ -113,7 +126,15 @@ pub struct Truth {
 }
 
 /// Board-to-camera poses for `n` views (see the module docs).
-pub fn poses(cam: &CameraModel, board: BoardSize, square: f64, n: usize, seed: u64) -> Vec<(DMat3, DVec3)> {
+pub fn poses(
+    cam: &CameraModel,
+    board: BoardSize,
+    square: f64,
+    n: usize,
+    tilt_deg: [f64; 2],
+    seed: u64,
+) -> Vec<(DMat3, DVec3)> {
+    let (tilt_mid, tilt_half) = ((tilt_deg[0] + tilt_deg[1]) / 2.0, (tilt_deg[1] - tilt_deg[0]) / 2.0);
     let centre =
         DVec3::new((board.cols - 1) as f64 * square / 2.0, (board.rows - 1) as f64 * square / 2.0, 0.0);
     // The board's outline: its outer squares' far corners.
@@ -131,11 +152,11 @@ pub fn poses(cam: &CameraModel, board: BoardSize, square: f64, n: usize, seed: u
             let mut u = || s.next() as f64 * 2.0 - 1.0;
             let (gx, gy) = ((k % 4) as f64, ((k / 4) % 4) as f64);
             let target = DVec2::new((0.12 + 0.76 * gx / 3.0) * w, (0.12 + 0.76 * gy / 3.0) * h);
-            // A strong tilt (30°–40°) constrains the focal length through foreshortening,
-            // where frontal views hardly do; its axis lies in the board and turns by 3/8 of a
-            // turn from view to view, so the tilts point every way.
+            // A strong tilt (by default 30°–40°) constrains the focal length through
+            // foreshortening, where frontal views hardly do; its axis lies in the board and
+            // turns by 3/8 of a turn from view to view, so the tilts point every way.
             let phi = 2.356 * k as f64 + 0.3 * u();
-            let tilt = (35.0 + 5.0 * u()).to_radians();
+            let tilt = (tilt_mid + tilt_half * u()).to_radians();
             let r = Pose::rotation_from_rvec(DVec3::new(0.0, 0.0, 0.35 * u()))
                 * Pose::rotation_from_rvec(DVec3::new(phi.cos(), phi.sin(), 0.0) * tilt);
             let ray = cam.pixel_ray(target).unwrap_or(DVec3::Z);
@@ -185,6 +206,12 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Fin
             c.board, c.square
         )));
     }
+    if !c.tilt_deg.iter().all(|t| (0.0..=89.0).contains(t)) || c.tilt_deg[0] > c.tilt_deg[1] {
+        return Err(StageError::Config(format!(
+            "tilt_deg = {:?}: expected [lowest, highest] within 0° to 89°",
+            c.tilt_deg
+        )));
+    }
     let origin = DVec3::from_array(c.board_origin.unwrap_or([c.square, c.square, 0.0]));
     if !origin.is_finite() {
         return Err(StageError::Config(format!("board_origin = {origin}: expected finite numbers")));
@@ -197,7 +224,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Fin
     let bar = render::progress_bar(c.views as u64, &format!("{} views", ctx.case), ctx.progress);
     let mut images = Vec::new();
     let mut corners = Vec::new();
-    for (k, (r, t)) in poses(&camera, board, c.square, c.views, ctx.seed).into_iter().enumerate() {
+    for (k, (r, t)) in poses(&camera, board, c.square, c.views, c.tilt_deg, ctx.seed).into_iter().enumerate() {
         let name = format!("view{k:02}");
         let true_corners = board_pts.iter().map(|x| camera.project(r * *x + t)).collect::<Option<Vec<_>>>();
         let Some(true_corners) = true_corners else {
@@ -306,6 +333,12 @@ pub fn validate(_c: &Config, out: &calib::Output, truth: &Truth) -> Findings {
     m.push(Metric::new("fy_rel_err", (ke.fy - kt.fy).abs() / kt.fy, "", Better::Lower));
     m.push(Metric::new("cx_err_px", (ke.cx - kt.cx).abs(), "px", Better::Lower));
     m.push(Metric::new("cy_err_px", (ke.cy - kt.cy).abs(), "px", Better::Lower));
+    // The error in units of the standard deviation the solver itself reports: with an honest
+    // covariance, beyond 3 happens 0.3 % of the time.
+    let sd = &cal.std_dev;
+    let sigmas = |err: f64, sd: f64| if sd > 0.0 { err / sd } else { f64::INFINITY };
+    m.push(Metric::new("fx_err_sigmas", sigmas((ke.fx - kt.fx).abs(), sd.fx), "σ", Better::Lower));
+    m.push(Metric::new("cx_err_sigmas", sigmas((ke.cx - kt.cx).abs(), sd.cx), "σ", Better::Lower));
     // Over every detected corner position, that is over the part of the image the boards covered.
     let mut worst = Some(0.0f64);
     for p in out.corners.iter().flat_map(|(_, c)| c) {
@@ -322,7 +355,11 @@ pub fn validate(_c: &Config, out: &calib::Output, truth: &Truth) -> Findings {
         "a detected corner lies where a distortion model cannot be inverted",
     ));
     m.push(Metric::new("rms_px", cal.rms_px, "px", Better::Lower));
-    let sd = &cal.std_dev;
+    m.push(Metric::new("zhang_condition_number", cal.conditioning.zhang, "", Better::Lower));
+    m.push(Metric::new("homography_condition_number_max", cal.conditioning.homography_worst, "", Better::Lower));
+    for w in cal.conditioning.warnings() {
+        f.notes.push(format!("warning: {w}"));
+    }
     let kt = truth.camera.intrinsics;
     f.notes.push(format!(
         "estimate (± standard deviation) fx {:.3} ± {:.3}, fy {:.3} ± {:.3}, cx {:.3} ± {:.3}, cy {:.3} ± {:.3}, d {:?}; \

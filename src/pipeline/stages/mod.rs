@@ -56,6 +56,7 @@ impl StageError {
             StageError::Calib(C::BadInput(_)) => "bad-input",
             StageError::Calib(C::File { .. }) => "io",
             StageError::Photometric(P::Write { .. }) => "io",
+            StageError::Photometric(P::Unsolvable { .. }) => "numerical",
             StageError::Photometric(P::Image(I::Read { .. })) => "io",
             StageError::Photometric(_) => "bad-input",
         }

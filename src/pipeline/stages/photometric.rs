@@ -47,7 +47,7 @@ pub struct Config {
     /// (default [25, 70]).
     #[serde(default = "default_elevation")]
     pub elevation_deg: [f64; 2],
-    /// Irradiance of every light on a surface facing it (default 3).
+    /// Irradiance of every light on a surface facing it (default 3; 1e-30 to 1e30).
     #[serde(default = "default_irradiance")]
     pub irradiance: f64,
     /// Samples per pixel (default: the scene's).
@@ -60,6 +60,9 @@ pub struct Config {
     pub model: String,
     /// Overrides the shininess (exponent) of every Blinn-Phong material in the scene.
     pub shininess: Option<f64>,
+    /// Scales every material's diffuse albedo (default 1): 0.01 makes a nearly black object.
+    #[serde(default = "one")]
+    pub albedo_scale: f64,
     /// Makes every material Lambertian, keeping its diffuse colour (default false).
     #[serde(default)]
     pub diffuse_only: bool,
@@ -75,6 +78,9 @@ pub struct Config {
 /// pixel to be in the truth mask (degrees).
 const MAX_SPREAD_DEG: f64 = 10.0;
 
+fn one() -> f64 {
+    1.0
+}
 fn default_lights() -> usize {
     24
 }
@@ -120,6 +126,7 @@ struct LightRecipe<'a> {
     scene: &'a str,
     diffuse_only: bool,
     shininess: Option<f64>,
+    albedo_scale: f64,
     to_light: [f32; 3],
     irradiance: f64,
     settings: SettingsKey,
@@ -140,9 +147,10 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Trut
             c.elevation_deg
         )));
     }
-    if !(c.irradiance.is_finite() && c.irradiance > 0.0 && c.irradiance < 1e30) {
+    // Radiance is f32 in the renderer: keep it well inside f32's normal range.
+    if !(1e-30..=1e30).contains(&c.irradiance) {
         return Err(StageError::Config(format!(
-            "irradiance = {}: expected a positive number below 1e30",
+            "irradiance = {}: expected a number from 1e-30 to 1e30 (the renderer's radiance is float32)",
             c.irradiance
         )));
     }
@@ -152,6 +160,14 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Trut
     if c.diffuse_only {
         for m in &mut scene.materials {
             m.bsdf = render::bsdf::Bsdf::Lambertian;
+        }
+    }
+    if !(c.albedo_scale.is_finite() && c.albedo_scale > 0.0 && c.albedo_scale <= 1.0) {
+        return Err(StageError::Config(format!("albedo_scale = {}: expected a number in (0, 1]", c.albedo_scale)));
+    }
+    if c.albedo_scale != 1.0 {
+        for m in &mut scene.materials {
+            m.albedo.scale(c.albedo_scale as f32);
         }
     }
     if let Some(e) = c.shininess {
@@ -232,6 +248,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Trut
             scene: &digest,
             diffuse_only: c.diffuse_only,
             shininess: c.shininess,
+            albedo_scale: c.albedo_scale,
             to_light: to_light.to_array(),
             irradiance: c.irradiance,
             settings: SettingsKey::from(&settings),
@@ -244,7 +261,8 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Trut
         };
         for (p, &i) in pixels.iter().enumerate() {
             let v = &img.data[3 * i..3 * i + 3];
-            obs.set_raw(p, j, [v[0], v[1], v[2]], [c.irradiance; 3]);
+            // Linear radiance without a sensor: nothing is clipped, whatever its size.
+            obs.set_linear(p, j, [v[0], v[1], v[2]], [c.irradiance; 3]);
         }
         if c.save_dataset {
             kept_images.push((format!("{:03}.exr", j + 1), img.clone()));

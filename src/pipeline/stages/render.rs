@@ -99,8 +99,20 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(Input, Truth, Findings),
             ))
         }
     };
-    if let Reference::Images { path, mean, .. } = &reference {
-        if mean.has_non_finite() {
+    if let Reference::Images { path, mean, variance } = &reference {
+        let (w, h) = (scene.camera.width, scene.camera.height);
+        for (what, img) in [("reference", mean), ("reference_variance", variance)] {
+            if (img.width, img.height, img.channels) != (w, h, 3) {
+                return Err(StageError::Config(format!(
+                    "{what} {}: {}×{}×{}, but the scene renders {w}×{h}×3",
+                    clean(path).display(),
+                    img.width,
+                    img.height,
+                    img.channels
+                )));
+            }
+        }
+        if mean.has_non_finite() || variance.has_non_finite() {
             return Err(StageError::Config(format!("reference {}: holds non-finite pixels", path.display())));
         }
     }
