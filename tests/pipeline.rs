@@ -90,11 +90,28 @@ fn missed_bound_exits_3_and_names_metric() {
 fn missing_reference_is_skipped_with_a_note() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
+    // A bound on a reference metric: skipped with the missing file named, not failed.
     let extra = "reference = \"/nonexistent/ref.exr\"\nreference_variance = \"/nonexistent/var.exr\"\n";
-    let (code, err) = run(&furnace(0.2, extra), &out);
+    let text = furnace(0.2, extra)
+        .replace("nonfinite_samples = 0 }", "nonfinite_samples = 0, mean_rel_err_r = 0.01 }");
+    let (code, err) = run(&text, &out);
     assert_eq!(code, 0, "{err}");
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(md.contains("/nonexistent/ref.exr not found: comparison skipped"), "{md}");
+    assert!(
+        md.contains("| mean_rel_err_r | — |  | ≤ 0.01 | skipped: /nonexistent/ref.exr not found |"),
+        "{md}"
+    );
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let m = j["stages"][0]["metrics"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|m| m["name"] == "mean_rel_err_r")
+        .unwrap()
+        .clone();
+    assert_eq!((m["value"].is_null(), m["pass"].is_null()), (true, true), "{m}");
 }
 
 #[test]
@@ -395,4 +412,24 @@ fn cli_on_the_pipelines_inputs_gives_its_numbers() {
     // rounding, far below the error itself.
     assert!((cli - pipe).abs() <= 1e-9 * pipe, "lumen ps {cli}°, the pipeline's {pipe}°");
     assert_eq!(s["masked_pixels"].as_f64().unwrap(), metric("sphere", "masked_pixels"));
+}
+
+/// `pipelines/stress.toml`: at least 30 cases, each declaring its outcome: an error kind, or
+/// a result with at least one bound.
+#[test]
+fn stress_suite_declares_every_outcome() {
+    let path = common::root().join("pipelines/stress.toml");
+    let file = lumen::pipeline::load(&path).unwrap();
+    assert!(file.cases.len() >= 30, "{} cases", file.cases.len());
+    for c in &file.cases {
+        let declared = c.common.expect_error.is_some() || !c.common.bounds.is_empty();
+        assert!(declared, "{} declares no outcome", c.common.case);
+    }
+    let all = lumen::pipeline::load(&common::root().join("pipelines/all.toml")).unwrap();
+    for stage in ["render", "calibrate", "photometric"] {
+        assert!(
+            all.cases.iter().any(|c| c.stage.name() == stage && !c.sweep.is_empty()),
+            "no {stage} sweep in all.toml"
+        );
+    }
 }

@@ -316,7 +316,8 @@ pub fn calibrate(
     const MAX_FOCAL_REL_SD: f64 = 0.1;
     let (fx, fy) = (out.camera_matrix[0][0], out.camera_matrix[1][1]);
     let u = sol.unit_std_intrinsics;
-    let determined = |sd: f64, unit_sd: f64, f: f64| sd <= MAX_FOCAL_REL_SD * f && 0.1 * unit_sd <= MAX_FOCAL_REL_SD * f;
+    let determined =
+        |sd: f64, unit_sd: f64, f: f64| sd <= MAX_FOCAL_REL_SD * f && 0.1 * unit_sd <= MAX_FOCAL_REL_SD * f;
     if !(determined(out.std_dev.fx, u[0], fx) && determined(out.std_dev.fy, u[1], fy)) {
         return Err(Error::Numerical(format!(
             "the views do not determine the focal length (fx {fx:.1} ± {:.1}, fy {fy:.1} ± {:.1} px): the boards are (nearly) parallel to the image plane; tilt the board by 10° or more, differently between views",

@@ -201,17 +201,18 @@ pub fn intrinsics_conditioned(hs: &[Homography], size: (u32, u32)) -> Result<(DM
     let lambda = b33 - (b13 * b13 + v0 * (b12 * b13 - b11 * b23)) / b11;
     let alpha2 = lambda / b11;
     let beta2 = lambda * b11 / den;
-    let (kn, cond) = if alpha2 > 0.0 && beta2 > 0.0 && den.abs() > 0.0 && alpha2.is_finite() && beta2.is_finite() {
-        let (alpha, beta) = (alpha2.sqrt(), beta2.sqrt());
-        let u0 = -b13 * alpha2 / lambda;
-        (Matrix3::new(alpha, 0.0, u0, 0.0, beta, v0, 0.0, 0.0, 1.0), cond)
-    } else {
-        // Slightly tilted boards seen through a distorting lens leave the principal point too
-        // weakly determined for the full closed form (B comes out indefinite). Fix it at the
-        // image centre and solve for the focal lengths alone, as OpenCV's
-        // initIntrinsicParams2D does; the refinement frees it again.
-        centred_focal(hs, &n)?
-    };
+    let (kn, cond) =
+        if alpha2 > 0.0 && beta2 > 0.0 && den.abs() > 0.0 && alpha2.is_finite() && beta2.is_finite() {
+            let (alpha, beta) = (alpha2.sqrt(), beta2.sqrt());
+            let u0 = -b13 * alpha2 / lambda;
+            (Matrix3::new(alpha, 0.0, u0, 0.0, beta, v0, 0.0, 0.0, 1.0), cond)
+        } else {
+            // Slightly tilted boards seen through a distorting lens leave the principal point too
+            // weakly determined for the full closed form (B comes out indefinite). Fix it at the
+            // image centre and solve for the focal lengths alone, as OpenCV's
+            // initIntrinsicParams2D does; the refinement frees it again.
+            centred_focal(hs, &n)?
+        };
     let k = n.try_inverse().ok_or("singular normaliser")? * kn;
     let k = k / k[(2, 2)];
     Ok((DMat3::from_cols_array(&[k[(0, 0)], 0.0, 0.0, 0.0, k[(1, 1)], 0.0, k[(0, 2)], k[(1, 2)], 1.0]), cond))

@@ -224,7 +224,8 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Fin
     let bar = render::progress_bar(c.views as u64, &format!("{} views", ctx.case), ctx.progress);
     let mut images = Vec::new();
     let mut corners = Vec::new();
-    for (k, (r, t)) in poses(&camera, board, c.square, c.views, c.tilt_deg, ctx.seed).into_iter().enumerate() {
+    for (k, (r, t)) in poses(&camera, board, c.square, c.views, c.tilt_deg, ctx.seed).into_iter().enumerate()
+    {
         let name = format!("view{k:02}");
         let true_corners = board_pts.iter().map(|x| camera.project(r * *x + t)).collect::<Option<Vec<_>>>();
         let Some(true_corners) = true_corners else {
@@ -356,7 +357,12 @@ pub fn validate(_c: &Config, out: &calib::Output, truth: &Truth) -> Findings {
     ));
     m.push(Metric::new("rms_px", cal.rms_px, "px", Better::Lower));
     m.push(Metric::new("zhang_condition_number", cal.conditioning.zhang, "", Better::Lower));
-    m.push(Metric::new("homography_condition_number_max", cal.conditioning.homography_worst, "", Better::Lower));
+    m.push(Metric::new(
+        "homography_condition_number_max",
+        cal.conditioning.homography_worst,
+        "",
+        Better::Lower,
+    ));
     for w in cal.conditioning.warnings() {
         f.notes.push(format!("warning: {w}"));
     }

@@ -163,7 +163,10 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Trut
         }
     }
     if !(c.albedo_scale.is_finite() && c.albedo_scale > 0.0 && c.albedo_scale <= 1.0) {
-        return Err(StageError::Config(format!("albedo_scale = {}: expected a number in (0, 1]", c.albedo_scale)));
+        return Err(StageError::Config(format!(
+            "albedo_scale = {}: expected a number in (0, 1]",
+            c.albedo_scale
+        )));
     }
     if c.albedo_scale != 1.0 {
         for m in &mut scene.materials {
