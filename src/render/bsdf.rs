@@ -17,6 +17,7 @@
 //! may have produced it. Directions are in world space around the shading normal n, which the
 //! caller has turned to the side wo is on (surfaces are two-sided).
 
+pub use super::geometry::basis;
 use super::microfacet::{self, Distribution};
 use super::specular;
 use glam::Vec3A;
@@ -55,16 +56,6 @@ pub enum Bsdf {
 /// Rec. 709 luminance of linear RGB.
 pub fn luminance(c: Vec3A) -> f32 {
     0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
-}
-
-/// An orthonormal basis (t, b) completing n (Duff et al. 2017).
-#[inline]
-pub fn basis(n: Vec3A) -> (Vec3A, Vec3A) {
-    // As in the paper: a sign copy, not a compare and a branch (n.z = −0 takes −1, also fine).
-    let s = 1.0f32.copysign(n.z);
-    let a = -1.0 / (s + n.z);
-    let b = n.x * n.y * a;
-    (Vec3A::new(1.0 + s * n.x * n.x * a, s * b, -s * n.x), Vec3A::new(b, s + n.y * n.y * a, -n.y))
 }
 
 /// Cosine-weighted direction around `n` (Malley's method).

@@ -2,6 +2,16 @@
 
 use glam::{Vec2, Vec3A};
 
+/// An orthonormal basis (t, b) completing n (Duff et al. 2017).
+#[inline]
+pub fn basis(n: Vec3A) -> (Vec3A, Vec3A) {
+    // As in the paper: a sign copy, not a compare and a branch (n.z = −0 takes −1, also fine).
+    let s = 1.0f32.copysign(n.z);
+    let a = -1.0 / (s + n.z);
+    let b = n.x * n.y * a;
+    (Vec3A::new(1.0 + s * n.x * n.x * a, s * b, -s * n.x), Vec3A::new(b, s + n.y * n.y * a, -n.y))
+}
+
 #[derive(Clone, Copy, Debug)]
 pub struct Ray {
     pub origin: Vec3A,

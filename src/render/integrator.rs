@@ -34,59 +34,17 @@
 //! which computes exactly this loop's numbers, about 1.2–1.3× as fast.
 
 use super::bsdf::Bsdf;
+use super::camera_ray::{camera_direction, camera_ray, needs_lens_sample};
+use super::film::{pixel_stats, RR_START};
+pub use super::film::{Film, Settings};
 use super::geometry::{Hit, Prim, Ray};
-use super::sampler::{Sampler, SamplerKind};
+use super::sampler::Sampler;
 use super::scene::{Light, Scene};
 use super::texture::Texture;
 use crate::image::Image;
-use glam::{DVec2, Vec2, Vec3A};
+use glam::{Vec2, Vec3A};
 use rayon::prelude::*;
 use std::f32::consts::PI;
-
-/// What to render: samples, depth, seed, and which part of the image.
-#[derive(Clone, Debug)]
-pub struct Settings {
-    pub spp: u32,
-    pub max_depth: u32,
-    pub seed: u64,
-    pub sampler: SamplerKind,
-    /// Pixel window [x0, y0, x1, y1) to render; the whole image when `None`.
-    pub crop: Option<[u32; 4]>,
-    /// Worker threads; all available cores when `None`.
-    pub threads: Option<usize>,
-    pub progress: bool,
-    /// Trace eight paths at once where the scene allows it (`render::lanes`; the image is the
-    /// same either way). False forces the one-path loop, for comparisons.
-    pub lanes: bool,
-}
-
-impl Settings {
-    pub fn from_scene(scene: &Scene) -> Settings {
-        Settings {
-            spp: scene.render.spp,
-            max_depth: scene.render.max_depth,
-            seed: scene.render.seed,
-            sampler: scene.render.sampler,
-            crop: None,
-            threads: None,
-            progress: false,
-            lanes: true,
-        }
-    }
-}
-
-/// The film after rendering: mean radiance and the variance of that mean, per pixel.
-pub struct Film {
-    pub mean: Image,
-    pub variance: Image,
-    /// Pixel offset of the film in the full image (non-zero for a crop).
-    pub origin: [u32; 2],
-    /// Samples whose value was not finite and was dropped (should be 0).
-    pub dropped_samples: u64,
-}
-
-/// Segments after which Russian roulette starts (module docs).
-pub(super) const RR_START: u32 = 5;
 
 /// Offset for spawning rays off a surface, scaled with the coordinates' magnitude.
 #[inline]
@@ -446,24 +404,6 @@ pub fn render(scene: &Scene, settings: &Settings) -> Film {
     Film { mean, variance, origin: [x0, y0], dropped_samples: dropped.into_inner() }
 }
 
-/// A thin-lens camera ray (camera frame) for the pinhole direction `d` (d.z > 0): from a
-/// point uniform on the aperture disk (Shirley–Chiu concentric map) towards the point where
-/// the pinhole ray meets the plane in focus, so that plane stays sharp and a point at depth D
-/// blurs into a disk of radius fx·r·|1/F − 1/D| pixels.
-fn lens_ray(lens: super::scene::ThinLens, d: glam::DVec3, u: (f32, f32)) -> (glam::DVec3, glam::DVec3) {
-    let (a, b) = (2.0 * u.0 as f64 - 1.0, 2.0 * u.1 as f64 - 1.0);
-    let (r, phi) = if a == 0.0 && b == 0.0 {
-        (0.0, 0.0)
-    } else if a.abs() > b.abs() {
-        (a, std::f64::consts::FRAC_PI_4 * (b / a))
-    } else {
-        (b, std::f64::consts::FRAC_PI_2 - std::f64::consts::FRAC_PI_4 * (a / b))
-    };
-    let o = glam::DVec3::new(r * phi.cos(), r * phi.sin(), 0.0) * lens.aperture_radius;
-    let focus = d * (lens.focus_distance / d.z);
-    (o, (focus - o).normalize())
-}
-
 /// Mean and variance of the mean of one pixel, and the number of non-finite samples dropped.
 fn render_pixel(scene: &Scene, settings: &Settings, x: u32, y: u32) -> ([f32; 3], [f32; 3], u64) {
     pixel_stats((0..settings.spp).map(|k| {
@@ -483,59 +423,4 @@ fn camera_path(scene: &Scene, settings: &Settings, x: u32, y: u32, k: u32) -> (S
         camera_ray(scene, d, lens_u)
     });
     (s, ray)
-}
-
-/// The pinhole direction (camera frame) through pixel (x, y) at the offset `jitter` ∈ [0, 1)²
-/// within it; `None` beyond the fold of the distortion.
-pub(super) fn camera_direction(scene: &Scene, x: u32, y: u32, jitter: (f32, f32)) -> Option<glam::DVec3> {
-    let px = DVec2::new(x as f64 + jitter.0 as f64 - 0.5, y as f64 + jitter.1 as f64 - 0.5);
-    scene.camera.pixel_ray(px)
-}
-
-/// Whether the camera ray for the pinhole direction `d` takes a thin-lens sample.
-pub(super) fn needs_lens_sample(scene: &Scene, d: glam::DVec3) -> bool {
-    scene.lens.is_some() && d.z > 0.0
-}
-
-/// The world-space camera ray for the pinhole direction `d`, through the point `lens_u` of
-/// the aperture when `needs_lens_sample`.
-pub(super) fn camera_ray(scene: &Scene, d: glam::DVec3, lens_u: Option<(f32, f32)>) -> Ray {
-    let origin = Vec3A::from(scene.t_world_cam.translation.as_vec3());
-    let rot = scene.t_world_cam.rotation;
-    match (scene.lens, lens_u) {
-        (Some(lens), Some(u)) => {
-            let (lo, ld) = lens_ray(lens, d, u);
-            Ray { origin: origin + Vec3A::from((rot * lo).as_vec3()), dir: Vec3A::from((rot * ld).as_vec3()) }
-        }
-        _ => Ray { origin, dir: Vec3A::from((rot * d).as_vec3()) },
-    }
-}
-
-/// Mean and variance of the mean of a pixel's samples, in sample order, and the number of
-/// non-finite samples dropped.
-pub(super) fn pixel_stats(samples: impl ExactSizeIterator<Item = Vec3A>) -> ([f32; 3], [f32; 3], u64) {
-    let spp = samples.len() as u64;
-    let mut sum = [0.0f64; 3];
-    let mut sum2 = [0.0f64; 3];
-    let mut dropped = 0;
-    for l in samples {
-        if !l.is_finite() {
-            dropped += 1;
-            continue;
-        }
-        for c in 0..3 {
-            let v = l[c] as f64;
-            sum[c] += v;
-            sum2[c] += v * v;
-        }
-    }
-    let n = (spp - dropped).max(1) as f64;
-    let mut mean = [0.0f32; 3];
-    let mut var = [0.0f32; 3];
-    for c in 0..3 {
-        let m = sum[c] / n;
-        mean[c] = m as f32;
-        var[c] = if n > 1.0 { ((sum2[c] - n * m * m).max(0.0) / (n - 1.0) / n) as f32 } else { 0.0 };
-    }
-    (mean, var, dropped)
 }

@@ -38,8 +38,9 @@
 //! loads did).
 
 use super::bsdf::Bsdf;
+use super::camera_ray::{camera_direction, camera_ray, needs_lens_sample};
+use super::film::{pixel_stats, Settings, RR_START};
 use super::geometry::{Prim, Ray};
-use super::integrator::{camera_direction, camera_ray, needs_lens_sample, pixel_stats, Settings, RR_START};
 use super::sampler::{self, Sampler, SamplerKind};
 use super::scene::{Light, Scene};
 use glam::Vec3A;

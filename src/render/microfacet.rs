@@ -20,7 +20,7 @@
 //! weight f·cos/p ≈ R·F·G1(wi) never much exceeds R. `sample_h` (D(h)·cos θh) is kept for
 //! tests of D.
 
-use super::bsdf::basis;
+use super::geometry::basis;
 use glam::Vec3A;
 use std::f32::consts::PI;
 

@@ -6,7 +6,9 @@
 
 pub mod bsdf;
 pub mod bvh;
+pub mod camera_ray;
 pub mod envmap;
+pub mod film;
 pub mod geometry;
 pub mod integrator;
 pub mod lanes;

@@ -1,10 +1,49 @@
 //! Textures of colour and roughness: constant, image (bilinear, wrapping) and procedural
-//! checkerboard.
+//! checkerboard, and their scene-file schema (`TextureSpec`, `RoughnessSpec`).
 
-use super::scene::{RoughnessSpec, TextureSpec};
 use super::Error;
 use glam::{Vec2, Vec3A};
+use serde::Deserialize;
 use std::path::Path;
+
+/// A colour: constant `[r, g, b]`, an image `{ texture = "file.png" }` (8-bit files are
+/// sRGB-decoded, 16-bit and EXR taken as linear) or a procedural checkerboard
+/// `{ checker = { squares = [nu, nv], even = [..], odd = [..] } }` over texture coordinates.
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+pub enum TextureSpec {
+    Constant([f64; 3]),
+    Image { texture: String },
+    Checker { checker: CheckerSpec },
+}
+
+/// A roughness: a number, a greyscale image `{ texture = "alpha.png" }` (first channel, taken
+/// as data: 8-bit values are v/255 with no sRGB decoding, and clamped to [0.001, 1]), or a
+/// checkerboard `{ checker = { squares = [nu, nv], even = a, odd = b } }`.
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+pub enum RoughnessSpec {
+    Constant(f64),
+    Image { texture: String },
+    Checker { checker: RoughnessCheckerSpec },
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RoughnessCheckerSpec {
+    pub squares: [u32; 2],
+    pub even: f64,
+    pub odd: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CheckerSpec {
+    /// Number of squares along u and v over the [0, 1]² texture domain.
+    pub squares: [u32; 2],
+    pub even: [f64; 3],
+    pub odd: [f64; 3],
+}
 
 pub enum Texture {
     Constant(Vec3A),

@@ -1,0 +1,82 @@
+//! What a render is asked for and what it hands back: the settings, the film (mean and
+//! variance of the mean per pixel), and the per-pixel statistics both the one-path loop
+//! (`integrator`) and the eight lanes (`lanes`) fill it with.
+
+use super::sampler::SamplerKind;
+use super::scene::Scene;
+use crate::image::Image;
+use glam::Vec3A;
+
+/// What to render: samples, depth, seed, and which part of the image.
+#[derive(Clone, Debug)]
+pub struct Settings {
+    pub spp: u32,
+    pub max_depth: u32,
+    pub seed: u64,
+    pub sampler: SamplerKind,
+    /// Pixel window [x0, y0, x1, y1) to render; the whole image when `None`.
+    pub crop: Option<[u32; 4]>,
+    /// Worker threads; all available cores when `None`.
+    pub threads: Option<usize>,
+    pub progress: bool,
+    /// Trace eight paths at once where the scene allows it (`render::lanes`; the image is the
+    /// same either way). False forces the one-path loop, for comparisons.
+    pub lanes: bool,
+}
+
+impl Settings {
+    pub fn from_scene(scene: &Scene) -> Settings {
+        Settings {
+            spp: scene.render.spp,
+            max_depth: scene.render.max_depth,
+            seed: scene.render.seed,
+            sampler: scene.render.sampler,
+            crop: None,
+            threads: None,
+            progress: false,
+            lanes: true,
+        }
+    }
+}
+
+/// The film after rendering: mean radiance and the variance of that mean, per pixel.
+pub struct Film {
+    pub mean: Image,
+    pub variance: Image,
+    /// Pixel offset of the film in the full image (non-zero for a crop).
+    pub origin: [u32; 2],
+    /// Samples whose value was not finite and was dropped (should be 0).
+    pub dropped_samples: u64,
+}
+
+/// Segments after which Russian roulette starts (`integrator` docs).
+pub const RR_START: u32 = 5;
+
+/// Mean and variance of the mean of a pixel's samples, in sample order, and the number of
+/// non-finite samples dropped.
+pub fn pixel_stats(samples: impl ExactSizeIterator<Item = Vec3A>) -> ([f32; 3], [f32; 3], u64) {
+    let spp = samples.len() as u64;
+    let mut sum = [0.0f64; 3];
+    let mut sum2 = [0.0f64; 3];
+    let mut dropped = 0;
+    for l in samples {
+        if !l.is_finite() {
+            dropped += 1;
+            continue;
+        }
+        for c in 0..3 {
+            let v = l[c] as f64;
+            sum[c] += v;
+            sum2[c] += v * v;
+        }
+    }
+    let n = (spp - dropped).max(1) as f64;
+    let mut mean = [0.0f32; 3];
+    let mut var = [0.0f32; 3];
+    for c in 0..3 {
+        let m = sum[c] / n;
+        mean[c] = m as f32;
+        var[c] = if n > 1.0 { ((sum2[c] - n * m * m).max(0.0) / (n - 1.0) / n) as f32 } else { 0.0 };
+    }
+    (mean, var, dropped)
+}
