@@ -1,0 +1,663 @@
+//! Building a scene from its parsed file: every number checked (finite, in range), every
+//! name resolved, errors naming the file and the field.
+
+use super::super::bsdf::Bsdf;
+use super::super::geometry::{Prim, PrimInfo};
+use super::super::texture::{RoughnessSpec, Texture};
+use super::super::{bvh::Bvh, microfacet, obj, surfaces, Error};
+use super::file::*;
+use super::{bounding_sphere, light_cdf, light_of_prim, Light, Material, Scene, ThinLens};
+use crate::math::{CameraModel, Distortion, Intrinsics, Pose};
+use glam::{DMat3, DVec3, Vec2, Vec3A};
+use std::path::Path;
+
+fn field_err(path: &Path, field: &str, message: impl Into<String>) -> Error {
+    Error::Invalid { path: path.to_path_buf(), field: field.to_string(), message: message.into() }
+}
+
+fn finite3(path: &Path, field: &str, v: [f64; 3]) -> Result<DVec3, Error> {
+    if v.iter().all(|c| c.is_finite()) {
+        Ok(DVec3::from_array(v))
+    } else {
+        Err(field_err(path, field, format!("{v:?} must be finite numbers")))
+    }
+}
+
+fn non_negative3(path: &Path, field: &str, v: [f64; 3]) -> Result<Vec3A, Error> {
+    let d = finite3(path, field, v)?;
+    if d.min_element() < 0.0 {
+        return Err(field_err(path, field, format!("{v:?} must not be negative")));
+    }
+    Ok(d.as_vec3().into())
+}
+
+impl TransformSpec {
+    /// Builds the transform, checking every number.
+    fn build(&self, path: &Path, field: &str) -> Result<(DMat3, DVec3, DVec3), Error> {
+        let rotation = match (&self.rotation, &self.rvec) {
+            (Some(_), Some(_)) => {
+                return Err(field_err(path, field, "give either `rotation` or `rvec`, not both"))
+            }
+            (Some(rows), None) => {
+                for (i, r) in rows.iter().enumerate() {
+                    finite3(path, &format!("{field}.rotation[{i}]"), *r)?;
+                }
+                let m = DMat3::from_cols_array_2d(rows).transpose();
+                let e = Pose::orthonormality_error(&m);
+                if e > 1e-6 {
+                    return Err(field_err(
+                        path,
+                        &format!("{field}.rotation"),
+                        format!(
+                            "is not a rotation matrix (orthonormality error {e:.2e}, det {:.6})",
+                            m.determinant()
+                        ),
+                    ));
+                }
+                m
+            }
+            (None, Some(r)) => Pose::rotation_from_rvec(finite3(path, &format!("{field}.rvec"), *r)?),
+            (None, None) => DMat3::IDENTITY,
+        };
+        let translation = finite3(path, &format!("{field}.translation"), self.translation)?;
+        let scale = match self.scale {
+            None => DVec3::ONE,
+            Some(Scale::Uniform(s)) => DVec3::splat(s),
+            Some(Scale::PerAxis(s)) => DVec3::from_array(s),
+        };
+        if !scale.is_finite() || scale.min_element().abs() == 0.0 || scale.abs().min_element() == 0.0 {
+            return Err(field_err(
+                path,
+                &format!("{field}.scale"),
+                format!("{scale} must be finite and non-zero"),
+            ));
+        }
+        Ok((rotation, translation, scale))
+    }
+}
+
+/// Builds a scene from its parsed file; `path` resolves relative paths and names errors.
+pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
+    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let (camera, t_world_cam) = build_camera(&file.camera, path)?;
+    let lens = build_lens(&file.camera, path)?;
+    if file.render.spp == 0 {
+        return Err(field_err(path, "render.spp", "must be at least 1"));
+    }
+    if file.render.max_depth == 0 {
+        return Err(field_err(path, "render.max_depth", "must be at least 1"));
+    }
+    if let Some(s) = &file.sensor {
+        s.validate().map_err(|m| field_err(path, "sensor", m))?;
+    }
+
+    let mut materials = Vec::new();
+    for (i, m) in file.materials.iter().enumerate() {
+        let field = format!("materials[{i}] ({})", m.name);
+        let bsdf = build_bsdf(m, path, &field)?;
+        if materials.iter().any(|x: &Material| x.name == m.name) {
+            return Err(field_err(path, &format!("{field}.name"), "is used by an earlier material"));
+        }
+        let albedo = Texture::build(&m.albedo, &dir, path, &format!("{field}.albedo"))?;
+        let emission =
+            m.emission.map(|e| non_negative3(path, &format!("{field}.emission"), e)).transpose()?;
+        let roughness = match &m.alpha {
+            Some(spec @ (RoughnessSpec::Image { .. } | RoughnessSpec::Checker { .. })) => {
+                Some(Texture::build_roughness(spec, &dir, path, &format!("{field}.alpha"))?)
+            }
+            _ => None,
+        };
+        materials.push(Material { name: m.name.clone(), albedo, emission, bsdf, roughness });
+    }
+    let material_index = |name: &str, field: &str| -> Result<u32, Error> {
+        materials.iter().position(|m| m.name == name).map(|i| i as u32).ok_or_else(|| {
+            field_err(path, field, format!("names material '{name}', which the scene does not define"))
+        })
+    };
+
+    let mut prims = Vec::new();
+    let mut info = Vec::new();
+    let mut object_names = vec!["background".to_string()];
+    for (i, shape) in file.shapes.iter().enumerate() {
+        let field = format!("shapes[{i}]");
+        match shape {
+            ShapeSpec::Mesh { file: f, material, object_materials, transform, reverse_orientation } => {
+                let mesh_path = dir.join(f);
+                let mesh = obj::read(&mesh_path)?;
+                if mesh.triangles.is_empty() {
+                    return Err(Error::EmptyMesh { path: mesh_path });
+                }
+                let (r, t, s) = transform.build(path, &format!("{field}.transform"))?;
+                let default = material
+                    .as_deref()
+                    .map(|m| material_index(m, &format!("{field}.material")))
+                    .transpose()?;
+                for (obj_name, mat) in object_materials {
+                    if !mesh.objects.contains(obj_name) {
+                        return Err(field_err(
+                            path,
+                            &format!("{field}.object_materials"),
+                            format!("'{obj_name}' is not an object of {}", mesh_path.display()),
+                        ));
+                    }
+                    material_index(mat, &format!("{field}.object_materials.{obj_name}"))?;
+                }
+                let first_id = object_names.len() as u32;
+                object_names.extend(mesh.objects.iter().cloned());
+                let positions: Vec<Vec3A> =
+                    mesh.positions.iter().map(|&p| (r * (s * p) + t).as_vec3().into()).collect();
+                // A negative determinant mirrors the mesh and so flips its winding.
+                let mirrored = s.x * s.y * s.z < 0.0;
+                for tri in &mesh.triangles {
+                    let obj_name = &mesh.objects[tri.object as usize];
+                    let mtl = if let Some(m) = object_materials.get(obj_name) {
+                        material_index(m, "")?
+                    } else {
+                        let by_usemtl = tri.material.and_then(|m| {
+                            let n = &mesh.materials[m as usize];
+                            materials.iter().position(|x| &x.name == n).map(|i| i as u32)
+                        });
+                        match by_usemtl.or(default) {
+                            Some(m) => m,
+                            None => {
+                                let what = tri
+                                    .material
+                                    .map(|m| mesh.materials[m as usize].clone())
+                                    .unwrap_or_else(|| "(none)".into());
+                                return Err(field_err(
+                                    path,
+                                    &format!("{field}.material"),
+                                    format!(
+                                        "is not set, and the OBJ's usemtl {what} names no scene material"
+                                    ),
+                                ));
+                            }
+                        }
+                    };
+                    let [a, b, c] = tri.v.map(|k| positions[k as usize]);
+                    let (e1, e2) = (b - a, c - a);
+                    if e1.cross(e2).length_squared() == 0.0 {
+                        continue; // degenerate triangle: no area, never hit
+                    }
+                    let uv = match tri.vt {
+                        Some(vt) => vt.map(|k| mesh.uvs[k as usize].as_vec2()),
+                        None => [Vec2::ZERO, Vec2::X, Vec2::Y],
+                    };
+                    prims.push(Prim::Triangle { v0: a, e1, e2 });
+                    info.push(PrimInfo {
+                        material: mtl,
+                        object_id: first_id + tri.object,
+                        reverse: *reverse_orientation ^ mirrored,
+                        uv,
+                        normal: Vec3A::ZERO,
+                    });
+                }
+            }
+            ShapeSpec::Sphere { center, radius, material, reverse_orientation } => {
+                let c = finite3(path, &format!("{field}.center"), *center)?;
+                if !(radius.is_finite() && *radius > 0.0) {
+                    return Err(field_err(
+                        path,
+                        &format!("{field}.radius"),
+                        format!("{radius} must be positive"),
+                    ));
+                }
+                let mtl = material_index(material, &format!("{field}.material"))?;
+                object_names.push(format!("sphere{i}"));
+                prims.push(Prim::Sphere { center: c.as_vec3().into(), radius: *radius as f32 });
+                info.push(PrimInfo {
+                    material: mtl,
+                    object_id: object_names.len() as u32 - 1,
+                    reverse: *reverse_orientation,
+                    uv: [Vec2::ZERO; 3],
+                    normal: Vec3A::ZERO,
+                });
+            }
+            ShapeSpec::Quad { corner, edge_u, edge_v, material, reverse_orientation } => {
+                let o = finite3(path, &format!("{field}.corner"), *corner)?;
+                let u = finite3(path, &format!("{field}.edge_u"), *edge_u)?;
+                let v = finite3(path, &format!("{field}.edge_v"), *edge_v)?;
+                if u.cross(v).length() == 0.0 {
+                    return Err(field_err(
+                        path,
+                        &field,
+                        "edge_u and edge_v are parallel: the quad has no area",
+                    ));
+                }
+                let mtl = material_index(material, &format!("{field}.material"))?;
+                object_names.push(format!("quad{i}"));
+                let id = object_names.len() as u32 - 1;
+                let [o, u, v] = [o, u, v].map(|x| Vec3A::from(x.as_vec3()));
+                for (a, e1, e2, uv) in [
+                    (o, u, u + v, [Vec2::ZERO, Vec2::X, Vec2::ONE]),
+                    (o, u + v, v, [Vec2::ZERO, Vec2::ONE, Vec2::Y]),
+                ] {
+                    prims.push(Prim::Triangle { v0: a, e1, e2 });
+                    info.push(PrimInfo {
+                        material: mtl,
+                        object_id: id,
+                        reverse: *reverse_orientation,
+                        uv,
+                        normal: Vec3A::ZERO,
+                    });
+                }
+            }
+            ShapeSpec::Torus { .. } | ShapeSpec::Blob { .. } | ShapeSpec::Relief { .. } => {
+                let Some((surface, material, transform)) = generated_surface(shape, path, &field)? else {
+                    continue;
+                };
+                let (r, t, s) = transform.build(path, &format!("{field}.transform"))?;
+                let mtl = material_index(material, &format!("{field}.material"))?;
+                let kind = match shape {
+                    ShapeSpec::Torus { .. } => "torus",
+                    ShapeSpec::Blob { .. } => "blob",
+                    _ => "relief",
+                };
+                object_names.push(format!("{kind}{i}"));
+                let id = object_names.len() as u32 - 1;
+                let positions: Vec<Vec3A> =
+                    surface.positions.iter().map(|&p| (r * (s * p) + t).as_vec3().into()).collect();
+                let mirrored = s.x * s.y * s.z < 0.0;
+                for tri in &surface.triangles {
+                    let [a, b, c] = tri.map(|k| positions[k as usize]);
+                    let (e1, e2) = (b - a, c - a);
+                    if e1.cross(e2).length_squared() == 0.0 {
+                        continue; // the blob's poles
+                    }
+                    prims.push(Prim::Triangle { v0: a, e1, e2 });
+                    info.push(PrimInfo {
+                        material: mtl,
+                        object_id: id,
+                        reverse: mirrored,
+                        uv: [Vec2::ZERO, Vec2::X, Vec2::Y],
+                        normal: Vec3A::ZERO,
+                    });
+                }
+            }
+        }
+    }
+
+    let bvh = Bvh::build(&prims);
+    let info: Vec<PrimInfo> = bvh
+        .order
+        .iter()
+        .zip(&bvh.prims)
+        .map(|(&i, prim)| {
+            let mut inf = info[i as usize];
+            let n = prim.normal(prim.centroid());
+            inf.normal = if inf.reverse { -n } else { n };
+            inf
+        })
+        .collect();
+    let (bounds_center, bounds_radius) = bounding_sphere(&bvh.prims, t_world_cam.translation);
+
+    let mut lights = Vec::new();
+    let mut environment_map = None;
+    for (i, l) in file.lights.iter().enumerate() {
+        let field = format!("lights[{i}]");
+        lights.push(match l {
+            LightSpec::Point { position, intensity, power } => {
+                let intensity = match (intensity, power) {
+                    (Some(i), None) => non_negative3(path, &format!("{field}.intensity"), *i)?,
+                    (None, Some(p)) => {
+                        non_negative3(path, &format!("{field}.power"), *p)? / (4.0 * std::f32::consts::PI)
+                    }
+                    _ => {
+                        return Err(field_err(
+                            path,
+                            &field,
+                            "give exactly one of `intensity` (W/sr) or `power` (W)",
+                        ))
+                    }
+                };
+                Light::Point {
+                    position: finite3(path, &format!("{field}.position"), *position)?.as_vec3().into(),
+                    intensity,
+                }
+            }
+            LightSpec::Environment { radiance, map, scale } => {
+                if lights.iter().any(|l| matches!(l, Light::Environment { .. })) {
+                    return Err(field_err(path, &field, "a scene takes one environment light"));
+                }
+                match (radiance, map) {
+                    (Some(r), None) if scale.is_none() => {
+                        let radiance = non_negative3(path, &format!("{field}.radiance"), *r)?;
+                        Light::Environment { radiance, mean: radiance }
+                    }
+                    (None, Some(m)) => {
+                        let scale = scale.unwrap_or(1.0);
+                        if !(scale.is_finite() && scale >= 0.0) {
+                            return Err(field_err(
+                                path,
+                                &format!("{field}.scale"),
+                                format!("{scale}: expected a finite number ≥ 0"),
+                            ));
+                        }
+                        let file = dir.join(m);
+                        if !file.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")) {
+                            return Err(field_err(
+                                path,
+                                &format!("{field}.map"),
+                                format!("{}: an environment map must be a linear EXR file", file.display()),
+                            ));
+                        }
+                        let img = crate::image::io::read(&file)?;
+                        let env = super::super::envmap::EnvMap::new(&img).map_err(|e| {
+                            field_err(path, &format!("{field}.map"), format!("{}: {e}", file.display()))
+                        })?;
+                        let radiance = Vec3A::splat(scale as f32);
+                        let mean = radiance * env.mean_radiance;
+                        environment_map = Some(env);
+                        Light::Environment { radiance, mean }
+                    }
+                    _ => {
+                        return Err(field_err(
+                            path,
+                            &field,
+                            "an environment light takes `radiance` = [r, g, b], or `map` = \"file.exr\" with an optional `scale`",
+                        ))
+                    }
+                }
+            }
+            LightSpec::Spot { position, target, intensity, cutoff_deg, beam_width_deg } => {
+                let p = finite3(path, &format!("{field}.position"), *position)?;
+                let t = finite3(path, &format!("{field}.target"), *target)?;
+                if (t - p).length() == 0.0 {
+                    return Err(field_err(path, &format!("{field}.target"), "must differ from `position`"));
+                }
+                let cutoff = cutoff_deg.unwrap_or(20.0);
+                if !(cutoff > 0.0 && cutoff <= 90.0) {
+                    return Err(field_err(
+                        path,
+                        &format!("{field}.cutoff_deg"),
+                        format!("{cutoff}: expected (0, 90]"),
+                    ));
+                }
+                let beam = beam_width_deg.unwrap_or(0.75 * cutoff);
+                if !(beam > 0.0 && beam <= cutoff) {
+                    return Err(field_err(
+                        path,
+                        &format!("{field}.beam_width_deg"),
+                        format!("{beam}: expected (0, cutoff_deg = {cutoff}]"),
+                    ));
+                }
+                Light::Spot {
+                    position: p.as_vec3().into(),
+                    axis: (t - p).normalize().as_vec3().into(),
+                    intensity: non_negative3(path, &format!("{field}.intensity"), *intensity)?,
+                    cutoff: cutoff.to_radians() as f32,
+                    beam: beam.to_radians() as f32,
+                }
+            }
+            LightSpec::Directional { to_light, irradiance } => {
+                let d = finite3(path, &format!("{field}.to_light"), *to_light)?;
+                if d.length() == 0.0 {
+                    return Err(field_err(path, &format!("{field}.to_light"), "must not be the zero vector"));
+                }
+                Light::Directional {
+                    to_light: d.normalize().as_vec3().into(),
+                    irradiance: non_negative3(path, &format!("{field}.irradiance"), *irradiance)?,
+                }
+            }
+        });
+    }
+    for (k, (p, inf)) in bvh.prims.iter().zip(&info).enumerate() {
+        if let Some(e) = materials[inf.material as usize].emission {
+            if e.max_element() > 0.0 {
+                lights.push(Light::Area { prim: k as u32, radiance: e, area: p.area() });
+            }
+        }
+    }
+    let light_cdf = light_cdf(&lights, bounds_radius);
+    let light_of_prim = light_of_prim(&lights, bvh.prims.len());
+    let environment_light = lights.iter().position(|l| matches!(l, Light::Environment { .. }));
+
+    Ok(Scene {
+        camera,
+        t_world_cam,
+        lens,
+        render: file.render.clone(),
+        sensor: file.sensor.clone(),
+        materials,
+        bvh,
+        info,
+        lights,
+        light_cdf,
+        light_of_prim,
+        environment_light,
+        environment_map,
+        object_names,
+        bounds_center,
+        bounds_radius,
+    })
+}
+
+fn build_lens(c: &CameraSpec, path: &Path) -> Result<Option<ThinLens>, Error> {
+    let radius = c.aperture_radius.unwrap_or(0.0);
+    if !(radius.is_finite() && radius >= 0.0) {
+        return Err(field_err(
+            path,
+            "camera.aperture_radius",
+            format!("{radius}: expected a finite number ≥ 0"),
+        ));
+    }
+    match c.focus_distance {
+        _ if radius == 0.0 => Ok(None),
+        Some(f) if f.is_finite() && f > 0.0 => {
+            Ok(Some(ThinLens { aperture_radius: radius, focus_distance: f }))
+        }
+        Some(f) => {
+            Err(field_err(path, "camera.focus_distance", format!("{f}: expected a positive distance")))
+        }
+        None => Err(field_err(path, "camera", "a lens (aperture_radius > 0) needs `focus_distance`")),
+    }
+}
+
+fn build_camera(c: &CameraSpec, path: &Path) -> Result<(CameraModel, Pose), Error> {
+    let mut camera = match (c.fov_deg, c.fx, c.fy, c.cx, c.cy) {
+        (Some(fov), None, None, None, None) => {
+            if !(fov > 0.0 && fov < 180.0) {
+                return Err(field_err(path, "camera.fov_deg", format!("{fov} must be in (0, 180) degrees")));
+            }
+            CameraModel::from_fov(c.width, c.height, fov)
+        }
+        (None, Some(fx), Some(fy), Some(cx), Some(cy)) => CameraModel {
+            width: c.width,
+            height: c.height,
+            intrinsics: Intrinsics { fx, fy, cx, cy },
+            distortion: Distortion::default(),
+        },
+        _ => return Err(field_err(path, "camera", "give either `fov_deg` or all of `fx`, `fy`, `cx`, `cy`")),
+    };
+    if let Some(d) = c.distortion {
+        camera.distortion = Distortion::from_array(d);
+    }
+    camera.validate().map_err(|m| field_err(path, "camera", m))?;
+    if c.width as u64 * c.height as u64 > 1 << 28 {
+        return Err(field_err(
+            path,
+            "camera",
+            format!("{}×{} pixels is more than the 2^28 lumen renders", c.width, c.height),
+        ));
+    }
+    let pose = match (&c.look_at, &c.t_world_cam) {
+        (Some(l), None) => {
+            let o = finite3(path, "camera.look_at.origin", l.origin)?;
+            let t = finite3(path, "camera.look_at.target", l.target)?;
+            let u = finite3(path, "camera.look_at.up", l.up)?;
+            Pose::look_at(o, t, u).ok_or_else(|| {
+                field_err(
+                    path,
+                    "camera.look_at",
+                    "origin equals target, or up is parallel to the view direction",
+                )
+            })?
+        }
+        (None, Some(t)) => {
+            if t.scale.is_some() {
+                return Err(field_err(path, "camera.t_world_cam.scale", "a camera pose is rigid: no scale"));
+            }
+            let (r, tr, _) = t.build(path, "camera.t_world_cam")?;
+            Pose { rotation: r, translation: tr }
+        }
+        _ => return Err(field_err(path, "camera", "give exactly one of `look_at` or `t_world_cam`")),
+    };
+    Ok((camera, pose))
+}
+
+/// The reflectance model a material names, each field checked.
+fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error> {
+    let blinn_phong = m.specular.is_some() || m.exponent.is_some();
+    let rough = m.distribution.is_some() || m.alpha.is_some();
+    let conductor = rough || m.eta.is_some() || m.k.is_some();
+    let foreign = |kind: &str, other: &str| {
+        field_err(path, field, format!("a {kind} material takes no {other} fields (check `type`)"))
+    };
+    if m.ior.is_some() && m.kind != "dielectric" {
+        return Err(field_err(path, &format!("{field}.ior"), "only a dielectric material takes `ior`"));
+    }
+    let complex_index = |eta: [f64; 3], k: [f64; 3]| {
+        let eta = non_negative3(path, &format!("{field}.eta"), eta)?;
+        let k = non_negative3(path, &format!("{field}.k"), k)?;
+        if eta.min_element() <= 0.0 {
+            return Err(field_err(path, &format!("{field}.eta"), "must be positive"));
+        }
+        Ok((eta, k))
+    };
+    match m.kind.as_str() {
+        "lambertian" if blinn_phong => Err(field_err(
+            path,
+            field,
+            "a lambertian material takes no `specular` or `exponent` (use type = \"blinn-phong\")",
+        )),
+        "lambertian" if conductor => Err(foreign("lambertian", "conductor")),
+        "lambertian" => Ok(Bsdf::Lambertian),
+        "blinn-phong" if conductor => Err(foreign("blinn-phong", "conductor")),
+        "blinn-phong" => {
+            let (Some(ks), Some(e)) = (m.specular, m.exponent) else {
+                return Err(field_err(
+                    path,
+                    field,
+                    "a blinn-phong material needs `specular` = [r, g, b] and `exponent`",
+                ));
+            };
+            let specular = non_negative3(path, &format!("{field}.specular"), ks)?;
+            if !(e.is_finite() && e > 0.0 && e <= 1e5) {
+                return Err(field_err(
+                    path,
+                    &format!("{field}.exponent"),
+                    format!("{e}: expected a number in (0, 100000]"),
+                ));
+            }
+            Ok(Bsdf::BlinnPhong { specular, exponent: e as f32 })
+        }
+        "conductor" if blinn_phong => Err(foreign("conductor", "blinn-phong")),
+        "conductor" => {
+            let distribution = match m.distribution.as_deref().unwrap_or("ggx") {
+                "ggx" => microfacet::Distribution::Ggx,
+                "beckmann" => microfacet::Distribution::Beckmann,
+                other => {
+                    return Err(field_err(
+                        path,
+                        &format!("{field}.distribution"),
+                        format!("'{other}': expected \"ggx\" or \"beckmann\""),
+                    ))
+                }
+            };
+            // A textured α is looked up per hit (Material::roughness); the model keeps 0.1.
+            let alpha = match m.alpha {
+                Some(RoughnessSpec::Constant(a)) => a,
+                _ => 0.1,
+            };
+            if !(0.001..=1.0).contains(&alpha) {
+                return Err(field_err(path, &format!("{field}.alpha"), format!("{alpha}: expected [0.001, 1]")));
+            }
+            let (eta, k) = complex_index(
+                m.eta.unwrap_or([0.143, 0.374, 1.442]),
+                m.k.unwrap_or([3.983, 2.385, 1.603]),
+            )?;
+            Ok(Bsdf::Conductor { distribution, alpha: alpha as f32, eta, k })
+        }
+        "mirror" if blinn_phong => Err(foreign("mirror", "blinn-phong")),
+        "mirror" if rough => Err(field_err(
+            path,
+            field,
+            "a mirror is smooth: it takes no `alpha` or `distribution` (use type = \"conductor\")",
+        )),
+        "mirror" => match (m.eta, m.k) {
+            (None, None) => Ok(Bsdf::Mirror { fresnel: None }),
+            (Some(eta), Some(k)) => Ok(Bsdf::Mirror { fresnel: Some(complex_index(eta, k)?) }),
+            _ => Err(field_err(path, field, "a mirror takes both `eta` and `k` or neither (a perfect mirror)")),
+        },
+        "dielectric" if blinn_phong || conductor => Err(foreign("dielectric", "blinn-phong or conductor")),
+        "dielectric" => {
+            let ior = m.ior.unwrap_or(1.5046 / 1.000277);
+            if !(0.25..=4.0).contains(&ior) {
+                return Err(field_err(
+                    path,
+                    &format!("{field}.ior"),
+                    format!("{ior}: expected a relative index in [0.25, 4]"),
+                ));
+            }
+            Ok(Bsdf::Dielectric { eta: ior as f32 })
+        }
+        other => Err(field_err(
+            path,
+            &format!("{field}.type"),
+            format!(
+                "'{other}' is not a known material (expected \"lambertian\", \"blinn-phong\", \"conductor\", \"mirror\" or \"dielectric\")"
+            ),
+        )),
+    }
+}
+
+/// The generated surface a `torus`, `blob` or `relief` shape describes, with its material and
+/// transform; `None` for other shapes.
+fn generated_surface<'a>(
+    shape: &'a ShapeSpec,
+    path: &Path,
+    field: &str,
+) -> Result<Option<(surfaces::Surface, &'a str, &'a TransformSpec)>, Error> {
+    let positive = |name: &str, v: f64| {
+        if v.is_finite() && v > 0.0 {
+            Ok(())
+        } else {
+            Err(field_err(path, &format!("{field}.{name}"), format!("{v} must be positive")))
+        }
+    };
+    let counts = |n: &[u32]| {
+        if n.iter().all(|&k| (3..=4096).contains(&k)) {
+            Ok(())
+        } else {
+            Err(field_err(path, &format!("{field}.segments"), format!("{n:?}: expected 3 to 4096")))
+        }
+    };
+    Ok(Some(match shape {
+        ShapeSpec::Torus { radius, tube, segments, material, transform } => {
+            positive("radius", *radius)?;
+            positive("tube", *tube)?;
+            counts(segments)?;
+            (surfaces::torus(*radius, *tube, *segments), material, transform)
+        }
+        ShapeSpec::Blob { radius, amplitude, lobes, segments, material, transform } => {
+            positive("radius", *radius)?;
+            positive("lobes", *lobes)?;
+            if !(0.0..1.0).contains(amplitude) {
+                return Err(field_err(
+                    path,
+                    &format!("{field}.amplitude"),
+                    format!("{amplitude}: expected [0, 1)"),
+                ));
+            }
+            counts(segments)?;
+            (surfaces::blob(*radius, *amplitude, *lobes, *segments), material, transform)
+        }
+        ShapeSpec::Relief { size, height, segments, material, transform } => {
+            positive("size", *size)?;
+            positive("height", *height)?;
+            counts(&[*segments])?;
+            (surfaces::relief(*size, *height, *segments), material, transform)
+        }
+        _ => return Ok(None),
+    }))
+}

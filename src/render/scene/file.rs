@@ -1,0 +1,259 @@
+//! The scene file's schema: what a `[camera]`, `[render]`, `[[materials]]`, `[[shapes]]` and
+//! `[[lights]]` entry may hold (every struct refuses unknown keys). `build` turns it into a
+//! `Scene`, checking every value.
+
+use super::super::texture::{RoughnessSpec, TextureSpec};
+use serde::Deserialize;
+
+// ---------------------------------------------------------------------------------------------
+// File format
+// ---------------------------------------------------------------------------------------------
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneFile {
+    pub camera: CameraSpec,
+    #[serde(default)]
+    pub render: RenderSpec,
+    pub sensor: Option<super::super::sensor::Sensor>,
+    #[serde(default)]
+    pub materials: Vec<MaterialSpec>,
+    #[serde(default)]
+    pub shapes: Vec<ShapeSpec>,
+    #[serde(default)]
+    pub lights: Vec<LightSpec>,
+}
+
+/// Camera: size, then either `fov_deg` (on the shorter side, centred principal point) or
+/// `fx, fy, cx, cy` (OpenCV pixels), optional `distortion = [k1, k2, p1, p2, k3]`, and a pose:
+/// `look_at = { origin, target, up }` or `t_world_cam = { rotation | rvec, translation }`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraSpec {
+    pub width: u32,
+    pub height: u32,
+    pub fov_deg: Option<f64>,
+    pub fx: Option<f64>,
+    pub fy: Option<f64>,
+    pub cx: Option<f64>,
+    pub cy: Option<f64>,
+    pub distortion: Option<[f64; 5]>,
+    pub look_at: Option<LookAt>,
+    pub t_world_cam: Option<TransformSpec>,
+    /// Thin lens (depth of field, as Mitsuba's `thinlens`): radius of the aperture in scene
+    /// units (default 0, a pinhole) and the distance along the optical axis (camera z) of
+    /// the plane in focus, which a lens needs.
+    pub aperture_radius: Option<f64>,
+    pub focus_distance: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LookAt {
+    pub origin: [f64; 3],
+    pub target: [f64; 3],
+    pub up: [f64; 3],
+}
+
+/// A rigid (plus optional scale, for shapes) transform: p' = R·(s ⊙ p) + t. `rotation` is a
+/// 3×3 matrix given as rows; `rvec` a Rodrigues vector (radians), as OpenCV's.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TransformSpec {
+    pub rotation: Option<[[f64; 3]; 3]>,
+    pub rvec: Option<[f64; 3]>,
+    #[serde(default)]
+    pub translation: [f64; 3],
+    pub scale: Option<Scale>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+pub enum Scale {
+    Uniform(f64),
+    PerAxis([f64; 3]),
+}
+
+/// Render settings a scene may carry; the CLI and pipeline files override them.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RenderSpec {
+    /// Samples per pixel (default 16).
+    #[serde(default = "default_spp")]
+    pub spp: u32,
+    /// Longest path in segments, Mitsuba's convention: 1 shows only emitters seen directly,
+    /// 2 adds direct lighting, 8 allows 7 bounces (default 8).
+    #[serde(default = "default_depth")]
+    pub max_depth: u32,
+    /// Seed of every random stream (default 1).
+    #[serde(default = "default_seed")]
+    pub seed: u64,
+    /// `"independent"` (default) or `"sobol"` (padded Owen-scrambled Sobol, see
+    /// `render::sampler`; converges faster on pixel edges and soft shadows).
+    #[serde(default)]
+    pub sampler: super::super::sampler::SamplerKind,
+}
+
+fn default_spp() -> u32 {
+    16
+}
+fn default_depth() -> u32 {
+    8
+}
+fn default_seed() -> u64 {
+    1
+}
+
+impl Default for RenderSpec {
+    fn default() -> Self {
+        RenderSpec {
+            spp: default_spp(),
+            max_depth: default_depth(),
+            seed: default_seed(),
+            sampler: Default::default(),
+        }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialSpec {
+    pub name: String,
+    /// `"lambertian"`, `"blinn-phong"` (f = kd/π + ks·(e + 8)/(8π)·cosᵉθh, see
+    /// `render::bsdf`; kd is `albedo`), `"conductor"` (a rough metal, `render::microfacet`;
+    /// `albedo` tints it, as Mitsuba's `specular_reflectance`), `"mirror"` (a smooth
+    /// conductor, Mitsuba's `conductor`: a perfect mirror tinted by `albedo`, or with the
+    /// Fresnel reflectance of `eta` and `k` when both are given) or `"dielectric"` (smooth
+    /// glass or water, Mitsuba's `dielectric`; `albedo` tints reflection and transmission,
+    /// [1, 1, 1] for clear glass; see `render::specular`).
+    #[serde(rename = "type")]
+    pub kind: String,
+    pub albedo: TextureSpec,
+    /// Blinn-Phong only: specular colour ks (kd + ks ≤ 1 conserves energy).
+    pub specular: Option<[f64; 3]>,
+    /// Blinn-Phong only: the exponent e (shininess), > 0.
+    pub exponent: Option<f64>,
+    /// Conductor only: `"ggx"` (default) or `"beckmann"`.
+    pub distribution: Option<String>,
+    /// Conductor only: roughness α in [0.001, 1] (Mitsuba's `alpha`; default 0.1), a number
+    /// or a texture (`render::texture::Texture::build_roughness`).
+    pub alpha: Option<RoughnessSpec>,
+    /// Conductor and mirror only: the real and imaginary parts of the complex index of
+    /// refraction per channel (conductor default gold's at 650, 550, 450 nm:
+    /// η = [0.143, 0.374, 1.442], k = [3.983, 2.385, 1.603]; mirror default none: F = 1).
+    pub eta: Option<[f64; 3]>,
+    pub k: Option<[f64; 3]>,
+    /// Dielectric only: index of refraction of the inside relative to the outside (the side
+    /// the surface normal points to), in [1/4, 4]; default 1.5046 / 1.000277 (Mitsuba's BK7
+    /// glass in air).
+    pub ior: Option<f64>,
+    /// Emitted radiance (linear RGB), one-sided along the surface normal: makes every shape
+    /// with this material an area light.
+    pub emission: Option<[f64; 3]>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
+pub enum ShapeSpec {
+    /// An OBJ file. `material` is used for faces whose `usemtl` names no scene material;
+    /// `object_materials` maps OBJ object names (`o`) to scene materials, overriding both.
+    Mesh {
+        file: String,
+        material: Option<String>,
+        #[serde(default)]
+        object_materials: std::collections::BTreeMap<String, String>,
+        #[serde(default)]
+        transform: TransformSpec,
+        #[serde(default)]
+        reverse_orientation: bool,
+    },
+    Sphere {
+        center: [f64; 3],
+        radius: f64,
+        material: String,
+        #[serde(default)]
+        reverse_orientation: bool,
+    },
+    /// A torus round its local z axis (`render::surfaces`): `radius` to the tube's centre
+    /// line, `tube` the tube's radius, `segments` [round the axis, round the tube]
+    /// (default [256, 128]).
+    Torus {
+        radius: f64,
+        tube: f64,
+        #[serde(default = "torus_segments")]
+        segments: [u32; 2],
+        material: String,
+        #[serde(default)]
+        transform: TransformSpec,
+    },
+    /// A sphere displaced along its normal, r = radius·(1 + amplitude·sin(k·x)·sin(k·y)·sin(k·z))
+    /// on unit directions (`render::surfaces`); `lobes` is k; `segments` [θ, φ] (default
+    /// [128, 256]).
+    Blob {
+        radius: f64,
+        amplitude: f64,
+        lobes: f64,
+        #[serde(default = "blob_segments")]
+        segments: [u32; 2],
+        material: String,
+        #[serde(default)]
+        transform: TransformSpec,
+    },
+    /// A height field of bumps and dimples over the square of side `size` in the local z = 0
+    /// plane, the tallest `height` high (`render::surfaces`); `segments` cells per side
+    /// (default 256).
+    Relief {
+        size: f64,
+        height: f64,
+        #[serde(default = "relief_segments")]
+        segments: u32,
+        material: String,
+        #[serde(default)]
+        transform: TransformSpec,
+    },
+    /// A parallelogram `corner + s·edge_u + t·edge_v`, s, t ∈ [0, 1] (the texture coordinates),
+    /// facing edge_u × edge_v.
+    Quad {
+        corner: [f64; 3],
+        edge_u: [f64; 3],
+        edge_v: [f64; 3],
+        material: String,
+        #[serde(default)]
+        reverse_orientation: bool,
+    },
+}
+
+fn torus_segments() -> [u32; 2] {
+    [256, 128]
+}
+fn blob_segments() -> [u32; 2] {
+    [128, 256]
+}
+fn relief_segments() -> u32 {
+    256
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
+pub enum LightSpec {
+    /// Isotropic point light: `intensity` (W/sr) or `power` (W, = 4π·intensity).
+    Point { position: [f64; 3], intensity: Option<[f64; 3]>, power: Option<[f64; 3]> },
+    /// Distant light from direction `to_light` (towards the light), `irradiance` in W/m² on a
+    /// surface facing it.
+    Directional { to_light: [f64; 3], irradiance: [f64; 3] },
+    /// Light from every direction, what a ray leaving the scene sees: uniform `radiance` in
+    /// W/(m²·sr), as Mitsuba's `constant`, or a latitude-longitude `map` (a linear RGB EXR
+    /// file, relative to the scene file; y up, see `render::envmap`) times `scale` (default 1),
+    /// as Mitsuba's `envmap`.
+    Environment { radiance: Option<[f64; 3]>, map: Option<String>, scale: Option<f64> },
+    /// Spot light at `position` aimed at `target`, as Mitsuba's `spot`: `intensity` (W/sr) on
+    /// the axis and out to `beam_width_deg`, falling linearly in angle to 0 at `cutoff_deg`
+    /// (defaults 20° and ¾ of the cutoff).
+    Spot {
+        position: [f64; 3],
+        target: [f64; 3],
+        intensity: [f64; 3],
+        cutoff_deg: Option<f64>,
+        beam_width_deg: Option<f64>,
+    },
+}
