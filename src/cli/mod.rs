@@ -1,4 +1,9 @@
-//! Command-line parsing and the commands. anyhow lives only here.
+//! Command-line parsing and the commands (`bench` holds the benchmarks). anyhow lives only
+//! here.
+
+mod bench;
+
+use bench::{bench_calibrate, bench_convergence, bench_render, BenchRender};
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
@@ -371,110 +376,6 @@ fn render_cmd(
     Ok(())
 }
 
-/// `lumen bench render`'s options.
-struct BenchRender {
-    spp: u32,
-    max_depth: u32,
-    threads: Option<usize>,
-    repeat: u32,
-    sampler: Option<String>,
-    one_path: bool,
-}
-
-fn bench_render(scene_path: &Path, o: &BenchRender) -> Result<()> {
-    let scene = render::load(scene_path)?;
-    let mut settings = render::Settings::from_scene(&scene);
-    settings.spp = o.spp.max(1);
-    settings.max_depth = o.max_depth.max(1);
-    settings.threads = o.threads;
-    settings.lanes = !o.one_path;
-    settings.sampler = match o.sampler.as_deref() {
-        None => settings.sampler,
-        Some("independent") => render::sampler::SamplerKind::Independent,
-        Some("sobol") => render::sampler::SamplerKind::Sobol,
-        Some(other) => bail!("--sampler {other}: expected independent or sobol"),
-    };
-    let paths = scene.camera.width as f64 * scene.camera.height as f64 * settings.spp as f64;
-    let mut best = f64::INFINITY;
-    for _ in 0..o.repeat.max(1) {
-        let t = std::time::Instant::now();
-        let film = render::render(&scene, &settings);
-        best = best.min(t.elapsed().as_secs_f64());
-        std::hint::black_box(film);
-    }
-    let lanes =
-        if settings.lanes && render::lanes::supported(&scene, &settings) { "8 lanes" } else { "one path" };
-    println!(
-        "lumen {}: {}x{} spp {} depth {} {:?} sampler, {lanes}, threads {}: {best:.3} s, {:.3} M paths/s",
-        scene_path.display(),
-        scene.camera.width,
-        scene.camera.height,
-        settings.spp,
-        settings.max_depth,
-        settings.sampler,
-        o.threads.map_or_else(|| rayon::current_num_threads().to_string(), |t| t.to_string()),
-        paths / best / 1e6
-    );
-    Ok(())
-}
-
-fn bench_convergence(scene_path: &Path, reference: &Path, spp: &str, threads: Option<usize>) -> Result<()> {
-    let counts: Vec<u32> = spp
-        .split(',')
-        .map(|t| t.trim().parse::<u32>().ok().filter(|&n| n > 0))
-        .collect::<Option<_>>()
-        .with_context(|| format!("--spp {spp}: expected positive sample counts separated by commas"))?;
-    let scene = render::load(scene_path)?;
-    let truth = lumen::image::io::read_exr(reference)?;
-    if (truth.width, truth.height) != (scene.camera.width, scene.camera.height) || truth.channels != 3 {
-        bail!(
-            "{}: {}×{}×{}, but the scene renders {}×{}×3",
-            reference.display(),
-            truth.width,
-            truth.height,
-            truth.channels,
-            scene.camera.width,
-            scene.camera.height
-        );
-    }
-    // The reference's own noise sets a floor under every RMSE: say how high, when its variance
-    // image (NAME_variance.exr beside it) is there.
-    let var_path = reference.with_file_name(format!(
-        "{}_variance.exr",
-        reference.file_stem().and_then(|s| s.to_str()).unwrap_or("reference")
-    ));
-    if let Ok(var) = lumen::image::io::read_exr(&var_path) {
-        let mean_var = var.data.iter().map(|&v| v as f64).sum::<f64>() / var.data.len().max(1) as f64;
-        println!("reference noise (from {}): RMS {:.5}\n", var_path.display(), mean_var.sqrt());
-    }
-    println!("| spp | independent RMSE | time (s) | Sobol RMSE | time (s) | independent / Sobol |");
-    println!("|---:|---:|---:|---:|---:|---:|");
-    for &n in &counts {
-        let mut row = Vec::new();
-        for kind in [render::sampler::SamplerKind::Independent, render::sampler::SamplerKind::Sobol] {
-            let mut settings = render::Settings::from_scene(&scene);
-            settings.spp = n;
-            settings.sampler = kind;
-            settings.threads = threads;
-            let t = std::time::Instant::now();
-            let film = render::render(&scene, &settings);
-            let secs = t.elapsed().as_secs_f64();
-            let se: f64 =
-                film.mean.data.iter().zip(&truth.data).map(|(a, b)| (*a as f64 - *b as f64).powi(2)).sum();
-            row.push(((se / truth.data.len() as f64).sqrt(), secs));
-        }
-        println!(
-            "| {n} | {:.5} | {:.2} | {:.5} | {:.2} | {:.2} |",
-            row[0].0,
-            row[0].1,
-            row[1].0,
-            row[1].1,
-            row[0].0 / row[1].0
-        );
-    }
-    Ok(())
-}
-
 /// Parses `COLSxROWS`.
 fn parse_board(text: &str) -> Result<lumen::calib::detect::BoardSize> {
     let parts: Vec<&str> = text.split(['x', 'X', '×']).collect();
@@ -592,80 +493,6 @@ fn write_overlays(
         let file = if used.insert(stem.clone()) { format!("{stem}.png") } else { format!("{stem}-{k}.png") };
         let values: Vec<u16> = canvas.rgb.iter().map(|&v| v as u16).collect();
         lumen::image::io::write_png_raw(&dir.join(file), canvas.width, canvas.height, 3, &values, 8)?;
-    }
-    Ok(())
-}
-
-/// Best of `repeat` runs of `f`, in seconds, and its last result.
-fn best_of<T>(repeat: u32, mut f: impl FnMut() -> Result<T>) -> Result<(f64, T)> {
-    let mut best = f64::INFINITY;
-    let mut out = None;
-    for _ in 0..repeat.max(1) {
-        let t = std::time::Instant::now();
-        let r = f()?;
-        best = best.min(t.elapsed().as_secs_f64());
-        out = Some(r);
-    }
-    Ok((best, out.expect("at least one run")))
-}
-
-fn bench_calibrate(patterns: &[String], board: &str, repeat: u32) -> Result<()> {
-    let board = parse_board(board)?;
-    let files = expand_images(patterns)?;
-    let mut images = Vec::new();
-    for f in &files {
-        let img = lumen::image::io::read(f)?;
-        images.push((f.display().to_string(), lumen::image::filter::Grey::from_image(&img)));
-    }
-    let size = images.first().map_or((0, 0), |(_, g)| (g.width as u32, g.height as u32));
-    let config = lumen::calib::Config {
-        board,
-        square: 1.0,
-        flags: Default::default(),
-        detect: Default::default(),
-        max_iterations: 100,
-    };
-    let (detect_s, (views, _)) = best_of(repeat, || Ok(lumen::calib::detect_views(&images, &config)?))?;
-    let (calib_s, cal) = best_of(repeat, || Ok(lumen::calib::calibrate(&views, size, &config)?))?;
-    println!("| library | views | detect (ms) | calibrate (ms) | total (ms) | RMS (px) |");
-    println!("|---|---:|---:|---:|---:|---:|");
-    println!(
-        "| lumen {} ({} threads) | {} | {:.1} | {:.1} | {:.1} | {:.4} |",
-        env!("CARGO_PKG_VERSION"),
-        rayon::current_num_threads(),
-        views.len(),
-        detect_s * 1e3,
-        calib_s * 1e3,
-        (detect_s + calib_s) * 1e3,
-        cal.rms_px
-    );
-    #[cfg(feature = "opencv")]
-    {
-        use lumen::cv;
-        let mats: Vec<_> =
-            files.iter().map(|f| cv::read_grey(f)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
-        let (detect_s, found) = best_of(repeat, || {
-            let mut found = Vec::new();
-            for m in &mats {
-                if let Some(c) = cv::find_corners(m, board.cols, board.rows).map_err(anyhow::Error::msg)? {
-                    found.push(c);
-                }
-            }
-            Ok(found)
-        })?;
-        let pts = lumen::calib::board_points(board, 1.0);
-        let (calib_s, cvc) = best_of(repeat, || {
-            cv::calibrate(&pts, &found, size, 30, f64::EPSILON).map_err(anyhow::Error::msg)
-        })?;
-        println!(
-            "| OpenCV {} | {} | {:.1} | {:.1} | {:.1} | {:.4} |",
-            opencv::core::CV_VERSION,
-            found.len(),
-            detect_s * 1e3,
-            calib_s * 1e3,
-            (detect_s + calib_s) * 1e3,
-            cvc.rms_px
-        );
     }
     Ok(())
 }
