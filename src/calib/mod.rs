@@ -293,7 +293,7 @@ pub fn calibrate(
             .zip(&per_view)
             .map(|((((name, _), (r, t)), sd), rms)| ViewResult {
                 name: name.clone(),
-                rvec: rvec_from_matrix(r).to_array(),
+                rvec: crate::math::Pose::rvec_from_rotation(r).to_array(),
                 tvec: t.to_array(),
                 rms_px: *rms,
                 std_rvec: [sd[0], sd[1], sd[2]],
@@ -364,17 +364,5 @@ fn linear_radial(
         (k1, k2)
     } else {
         (0.0, 0.0)
-    }
-}
-
-/// Rodrigues vector of a rotation matrix (OpenCV's `Rodrigues`), stable near 0 and π.
-pub fn rvec_from_matrix(r: &glam::DMat3) -> DVec3 {
-    let q = glam::DQuat::from_mat3(r).normalize();
-    let q = if q.w < 0.0 { -q } else { q };
-    let (axis, angle) = q.to_axis_angle();
-    if angle.abs() < 1e-300 {
-        DVec3::ZERO
-    } else {
-        axis * angle
     }
 }

@@ -54,6 +54,22 @@ impl Pose {
         DMat3::from_axis_angle(rvec / angle, angle)
     }
 
+    /// Rodrigues vector of a rotation matrix (OpenCV's `Rodrigues`), stable near 0 and π: the
+    /// inverse of `rotation_from_rvec`.
+    pub fn rvec_from_rotation(r: &DMat3) -> DVec3 {
+        let q = glam::DQuat::from_mat3(r).normalize();
+        let q = if q.w < 0.0 { -q } else { q };
+        // angle = 2·atan2(|v|, w) along v: atan2 keeps full precision at both ends, where
+        // acos(w) loses half the digits of a tiny angle.
+        let v = DVec3::new(q.x, q.y, q.z);
+        let s = v.length();
+        if s < 1e-300 {
+            DVec3::ZERO
+        } else {
+            v * (2.0 * s.atan2(q.w) / s)
+        }
+    }
+
     /// Largest deviation of RᵀR from the identity and det(R) from 1.
     pub fn orthonormality_error(r: &DMat3) -> f64 {
         let d = r.transpose() * *r - DMat3::IDENTITY;
@@ -78,6 +94,20 @@ mod tests {
         assert!(q.translation.length() < 1e-12);
         let x = DVec3::new(0.2, 0.7, -1.1);
         assert!((p.inverse().transform_point(p.transform_point(x)) - x).length() < 1e-12);
+    }
+
+    #[test]
+    fn rvec_round_trip_near_zero_and_pi() {
+        for r in [
+            DVec3::ZERO,
+            DVec3::new(1e-9, 0.0, -2e-9),
+            DVec3::new(0.3, -0.2, 0.9),
+            DVec3::new(0.0, 0.0, std::f64::consts::PI - 1e-7),
+            DVec3::new(1.0, 1.0, 0.0).normalize() * (std::f64::consts::PI - 1e-6),
+        ] {
+            let back = Pose::rvec_from_rotation(&Pose::rotation_from_rvec(r));
+            assert!((back - r).length() < 1e-9, "{r} -> {back}");
+        }
     }
 
     #[test]
