@@ -76,6 +76,7 @@ fn run_cases(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Repo
     let cache = cache::Cache::new(opts.cache_dir.clone());
     let bars = opts.progress && std::io::stderr().is_terminal();
     let started = std::time::Instant::now();
+    let start_time = humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
     let mut stages = Vec::new();
     let mut files = Vec::new();
     let n = file.cases.len();
@@ -126,6 +127,7 @@ fn run_cases(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Repo
     let mut report =
         Report::new(pipeline_name(file, path), file.seed, stages, started.elapsed().as_secs_f64());
     report.files = files;
+    report.started = start_time;
     report.warnings = cache.warnings();
     Ok(report)
 }

@@ -87,6 +87,13 @@ pub struct Report {
     pub pipeline: String,
     pub seed: u64,
     pub lumen_version: String,
+    /// The git commit lumen was built from (`+changes` when the checkout had uncommitted
+    /// changes), or `unknown`.
+    pub git_commit: String,
+    /// When the run started (UTC, RFC 3339).
+    pub started: String,
+    /// The machine: processor model and logical cores.
+    pub machine: String,
     pub threads: usize,
     /// Wall time of the whole run, in seconds.
     pub total_s: f64,
@@ -107,6 +114,9 @@ impl Report {
             pipeline,
             seed,
             lumen_version: env!("CARGO_PKG_VERSION").into(),
+            git_commit: env!("LUMEN_GIT_COMMIT").into(),
+            started: String::new(),
+            machine: machine(),
             threads: rayon::current_num_threads(),
             total_s,
             stages,
@@ -160,10 +170,13 @@ impl Report {
         let _ = writeln!(s, "# lumen report: {}\n", self.pipeline);
         let _ = writeln!(
             s,
-            "seed {}, lumen {}, {} threads, {:.1} s in all. Result: **{}**\n",
-            self.seed,
+            "Started {}; lumen {} (commit {}); {}; {} threads; seed {}; {:.1} s in all. Result: **{}**\n",
+            self.started,
             self.lumen_version,
+            self.git_commit,
+            self.machine,
             self.threads,
+            self.seed,
             self.total_s,
             if self.passed {
                 "every case ended as declared, every metric met its bound or a declared miss"
@@ -315,6 +328,21 @@ impl Report {
         }
         Ok(())
     }
+}
+
+/// The processor model (from /proc/cpuinfo where there is one) and the logical cores.
+fn machine() -> String {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let model = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|t| {
+            t.lines()
+                .find(|l| l.starts_with("model name"))
+                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())
+        })
+        .filter(|m| !m.is_empty())
+        .unwrap_or_else(|| std::env::consts::ARCH.to_string());
+    format!("{model}, {cores} logical cores")
 }
 
 /// A case name as a file name: letters, digits, `-`, `_`, `.` kept, the rest `_`.
