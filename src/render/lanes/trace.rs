@@ -1,0 +1,284 @@
+//! The path loop over eight lanes (`lanes` docs), and whether the processor has the lanes.
+
+use super::samplers::*;
+use super::vector::*;
+use super::*;
+use std::arch::x86_64::*;
+
+pub fn available() -> bool {
+    is_x86_feature_detected!("avx2")
+}
+
+/// The state of the eight lanes' paths, structure of arrays.
+pub(super) struct Lanes {
+    pub(super) origin: [[f32; 8]; 3],
+    pub(super) dir: [[f32; 8]; 3],
+    pub(super) beta: [[f32; 8]; 3],
+    pub(super) l: [[f32; 8]; 3],
+    pub(super) depth: [u32; 8],
+    /// Index of the lane's sample in the group's radiance buffer, and its pixel's column.
+    pub(super) slot: [usize; 8],
+    pub(super) x: [u32; 8],
+    pub(super) samplers: Samplers,
+    pub(super) active: u32,
+}
+
+/// What a vertex's shading needs from the hit and the sampler, per lane.
+#[derive(Default)]
+pub(super) struct Vertex {
+    pub(super) p: [[f32; 8]; 3],
+    pub(super) n: [[f32; 8]; 3],
+    pub(super) albedo: [[f32; 8]; 3],
+}
+
+#[inline(always)]
+pub(super) fn put(a: &mut [[f32; 8]; 3], lane: usize, v: Vec3A) {
+    a[0][lane] = v.x;
+    a[1][lane] = v.y;
+    a[2][lane] = v.z;
+}
+
+#[inline(always)]
+pub(super) fn get(a: &[[f32; 8]; 3], lane: usize) -> Vec3A {
+    Vec3A::new(a[0][lane], a[1][lane], a[2][lane])
+}
+
+/// Traces every sample of the pixels gx0..gx1 of row y into `radiance` (pixel-major,
+/// sample order within a pixel).
+///
+/// # Safety
+/// The processor must have AVX2 (`available()`).
+#[target_feature(enable = "avx2")]
+pub unsafe fn trace_group(
+    scene: &Scene,
+    lights: &LightTable,
+    settings: &Settings,
+    y: u32,
+    gx0: u32,
+    gx1: u32,
+    radiance: &mut [Vec3A],
+) {
+    let spp = settings.spp;
+    let max_depth = settings.max_depth;
+    let jobs = (gx1 - gx0) as usize * spp as usize;
+    let mut next_job = 0;
+    let mut lanes = Lanes {
+        origin: [[0.0; 8]; 3],
+        dir: [[0.0; 8]; 3],
+        beta: [[0.0; 8]; 3],
+        l: [[0.0; 8]; 3],
+        depth: [0; 8],
+        slot: [0; 8],
+        x: [0; 8],
+        samplers: Samplers::new(settings, y, gx0, gx1, scene.camera.width),
+        active: 0,
+    };
+    let mut v = Vertex::default();
+    loop {
+        // Empty lanes take the next samples (`integrator::camera_path`, with the pixel
+        // position and a thin lens's sample drawn for the new lanes together).
+        let mut fresh = 0u32;
+        let mut empty = !lanes.active & 0xff;
+        while empty != 0 && next_job < jobs {
+            let lane = empty.trailing_zeros() as usize;
+            empty &= empty - 1;
+            let slot = next_job;
+            next_job += 1;
+            let (x, k) = (gx0 + (slot / spp as usize) as u32, (slot % spp as usize) as u32);
+            let pixel = y as u64 * scene.camera.width as u64 + x as u64;
+            let s = Sampler::with_kind(settings.sampler, settings.seed, pixel, k as u64);
+            lanes.samplers.set(lane, &s, x - gx0);
+            lanes.slot[lane] = slot;
+            lanes.x[lane] = x;
+            fresh |= 1 << lane;
+        }
+        if lanes.active == 0 && fresh == 0 {
+            return;
+        }
+        if fresh != 0 {
+            let mut jitter = ([0.0f32; 8], [0.0f32; 8]);
+            let (jx, jy) = lanes.samplers.next(fresh, true);
+            jx.store(&mut jitter.0);
+            jy.store(&mut jitter.1);
+            let mut dirs = [glam::DVec3::ZERO; 8];
+            let (mut seen, mut lens) = (0u32, 0u32);
+            let mut mask = fresh;
+            while mask != 0 {
+                let lane = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                // Beyond the fold of the distortion the sample is black, as the buffer is.
+                if let Some(d) = camera_direction(scene, lanes.x[lane], y, (jitter.0[lane], jitter.1[lane])) {
+                    dirs[lane] = d;
+                    seen |= 1 << lane;
+                    lens |= (needs_lens_sample(scene, d) as u32) << lane;
+                }
+            }
+            let mut lens_u = ([0.0f32; 8], [0.0f32; 8]);
+            if lens != 0 {
+                let (lx, ly) = lanes.samplers.next(lens, true);
+                lx.store(&mut lens_u.0);
+                ly.store(&mut lens_u.1);
+            }
+            let mut mask = seen;
+            while mask != 0 {
+                let lane = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                let u = (lens & (1 << lane) != 0).then_some((lens_u.0[lane], lens_u.1[lane]));
+                let ray = camera_ray(scene, dirs[lane], u);
+                lanes.depth[lane] = 1;
+                put(&mut lanes.origin, lane, ray.origin);
+                put(&mut lanes.dir, lane, ray.dir);
+                put(&mut lanes.beta, lane, Vec3A::ONE);
+                put(&mut lanes.l, lane, Vec3A::ZERO);
+            }
+            lanes.active |= seen;
+            if lanes.active == 0 {
+                continue;
+            }
+        }
+        // Hits, emission seen from the camera, and what shading needs, lane by lane.
+        let mut shade = 0u32;
+        let mut mask = lanes.active;
+        while mask != 0 {
+            let lane = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            let ray = Ray { origin: get(&lanes.origin, lane), dir: get(&lanes.dir, lane) };
+            let depth = lanes.depth[lane];
+            let Some(hit) = scene.bvh.intersect(&ray, 0.0, f32::INFINITY) else {
+                radiance[lanes.slot[lane]] = get(&lanes.l, lane);
+                lanes.active &= !(1 << lane);
+                continue;
+            };
+            let surf = scene.surface(&ray, &hit);
+            let mat = &scene.materials[surf.material as usize];
+            if let Some(le) = mat.emission {
+                if depth == 1 && surf.n.dot(-ray.dir) > 0.0 {
+                    let l = get(&lanes.l, lane) + get(&lanes.beta, lane) * le;
+                    put(&mut lanes.l, lane, l);
+                }
+            }
+            if depth == max_depth {
+                radiance[lanes.slot[lane]] = get(&lanes.l, lane);
+                lanes.active &= !(1 << lane);
+                continue;
+            }
+            shade |= 1 << lane;
+            put(&mut v.p, lane, surf.p);
+            put(&mut v.n, lane, surf.n);
+            put(&mut v.albedo, lane, scene.albedo(surf.material, &hit, surf.p));
+        }
+        if shade == 0 {
+            continue;
+        }
+        let shading = M::from_bits(shade);
+        // The vertex's numbers, in the scalar loop's order: light, bounce, roulette.
+        let roulette: u32 = (0..8).filter(|&i| lanes.depth[i] >= RR_START).fold(0, |m, i| m | 1 << i);
+        let u_light = lanes.samplers.next(shade, true);
+        let u_bsdf = lanes.samplers.next(shade, true);
+        let u_rr = lanes.samplers.next(shade & roulette, false).0;
+
+        // The light sample and its shadow ray (`Scene::sample_light`, `unoccluded`).
+        let p = V::load(&v.p);
+        let wo = V::load(&lanes.dir).neg();
+        let surf_n = V::load(&v.n);
+        let front = surf_n.dot(wo).ge(F::splat(0.0));
+        let n = V::select(front, surf_n, surf_n.neg());
+        let eps = F::splat(1e-4) * (F::splat(1.0) + p.x.abs().max(p.z.abs()).max(p.y.abs()));
+        let zero = F::splat(0.0);
+        let (light, p_pick, u_pick) = pick_light(&scene.light_cdf, u_light.0);
+        let kind = gather_i(&lights.kind, light);
+        let is = |k: i32| M(_mm256_castsi256_ps(_mm256_cmpeq_epi32(kind, _mm256_set1_epi32(k))));
+        let (point, directional) = (is(POINT), is(DIRECTIONAL));
+        // Triangle: y = v0 + b1·e1 + b2·e2 with b1 = √u(1 − v), b2 = √u·v.
+        let su = u_pick.sqrt();
+        let uv = u_light.1;
+        let (b1, b2) = (su * (F::splat(1.0) - uv), su * uv);
+        let v0 = V::gather(&lights.v0, light);
+        let tri_y =
+            v0.add(V::gather(&lights.e1, light).scale(b1)).add(V::gather(&lights.e2, light).scale(b2));
+        let d = V::select(point, v0, tri_y).sub(p);
+        let r2 = d.dot(d);
+        let r = r2.sqrt();
+        let wi = V::select(directional, v0, d.div(r));
+        let cos_light = -V::gather(&lights.n, light).dot(wi);
+        let power = V::gather(&lights.power, light);
+        // Point: intensity / (r²·p_pick). Triangle: radiance / pdf, pdf = p_pick·r² / (A·cos θ_light).
+        let li_point = power.div(r2 * p_pick);
+        let pdf = p_pick * r2 / (F::gather(&lights.area, light) * cos_light);
+        let li_tri = power.div(pdf);
+        // Directional: irradiance / p_pick, along the direction itself.
+        let li_directional = power.div(p_pick);
+        let li = V::select(point, li_point, V::select(directional, li_directional, li_tri));
+        let tri_ok = !(cos_light.le(zero) | r2.eq(zero));
+        let cos = n.dot(wi);
+        let origin = p.add(n.scale(eps));
+        let to = p.add(wi.scale(r)).sub(origin);
+        let len = to.dot(to).sqrt();
+        let sdir = V::select(directional, wi, to.div(len));
+        let t_max = directional.select(F::splat(f32::INFINITY), len * F::splat(1.0 - 1e-4) - eps);
+        let lit = shading
+            & p_pick.gt(zero)
+            & (point | directional | tri_ok)
+            & cos.gt(zero)
+            & (directional | len.gt(zero));
+        let mut ray_o = [[0.0f32; 8]; 3];
+        let mut ray_d = [[0.0f32; 8]; 3];
+        let mut ray_t = [0.0f32; 8];
+        origin.store(&mut ray_o);
+        sdir.store(&mut ray_d);
+        t_max.store(&mut ray_t);
+        let mut visible = 0u32;
+        let mut mask = lit.bits();
+        while mask != 0 {
+            let lane = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            let ray = Ray { origin: get(&ray_o, lane), dir: get(&ray_d, lane) };
+            if !scene.bvh.occluded(&ray, 0.0, ray_t[lane]) {
+                visible |= 1 << lane;
+            }
+        }
+
+        // Lambertian: f = kd/π where n·wo > 0 and n·wi > 0.
+        let albedo = V::load(&v.albedo);
+        let beta = V::load(&lanes.beta);
+        let f_on = n.dot(wo).gt(zero) & cos.gt(zero);
+        let none = V { x: zero, y: zero, z: zero };
+        let f = V::select(f_on, albedo.scale(F::splat(std::f32::consts::FRAC_1_PI)), none);
+        let l = V::load(&lanes.l);
+        let l = V::select(M::from_bits(visible), l.add(beta.mul(f).scale(cos).mul(li)), l);
+        l.store(&mut lanes.l);
+
+        // The bounce (`bsdf::cosine_hemisphere`): weight kd.
+        let u1 = u_bsdf.0;
+        let radius = u1.sqrt();
+        let (c, s) = unit_circle(u_bsdf.1);
+        let (t, b) = basis(n);
+        let z = (F::splat(1.0) - u1).max(zero).sqrt();
+        let wi = t.scale(radius * c).add(b.scale(radius * s)).add(n.scale(z));
+        let mut beta = beta.mul(albedo);
+        // Russian roulette after RR_START segments: survive with q = min(max β, 0.95).
+        let roulette = M::from_bits(roulette);
+        let q = beta.max_element().min(F::splat(0.95));
+        let killed = roulette & u_rr.ge(q);
+        beta = V::select(roulette, beta.div(q), beta);
+        let black = beta.x.eq(zero) & beta.y.eq(zero) & beta.z.eq(zero);
+        let alive = shading & !killed & !black;
+        let away = n.dot(wi).ge(zero);
+        let off = n.scale(eps);
+        let origin = p.add(V::select(away, off, off.neg()));
+        beta.store(&mut lanes.beta);
+        origin.store(&mut lanes.origin);
+        wi.store(&mut lanes.dir);
+        let alive = alive.bits();
+        let mut ended = shade & !alive;
+        while ended != 0 {
+            let lane = ended.trailing_zeros() as usize;
+            ended &= ended - 1;
+            radiance[lanes.slot[lane]] = get(&lanes.l, lane);
+            lanes.active &= !(1 << lane);
+        }
+        for lane in 0..8 {
+            lanes.depth[lane] += (alive >> lane) & 1;
+        }
+    }
+}
