@@ -69,10 +69,28 @@ pub fn write_exr(path: &Path, img: &Image) -> Result<(), Error> {
     write_atomically(path, |tmp| image.write().to_file(tmp).map_err(|e| e.to_string()))
 }
 
+/// Largest decoded image any reader accepts, in bytes: the `image` crate's default limit for
+/// PNG and JPEG, applied to EXR as well (its header is checked before any pixel is read), so a
+/// 600-byte file claiming 100000 × 100000 pixels is refused instead of allocating 40 GB.
+pub const MAX_DECODED_BYTES: u64 = 512 * 1024 * 1024;
+
 /// Reads the first layer of an OpenEXR file as f32: R G B if present, else Y (one channel).
 pub fn read_exr(path: &Path) -> Result<Image, Error> {
     use exr::prelude::{read, ReadChannels, ReadLayers};
     let err = |message: String| Error::Read { path: path.to_path_buf(), message };
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| err(e.to_string()))?;
+    for h in &meta.headers {
+        let (w, hh) = (h.layer_size.0 as u64, h.layer_size.1 as u64);
+        let bytes = w.saturating_mul(hh).saturating_mul(h.channels.list.len() as u64).saturating_mul(4);
+        if bytes > MAX_DECODED_BYTES {
+            return Err(err(format!(
+                "{w}×{hh} pixels × {} channels would take {:.1} GB decoded, above the limit of {} MB",
+                h.channels.list.len(),
+                bytes as f64 / 1e9,
+                MAX_DECODED_BYTES >> 20
+            )));
+        }
+    }
     let image = read()
         .no_deep_data()
         .largest_resolution_level()
@@ -181,6 +199,23 @@ pub fn read(path: &Path) -> Result<Image, Error> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A small file whose header claims 100000 × 100000 pixels: refused from the header.
+    #[test]
+    fn exr_claiming_a_huge_size_is_refused() {
+        let dir = std::env::temp_dir().join(format!("lumen-io-huge-{}", std::process::id()));
+        let p = dir.join("huge.exr");
+        write_exr(&p, &Image::new(4, 4, 3)).unwrap();
+        let mut bytes = std::fs::read(&p).unwrap();
+        let key = b"dataWindow\0box2i\0";
+        let at = bytes.windows(key.len()).position(|w| w == key).unwrap() + key.len() + 4;
+        bytes[at + 8..at + 12].copy_from_slice(&99_999i32.to_le_bytes());
+        bytes[at + 12..at + 16].copy_from_slice(&99_999i32.to_le_bytes());
+        std::fs::write(&p, &bytes).unwrap();
+        let e = read_exr(&p).unwrap_err().to_string();
+        assert!(e.contains("huge.exr") && e.contains("100000×100000") && e.contains("limit"), "{e}");
+        let _ = std::fs::remove_dir_all(dir);
+    }
 
     #[test]
     fn exr_round_trip() {

@@ -73,7 +73,8 @@ impl Sensor {
         ((1u32 << self.bits) - 1) as u16
     }
 
-    /// Exposes a radiance image: integer code values, same layout.
+    /// Exposes a radiance image: integer code values, same layout. Photon counts above
+    /// `LARGE_MEAN` electrons are drawn from the normal approximation.
     pub fn expose(&self, radiance: &Image, seed: u64) -> Vec<u16> {
         let max = self.max_code() as f64;
         let c = radiance.channels as usize;
@@ -88,7 +89,12 @@ impl Sensor {
                 px.iter()
                     .map(|&l| {
                         let mean_e = (l.max(0.0) as f64) * self.exposure * self.full_well;
-                        let mut e = if self.photon_noise && mean_e > 0.0 {
+                        let mut e = if self.photon_noise && mean_e > LARGE_MEAN {
+                            // The Poisson sampler's rejection loop does not end for means near
+                            // f64's range; this far out the normal approximation is exact to
+                            // any precision a 16-bit code can show.
+                            Normal::new(mean_e, mean_e.sqrt()).map(|n| n.sample(&mut rng)).unwrap_or(mean_e)
+                        } else if self.photon_noise && mean_e > 0.0 {
                             Poisson::new(mean_e).map(|p| p.sample(&mut rng)).unwrap_or(mean_e)
                         } else {
                             mean_e
@@ -104,9 +110,23 @@ impl Sensor {
     }
 }
 
+/// Mean electron count above which photon noise is drawn as Normal(μ, √μ) instead of Poisson.
+const LARGE_MEAN: f64 = 1e12;
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An absurd exposure saturates every code at once instead of looping in the sampler.
+    #[test]
+    fn huge_exposure_saturates_without_hanging() {
+        let s = Sensor { exposure: 1e300, full_well: 4e4, read_noise: 2.0, bits: 16, photon_noise: true };
+        let img = Image { width: 16, height: 16, channels: 3, data: vec![0.5; 768] };
+        let t = std::time::Instant::now();
+        let codes = s.expose(&img, 1);
+        assert!(codes.iter().all(|&c| c == 65535));
+        assert!(t.elapsed().as_secs_f64() < 5.0);
+    }
 
     /// Photon noise has variance = mean in electrons; read noise adds in quadrature; values
     /// above full scale clip.
