@@ -3,7 +3,7 @@
 //!
 //!   min Σ_views Σ_corners ‖ π(K, d, R_v X + t_v) − x ‖²
 //!
-//! with analytic Jacobians. Rotations are updated on the manifold, R ← exp([ω]×)·R, for which
+//! with analytic Jacobians, by `math::lm`. Rotations are updated on the manifold, R ← exp([ω]×)·R, for which
 //! ∂(R X)/∂ω = −[R X]×. Standard deviations come from σ²·(JᵀJ)⁻¹ at the optimum with
 //! σ² = cost / (residuals − free parameters), as OpenCV's `calibrateCameraExtended` reports.
 
@@ -143,7 +143,7 @@ pub fn refine(
     if m <= np {
         return Err(format!("{} residuals cannot determine {np} parameters", m));
     }
-    let mut poses = init_poses;
+    let poses = init_poses;
 
     let evaluate = |intr: &[f64; NI],
                     poses: &[(DMat3, DVec3)],
@@ -179,27 +179,16 @@ pub fn refine(
         (r.norm_squared(), r, j)
     };
 
-    let (mut cost, _, _) = evaluate(&intr, &poses, false);
-    let mut mu = 1e-3;
-    let mut iterations = 0;
-    for it in 0..max_iterations {
-        iterations = it + 1;
-        let (_, r, j) = evaluate(&intr, &poses, true);
-        let j = j.ok_or("no Jacobian")?;
-        let jtj = j.transpose() * &j;
-        let jtr = j.transpose() * &r;
-        let mut accepted = false;
-        for _ in 0..20 {
-            let mut a = jtj.clone();
-            for d in 0..np {
-                a[(d, d)] += mu * jtj[(d, d)].max(1e-12);
-            }
-            let Some(chol) = a.cholesky() else {
-                mu *= 10.0;
-                continue;
-            };
-            let step = chol.solve(&(-&jtr));
-            let mut ni = intr;
+    let opts = crate::math::lm::Options { max_iterations, ..Default::default() };
+    let solved = crate::math::lm::minimize(
+        (intr, poses),
+        |(intr, poses)| {
+            let (_, r, j) = evaluate(intr, poses, true);
+            Some((r, j?))
+        },
+        |(intr, poses)| evaluate(intr, poses, false).0,
+        |(intr, poses), step| {
+            let mut ni = *intr;
             for (col, &p) in free.iter().enumerate() {
                 ni[p] += step[col];
             }
@@ -215,22 +204,11 @@ pub fn refine(
                     (crate::math::Pose::rotation_from_rvec(wv) * *rot, *t + dt)
                 })
                 .collect();
-            let (nc, _, _) = evaluate(&ni, &np_, false);
-            if nc.is_finite() && nc <= cost {
-                let small = cost - nc <= 1e-16 * cost;
-                intr = ni;
-                poses = np_;
-                cost = nc;
-                mu = (mu / 3.0).max(1e-15);
-                accepted = !small;
-                break;
-            }
-            mu *= 4.0;
-        }
-        if !accepted {
-            break;
-        }
-    }
+            (ni, np_)
+        },
+        &opts,
+    );
+    let ((intr, poses), iterations) = (solved.params, solved.iterations);
 
     let (cost, r, j) = evaluate(&intr, &poses, true);
     let j = j.ok_or("no Jacobian")?;

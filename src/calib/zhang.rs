@@ -93,57 +93,44 @@ fn null_vector(a: &DMatrix<f64>) -> Option<(DVector<f64>, f64)> {
     Some((vt.row(k).transpose(), cond))
 }
 
-/// Gauss–Newton with Levenberg damping on the 8 free entries of H (H₃₃ = 1).
+/// Levenberg–Marquardt (`math::lm`) on the 8 free entries of H (H₃₃ = 1), minimising the
+/// reprojection error in the image.
 fn refine_homography(h: &mut Homography, board: &[DVec2], image: &[DVec2]) {
     let cost =
         |h: &Homography| board.iter().zip(image).map(|(&b, &i)| apply(h, b).distance_squared(i)).sum::<f64>();
-    let mut mu = 1e-3;
-    let mut c = cost(h);
-    for _ in 0..50 {
-        let mut jtj = nalgebra::SMatrix::<f64, 8, 8>::zeros();
-        let mut jtr = nalgebra::SVector::<f64, 8>::zeros();
-        for (&b, &i) in board.iter().zip(image) {
+    let residuals = |h: &Homography| {
+        let mut r = DVector::zeros(2 * board.len());
+        let mut j = DMatrix::zeros(2 * board.len(), 8);
+        for (k, (&b, &i)) in board.iter().zip(image).enumerate() {
             let w = h[(2, 0)] * b.x + h[(2, 1)] * b.y + h[(2, 2)];
             let p = apply(h, b);
             let ju = [b.x / w, b.y / w, 1.0 / w, 0.0, 0.0, 0.0, -p.x * b.x / w, -p.x * b.y / w];
             let jv = [0.0, 0.0, 0.0, b.x / w, b.y / w, 1.0 / w, -p.y * b.x / w, -p.y * b.y / w];
-            let (ru, rv) = (p.x - i.x, p.y - i.y);
-            for r in 0..8 {
-                jtr[r] += ju[r] * ru + jv[r] * rv;
-                for s in 0..8 {
-                    jtj[(r, s)] += ju[r] * ju[s] + jv[r] * jv[s];
-                }
+            r[2 * k] = p.x - i.x;
+            r[2 * k + 1] = p.y - i.y;
+            for c in 0..8 {
+                j[(2 * k, c)] = ju[c];
+                j[(2 * k + 1, c)] = jv[c];
             }
         }
-        let mut improved = false;
-        for _ in 0..10 {
-            let mut m = jtj;
-            for d in 0..8 {
-                m[(d, d)] *= 1.0 + mu;
-            }
-            let Some(step) = m.cholesky().map(|ch| ch.solve(&(-jtr))) else {
-                mu *= 10.0;
-                continue;
-            };
-            let mut hn = *h;
-            for k in 0..8 {
-                hn[(k / 3, k % 3)] += step[k];
-            }
-            let cn = cost(&hn);
-            if cn < c {
-                let done = c - cn < 1e-14 * c.max(1e-300);
-                *h = hn;
-                c = cn;
-                mu = (mu * 0.1).max(1e-12);
-                improved = !done;
-                break;
-            }
-            mu *= 10.0;
+        Some((r, j))
+    };
+    let update = |h: &Homography, step: &DVector<f64>| {
+        let mut hn = *h;
+        for k in 0..8 {
+            hn[(k / 3, k % 3)] += step[k];
         }
-        if !improved {
-            break;
-        }
-    }
+        hn
+    };
+    let opts = crate::math::lm::Options {
+        max_iterations: 50,
+        rel_tolerance: 1e-14,
+        mu_down: 10.0,
+        mu_up: 10.0,
+        max_tries: 10,
+        ..Default::default()
+    };
+    *h = crate::math::lm::minimize(*h, residuals, cost, update, &opts).params;
 }
 
 const UNOBSERVABLE: &str =

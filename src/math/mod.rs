@@ -1,9 +1,11 @@
-//! Shared f64 geometry: the camera model (intrinsics + Brown–Conrady distortion) and rigid poses.
+//! Shared f64 geometry and numerics: the camera model (intrinsics + Brown–Conrady distortion),
+//! rigid poses and rotations, robust statistics, and Levenberg–Marquardt (`lm`).
 //!
 //! Renderer and solvers both use these types, so projection and distortion have one source of
 //! truth: a 3D point projected here lands where the renderer draws it.
 
 pub mod camera;
+pub mod lm;
 pub mod pose;
 pub mod stats;
 
