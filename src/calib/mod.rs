@@ -178,24 +178,28 @@ pub fn detect_views(images: &[(String, Grey)], config: &Config) -> Result<Detect
 }
 
 /// What calibration reads: named greyscale views of one camera.
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Input {
     pub images: Vec<(String, Grey)>,
 }
 
 /// A calibration and the corners it was computed from.
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Output {
     pub calibration: Calibration,
     /// Detected corners of every view used, in `detect`'s order (`Calibration::views`' order).
     pub corners: Vec<(String, Vec<DVec2>)>,
+    /// The refinement's intrinsics at its start and after each accepted step, with the time.
+    pub trace: Vec<refine::TraceStep>,
 }
 
 /// Detects the board in every image and calibrates from the views where it was found.
 pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     let (views, skipped) = detect_views(&input.images, config)?;
     let size = input.images.first().map_or((0, 0), |(_, g)| (g.width as u32, g.height as u32));
-    let mut calibration = calibrate(&views, size, config)?;
+    let (mut calibration, trace) = calibrate_traced(&views, size, config)?;
     calibration.skipped = skipped;
-    Ok(Output { calibration, corners: views })
+    Ok(Output { calibration, corners: views, trace })
 }
 
 /// Calibrates from detected corners (`views`: name and corners in `detect`'s order).
@@ -204,6 +208,15 @@ pub fn calibrate(
     size: (u32, u32),
     config: &Config,
 ) -> Result<Calibration, Error> {
+    calibrate_traced(views, size, config).map(|(c, _)| c)
+}
+
+/// `calibrate`, with the refinement's trace.
+pub fn calibrate_traced(
+    views: &[(String, Vec<DVec2>)],
+    size: (u32, u32),
+    config: &Config,
+) -> Result<(Calibration, Vec<refine::TraceStep>), Error> {
     if views.len() < 2 {
         return Err(Error::BadInput(format!(
             "the board was found in {} view(s); calibration needs at least 2 (3 or more for a reliable principal point)",
@@ -324,7 +337,7 @@ pub fn calibrate(
             out.std_dev.fx, out.std_dev.fy
         )));
     }
-    Ok(out)
+    Ok((out, sol.trace))
 }
 
 /// Zhang's linear estimate of k1, k2 from the distortion-free model's residuals:

@@ -41,6 +41,18 @@ pub struct Solution {
     /// Standard deviations of each view's rotation (small-angle, radians) and translation.
     pub std_views: Vec<[f64; 6]>,
     pub iterations: usize,
+    /// The intrinsics at the start and after each accepted step.
+    pub trace: Vec<TraceStep>,
+}
+
+/// One point of the refinement's trace: elapsed time, iteration, cost and the intrinsics
+/// (fx, fy, cx, cy, k1, k2, p1, p2, k3) at that point.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct TraceStep {
+    pub seconds: f64,
+    pub iteration: usize,
+    pub cost: f64,
+    pub intrinsics: [f64; 9],
 }
 
 const NI: usize = 9;
@@ -180,6 +192,8 @@ pub fn refine(
     };
 
     let opts = crate::math::lm::Options { max_iterations, ..Default::default() };
+    let started = std::time::Instant::now();
+    let mut trace = Vec::new();
     let solved = crate::math::lm::minimize(
         (intr, poses),
         |(intr, poses)| {
@@ -205,6 +219,14 @@ pub fn refine(
                 })
                 .collect();
             (ni, np_)
+        },
+        |k, (intr, _), cost| {
+            trace.push(TraceStep {
+                seconds: started.elapsed().as_secs_f64(),
+                iteration: k,
+                cost,
+                intrinsics: *intr,
+            })
         },
         &opts,
     );
@@ -245,5 +267,6 @@ pub fn refine(
         unit_std_intrinsics,
         std_views,
         iterations,
+        trace,
     })
 }

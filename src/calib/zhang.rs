@@ -130,7 +130,7 @@ fn refine_homography(h: &mut Homography, board: &[DVec2], image: &[DVec2]) {
         max_tries: 10,
         ..Default::default()
     };
-    *h = crate::math::lm::minimize(*h, residuals, cost, update, &opts).params;
+    *h = crate::math::lm::minimize(*h, residuals, cost, update, |_, _, _| {}, &opts).params;
 }
 
 const UNOBSERVABLE: &str =

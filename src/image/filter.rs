@@ -1,7 +1,7 @@
 //! Grey-level image helpers for detectors: conversion, Gaussian blur, bilinear sampling.
 
 /// A single-channel f32 image, row-major.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct Grey {
     pub width: usize,
     pub height: usize,

@@ -57,16 +57,19 @@ pub struct Solution<P> {
 
 /// Minimises ‖r(p)‖² from `start`. `residuals(p)` gives r and J at p (None where they cannot
 /// be evaluated); `cost(p)` gives ‖r(p)‖² alone (non-finite where p is not admissible);
-/// `update(p, δ)` applies a step.
+/// `update(p, δ)` applies a step; `observe(k, p, cost)` sees the start (k = 0) and the
+/// parameters after each accepted step k, so a caller can keep a trace of the iteration.
 pub fn minimize<P: Clone>(
     start: P,
     mut residuals: impl FnMut(&P) -> Option<(DVector<f64>, DMatrix<f64>)>,
     mut cost: impl FnMut(&P) -> f64,
     mut update: impl FnMut(&P, &DVector<f64>) -> P,
+    mut observe: impl FnMut(usize, &P, f64),
     opts: &Options,
 ) -> Solution<P> {
     let mut p = start;
     let mut c = cost(&p);
+    observe(0, &p, c);
     let mut mu = opts.mu_start;
     let mut iterations = 0;
     for it in 0..opts.max_iterations {
@@ -92,6 +95,7 @@ pub fn minimize<P: Clone>(
                 let small = c - cq <= opts.rel_tolerance * c;
                 p = q;
                 c = cq;
+                observe(iterations, &p, c);
                 mu = (mu / opts.mu_down).max(1e-15);
                 accepted = !small;
                 break;
@@ -118,8 +122,20 @@ mod tests {
             Some((r, j))
         };
         let cost = |p: &[f64; 2]| res(p).map_or(f64::INFINITY, |(r, _)| r.norm_squared());
-        let s = minimize([-1.2, 1.0], res, cost, |p, d| [p[0] + d[0], p[1] + d[1]], &Options::default());
+        let mut costs = Vec::new();
+        let s = minimize(
+            [-1.2, 1.0],
+            res,
+            cost,
+            |p, d| [p[0] + d[0], p[1] + d[1]],
+            |k, _, c| costs.push((k, c)),
+            &Options::default(),
+        );
         assert!((s.params[0] - 1.0).abs() < 1e-9 && (s.params[1] - 1.0).abs() < 1e-9, "{:?}", s.params);
         assert!(s.cost < 1e-20 && s.iterations < 100);
+        // The trace starts at the start and never rises.
+        // r(−1.2, 1) = (−4.4, 2.2): cost 24.2.
+        assert!(costs[0].0 == 0 && (costs[0].1 - 24.2).abs() < 1e-12, "{:?}", costs[0]);
+        assert!(costs.windows(2).all(|w| w[1].1 <= w[0].1 && w[1].0 > w[0].0));
     }
 }

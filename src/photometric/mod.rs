@@ -17,7 +17,7 @@ pub mod mat;
 
 use glam::DVec3;
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, thiserror::Error)]
@@ -41,6 +41,7 @@ pub const SATURATED: f32 = 0.999;
 /// Observations of many pixels under many lights, pixel-major: `lights` RGB triples per pixel,
 /// divided by the light's intensity, each with a flag saying whether it may be used (false
 /// when a channel was saturated).
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Observations {
     lights: usize,
     data: Vec<[f32; 3]>,
@@ -76,7 +77,7 @@ impl Observations {
 }
 
 /// Which reflectance model to fit.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Model {
     /// Least squares over every light, on the mean of the channels.
@@ -101,6 +102,7 @@ impl std::str::FromStr for Model {
 
 /// What the solver reads: the masked pixels' observations, the lights, and the view
 /// directions. Ground truth never reaches it (`dataset::Dataset` keeps truth beside it).
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Input {
     pub width: usize,
     pub height: usize,
@@ -118,7 +120,7 @@ pub struct Input {
 }
 
 /// How to solve.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
 pub struct Config {
     pub model: Model,
     /// Keep every pixel's normal after each Gauss-Newton iteration (Blinn-Phong), so the
@@ -134,6 +136,7 @@ impl Config {
 }
 
 /// The solution over the masked pixels, and what the report needs.
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Output {
     pub model: Model,
     /// Unit normals (dataset frame), `None` where the pixel could not be solved.
@@ -150,7 +153,7 @@ pub struct Output {
 
 /// What the solver says of its own run (`summary.json`, with the accuracy when the dataset
 /// has ground truth).
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Summary {
     pub model: Model,
     /// Pixels inside the mask that got a normal.

@@ -21,7 +21,8 @@
 //! - `distortion_field_max_px`: the largest difference between the true and estimated
 //!   distortion displacement (pixel − K·undistort(pixel), each with its own K) over every
 //!   detected corner position, that is over the part of the image the boards covered;
-//! - `rms_px`: the calibration's own reprojection error;
+//! - `rms_px`: the calibration's own reprojection error (and a note with fx's error after each
+//!   step of the refinement, from its trace);
 //! - `zhang_condition_number`, `homography_condition_number_max`: how well the closed form's
 //!   linear systems determine their solutions (`calib::Conditioning`; warned above 10³).
 
@@ -367,6 +368,26 @@ pub fn validate(_c: &Config, out: &calib::Output, truth: &Truth) -> Findings {
         f.notes.push(format!("warning: {w}"));
     }
     let kt = truth.camera.intrinsics;
+    if out.trace.len() > 1 {
+        let shown: Vec<String> = out
+            .trace
+            .iter()
+            .enumerate()
+            .filter(|&(k, _)| k <= 4 || k.is_power_of_two() || k + 1 == out.trace.len())
+            .map(|(_, t)| {
+                format!(
+                    "{}: {:.3e} ({:.3} s)",
+                    t.iteration,
+                    (t.intrinsics[0] - kt.fx).abs() / kt.fx,
+                    t.seconds
+                )
+            })
+            .collect();
+        f.notes.push(format!(
+            "fx relative error after k Levenberg–Marquardt steps (k = 0: Zhang's closed form): {}.",
+            shown.join(", ")
+        ));
+    }
     f.notes.push(format!(
         "estimate (± standard deviation) fx {:.3} ± {:.3}, fy {:.3} ± {:.3}, cx {:.3} ± {:.3}, cy {:.3} ± {:.3}, d {:?}; \
          truth fx {} fy {} cx {} cy {}, d {:?}.",
