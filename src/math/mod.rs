@@ -1,5 +1,6 @@
 //! Shared f64 geometry and numerics: the camera model (intrinsics + Brown–Conrady distortion),
-//! rigid poses and rotations, robust statistics, and Levenberg–Marquardt (`lm`).
+//! rigid poses and rotations, robust statistics, Levenberg–Marquardt (`lm`) and the RANSAC
+//! driver (`ransac`).
 //!
 //! Renderer and solvers both use these types, so projection and distortion have one source of
 //! truth: a 3D point projected here lands where the renderer draws it.
@@ -7,6 +8,7 @@
 pub mod camera;
 pub mod lm;
 pub mod pose;
+pub mod ransac;
 pub mod stats;
 
 pub use camera::{CameraModel, Distortion, Intrinsics};

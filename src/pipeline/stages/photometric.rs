@@ -358,6 +358,12 @@ pub fn validate(_c: &Config, out: &Output, truth: &Truth) -> Findings {
     let albedo_err = (!rel.is_empty()).then(|| rel.iter().sum::<f64>() / rel.len() as f64);
     m.push(Metric::maybe("mean_albedo_rel_err", albedo_err, "", Better::Lower, none));
     m.push(Metric::new("light_condition_number", sm.light_condition_number, "", Better::Lower));
+    if sm.lights_nearly_coplanar {
+        f.notes.push(format!(
+            "warning: the light matrix has condition number {:.3} (above 5): the lights nearly lie in a plane, and the normals' component across it is poorly determined.",
+            sm.light_condition_number
+        ));
+    }
     m.push(Metric::new("pixel_lights_per_s", sm.pixel_lights_per_s, "1/s", Better::Higher));
     m.push(Metric::new("time_per_megapixel_s", sm.time_per_megapixel_s, "s", Better::Lower));
     if let Some(base) = &out.baseline {
