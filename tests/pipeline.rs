@@ -360,9 +360,11 @@ fn declared_errors_are_outcomes() {
     let (code, err, _) = run_with(&entry("expect_error = \"flood\"\n"), dir.path(), "d", &["--no-cache"]);
     assert_eq!(code, 1);
     assert!(err.contains("expect_error = \"flood\""), "{err}");
-    let (code, err, _) = run_with(&entry(""), dir.path(), "e", &["--threads", "100000"]);
-    assert_eq!(code, 1);
-    assert!(err.contains("--threads 100000: expected 1 to"), "{err}");
+    for bad in ["100000", "0"] {
+        let (code, err, _) = run_with(&entry(""), dir.path(), "e", &["--threads", bad]);
+        assert_eq!(code, 2, "{err}");
+        assert!(err.contains(&format!("'{bad}'")) && err.contains("from 1 to 1024"), "{err}");
+    }
 }
 
 /// `lumen calibrate` and `lumen ps` on the inputs a pipeline kept give the pipeline's numbers:

@@ -31,7 +31,7 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
         /// Worker threads (default: all cores).
-        #[arg(long)]
+        #[arg(long, value_parser = parse_threads)]
         threads: Option<usize>,
         /// Folder of the render cache, shared by runs and pipelines (default: out/cache).
         #[arg(long)]
@@ -54,7 +54,7 @@ enum Command {
         max_depth: Option<u32>,
         #[arg(long)]
         seed: Option<u64>,
-        #[arg(long)]
+        #[arg(long, value_parser = parse_threads)]
         threads: Option<usize>,
         /// Truth images to write beside the output, comma-separated: depth, normal,
         /// normal_camera, albedo, position, id, or variance (of the mean radiance).
@@ -138,7 +138,7 @@ enum Bench {
         spp: u32,
         #[arg(long, default_value_t = 8)]
         max_depth: u32,
-        #[arg(long)]
+        #[arg(long, value_parser = parse_threads)]
         threads: Option<usize>,
         /// Repetitions; the best is reported.
         #[arg(long, default_value_t = 3)]
@@ -160,7 +160,7 @@ enum Bench {
         /// Sample counts, comma-separated.
         #[arg(long, default_value = "4,16,64,256")]
         spp: String,
-        #[arg(long)]
+        #[arg(long, value_parser = parse_threads)]
         threads: Option<usize>,
     },
     /// Detection and calibration time on a set of photographs; with the `opencv` feature,
@@ -374,6 +374,14 @@ fn render_cmd(
         eprintln!("warning: {} non-finite samples were dropped", film.dropped_samples);
     }
     Ok(())
+}
+
+/// Parses `--threads`: 1 to `pipeline::MAX_THREADS`.
+fn parse_threads(text: &str) -> Result<usize, String> {
+    match text.parse::<usize>() {
+        Ok(n) if (1..=pipeline::MAX_THREADS).contains(&n) => Ok(n),
+        _ => Err(format!("expected a number of threads from 1 to {}", pipeline::MAX_THREADS)),
+    }
 }
 
 /// Parses `COLSxROWS`.
