@@ -305,3 +305,26 @@ fn a_scene_without_light_renders_black() {
     let md = std::fs::read_to_string(dir.path().join("o/report.md")).unwrap();
     assert!(md.contains("no light"), "{md}");
 }
+
+/// Numbers finite in f64 but beyond what the float32 renderer holds, and generated surfaces
+/// too fine for memory: refused when the scene is read, naming the field.
+#[test]
+fn values_beyond_float32_and_huge_surfaces() {
+    let sphere = |c: &str, r: &str| {
+        format!("[[shapes]]\ntype = \"sphere\"\ncenter = {c}\nradius = {r}\nmaterial = \"white\"\n")
+    };
+    let e = scene_error(&sphere("[0.0, 0.0, 0.0]", "1e39"), &[]);
+    assert!(e.contains("shapes[0].radius") && e.contains("1e30"), "{e}");
+    let e = scene_error(&sphere("[1e39, 0.0, 0.0]", "1.0"), &[]);
+    assert!(e.contains("shapes[0].center") && e.contains("1e30"), "{e}");
+    let e = scene_error(
+        "[[lights]]\ntype = \"point\"\nposition = [0.0, 0.0, 0.0]\nintensity = [1e39, 1.0, 1.0]\n",
+        &[],
+    );
+    assert!(e.contains("lights[0]") && e.contains("1e30"), "{e}");
+    let e = scene_error(
+        "[[shapes]]\ntype = \"torus\"\nradius = 1.0\ntube = 0.2\nsegments = [4096, 4096]\nmaterial = \"white\"\n",
+        &[],
+    );
+    assert!(e.contains("shapes[0].segments") && e.contains("16777216 quads"), "{e}");
+}

@@ -15,11 +15,22 @@ fn field_err(path: &Path, field: &str, message: impl Into<String>) -> Error {
     Error::Invalid { path: path.to_path_buf(), field: field.to_string(), message: message.into() }
 }
 
+/// Largest magnitude of any number in a scene file. The renderer works in float32 (up to
+/// 3.4·10³⁸); 10³⁰ leaves room for the products it forms (squared distances, intensity over
+/// distance squared, radiance times area) before they overflow, where a value of 10³⁹ became
+/// infinity and rendered black.
+pub const MAX_SCENE_VALUE: f64 = 1e30;
+
+/// Finite and within ±`MAX_SCENE_VALUE`.
+fn representable(v: f64) -> bool {
+    v.is_finite() && v.abs() <= MAX_SCENE_VALUE
+}
+
 fn finite3(path: &Path, field: &str, v: [f64; 3]) -> Result<DVec3, Error> {
-    if v.iter().all(|c| c.is_finite()) {
+    if v.iter().all(|&c| representable(c)) {
         Ok(DVec3::from_array(v))
     } else {
-        Err(field_err(path, field, format!("{v:?} must be finite numbers")))
+        Err(field_err(path, field, format!("{v:?} must be finite numbers within ±{MAX_SCENE_VALUE:e}")))
     }
 }
 
@@ -65,11 +76,11 @@ impl TransformSpec {
             Some(Scale::Uniform(s)) => DVec3::splat(s),
             Some(Scale::PerAxis(s)) => DVec3::from_array(s),
         };
-        if !scale.is_finite() || scale.min_element().abs() == 0.0 || scale.abs().min_element() == 0.0 {
+        if !scale.to_array().iter().all(|&v| representable(v)) || scale.abs().min_element() == 0.0 {
             return Err(field_err(
                 path,
                 &format!("{field}.scale"),
-                format!("{scale} must be finite and non-zero"),
+                format!("{scale} must be finite, within ±{MAX_SCENE_VALUE:e}, and non-zero"),
             ));
         }
         Ok((rotation, translation, scale))
@@ -195,11 +206,11 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
             }
             ShapeSpec::Sphere { center, radius, material, reverse_orientation } => {
                 let c = finite3(path, &format!("{field}.center"), *center)?;
-                if !(radius.is_finite() && *radius > 0.0) {
+                if !(representable(*radius) && *radius > 0.0) {
                     return Err(field_err(
                         path,
                         &format!("{field}.radius"),
-                        format!("{radius} must be positive"),
+                        format!("{radius} must be positive, at most {MAX_SCENE_VALUE:e}"),
                     ));
                 }
                 let mtl = material_index(material, &format!("{field}.material"))?;
@@ -326,7 +337,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                     }
                     (None, Some(m)) => {
                         let scale = scale.unwrap_or(1.0);
-                        if !(scale.is_finite() && scale >= 0.0) {
+                        if !(representable(scale) && scale >= 0.0) {
                             return Err(field_err(
                                 path,
                                 &format!("{field}.scale"),
@@ -619,24 +630,36 @@ fn generated_surface<'a>(
     field: &str,
 ) -> Result<Option<(surfaces::Surface, &'a str, &'a TransformSpec)>, Error> {
     let positive = |name: &str, v: f64| {
-        if v.is_finite() && v > 0.0 {
+        if representable(v) && v > 0.0 {
             Ok(())
         } else {
-            Err(field_err(path, &format!("{field}.{name}"), format!("{v} must be positive")))
+            Err(field_err(
+                path,
+                &format!("{field}.{name}"),
+                format!("{v} must be positive, at most {MAX_SCENE_VALUE:e}"),
+            ))
         }
     };
-    let counts = |n: &[u32]| {
-        if n.iter().all(|&k| (3..=4096).contains(&k)) {
-            Ok(())
-        } else {
+    // 2²⁰ quads (2²¹ triangles) take about 0.7 GB with the BVH; 4096 × 4096 took 11.7 GB.
+    const MAX_QUADS: u64 = 1 << 20;
+    let counts = |n: &[u32], quads: u64| {
+        if !n.iter().all(|&k| (3..=4096).contains(&k)) {
             Err(field_err(path, &format!("{field}.segments"), format!("{n:?}: expected 3 to 4096")))
+        } else if quads > MAX_QUADS {
+            Err(field_err(
+                path,
+                &format!("{field}.segments"),
+                format!("{n:?} makes {quads} quads, more than the {MAX_QUADS} a generated surface may have"),
+            ))
+        } else {
+            Ok(())
         }
     };
     Ok(Some(match shape {
         ShapeSpec::Torus { radius, tube, segments, material, transform } => {
             positive("radius", *radius)?;
             positive("tube", *tube)?;
-            counts(segments)?;
+            counts(segments, segments[0] as u64 * segments[1] as u64)?;
             (surfaces::torus(*radius, *tube, *segments), material, transform)
         }
         ShapeSpec::Blob { radius, amplitude, lobes, segments, material, transform } => {
@@ -649,13 +672,13 @@ fn generated_surface<'a>(
                     format!("{amplitude}: expected [0, 1)"),
                 ));
             }
-            counts(segments)?;
+            counts(segments, segments[0] as u64 * segments[1] as u64)?;
             (surfaces::blob(*radius, *amplitude, *lobes, *segments), material, transform)
         }
         ShapeSpec::Relief { size, height, segments, material, transform } => {
             positive("size", *size)?;
             positive("height", *height)?;
-            counts(&[*segments])?;
+            counts(&[*segments], *segments as u64 * *segments as u64)?;
             (surfaces::relief(*size, *height, *segments), material, transform)
         }
         _ => return Ok(None),
