@@ -16,13 +16,31 @@ pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// `../shared/data`, or `None` (with a printed reason) when it is absent.
+/// Where skipped tests are listed: the test harness hides what a passing test prints, so a
+/// skip is also written here, one line per test, for `.ci/run` to count and show.
+pub fn skip_list() -> PathBuf {
+    Path::new(env!("CARGO_TARGET_TMPDIR")).join("skipped-tests.txt")
+}
+
+/// Records that the running test skipped its comparison, and why.
+pub fn skip(reason: &str) {
+    let test = std::thread::current().name().unwrap_or("?").to_string();
+    eprintln!("skipped: {reason}");
+    let line = format!("{test}: {reason}\n");
+    let _ = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(skip_list())
+        .and_then(|mut f| std::io::Write::write_all(&mut f, line.as_bytes()));
+}
+
+/// `../shared/data`, or `None` (the skip recorded with its reason) when it is absent.
 pub fn shared_data() -> Option<PathBuf> {
     let p = root().join("../shared/data");
     if p.is_dir() {
         Some(p)
     } else {
-        eprintln!("skipped: {} is absent (the reference data lives beside the project)", p.display());
+        skip(&format!("{} is absent (the reference data lives beside the project)", p.display()));
         None
     }
 }
