@@ -188,7 +188,7 @@ impl Report {
             s,
             "Columns: *render* is the time to synthesise the case's input (renders and truth; renders \
              read back from the cache cost almost nothing), *solve* the solver's own time; *renders* \
-             counts images rendered / reused from the cache; *metrics met* counts bounded metrics that \
+             counts images rendered / reused from the cache (the render stage renders its image afresh, outside the cache, and times it as its solve); *metrics met* counts bounded metrics that \
              met their bound, with declared misses and skipped metrics shown apart.\n"
         );
         let _ = writeln!(
