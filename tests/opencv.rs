@@ -108,3 +108,38 @@ fn corners_compared_per_view() {
     eprintln!("RMS reprojection error: lumen {:.4} px, OpenCV {:.4} px", ours.rms_px, theirs.rms_px);
     assert!(ours.rms_px < theirs.rms_px);
 }
+
+/// OpenCV's own FileStorage reads the YAML `lumen calibrate` writes: the camera matrix and
+/// distortion as matrices, and `view_names` as the sequence of image names, one per row of
+/// `extrinsic_parameters`.
+#[test]
+fn filestorage_reads_the_calibration_yaml() {
+    use opencv::core::{FileStorage, FileStorage_Mode, Mat, MatTraitConst};
+    use opencv::prelude::{FileNodeTraitConst, FileStorageTraitConst};
+    let Some(files) = common::calibration_photographs() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("camera.yaml");
+    let pattern = files[0].parent().unwrap().join("*.jpg");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_lumen"))
+        .args([
+            "calibrate",
+            "--images",
+            pattern.to_str().unwrap(),
+            "--board",
+            "9x6",
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let fs = FileStorage::new(out.to_str().unwrap(), FileStorage_Mode::READ as i32, "").unwrap();
+    let k: Mat = fs.get("camera_matrix").unwrap().mat().unwrap();
+    assert_eq!((k.rows(), k.cols()), (3, 3));
+    let ext: Mat = fs.get("extrinsic_parameters").unwrap().mat().unwrap();
+    let names = fs.get("view_names").unwrap();
+    assert!(names.is_seq().unwrap());
+    assert_eq!(names.size().unwrap() as i32, ext.rows());
+    let first = names.at(0).unwrap().to_string().unwrap();
+    assert!(first.ends_with("left01.jpg"), "{first}");
+}

@@ -1,5 +1,6 @@
 //! Calibration files. `.yaml`/`.yml`: an OpenCV FileStorage file, as OpenCV's calibration
-//! sample writes it (`cv::FileStorage` reads it); `.json`: the whole `Calibration`. Both are
+//! sample writes it (`cv::FileStorage` reads it), with `view_names` naming the image of each
+//! row of `extrinsic_parameters`; `.json`: the whole `Calibration`. Both are
 //! read back wherever a camera is expected. Writes are atomic (temporary file, then rename).
 
 use super::{Calibration, Error, StdDev};
@@ -38,6 +39,14 @@ pub fn to_yaml(c: &Calibration) -> String {
     if !c.views.is_empty() {
         let ext: Vec<f64> = c.views.iter().flat_map(|v| v.rvec.iter().chain(&v.tvec).copied()).collect();
         s += &matrix("extrinsic_parameters", c.views.len(), 6, &ext);
+        // The image each row of extrinsic_parameters belongs to, in the same order (a
+        // FileStorage sequence of strings).
+        let names: Vec<String> = c
+            .views
+            .iter()
+            .map(|v| format!("\"{}\"", v.name.replace('\\', "\\\\").replace('"', "\\\"")))
+            .collect();
+        s += &format!("view_names: [ {} ]\n", names.join(", "));
     }
     s
 }

@@ -30,7 +30,7 @@ enum Command {
         /// Output folder (default: out/<pipeline name>).
         #[arg(long)]
         out: Option<PathBuf>,
-        /// Worker threads (default: all cores).
+        /// Worker threads, 1 to 1024 (default: all cores).
         #[arg(long, value_parser = parse_threads)]
         threads: Option<usize>,
         /// Folder of the render cache, shared by runs and pipelines (default: out/cache).
@@ -43,7 +43,10 @@ enum Command {
     /// Render a scene file to an image: .exr (linear float) or .png (sRGB, or raw sensor values
     /// when the scene has a [sensor]).
     Render {
+        /// Scene file (TOML), e.g. pipelines/scenes/cornell-box.toml.
         scene: PathBuf,
+        /// Output image: .exr or .png; truth images and the variance go beside it as
+        /// NAME.<aov>.exr.
         #[arg(long)]
         out: PathBuf,
         /// Samples per pixel (default: the scene's [render] spp).
@@ -52,8 +55,10 @@ enum Command {
         /// Longest path in segments (default: the scene's max_depth).
         #[arg(long)]
         max_depth: Option<u32>,
+        /// Seed of every random stream (default: the scene's [render] seed).
         #[arg(long)]
         seed: Option<u64>,
+        /// Worker threads, 1 to 1024 (default: all cores).
         #[arg(long, value_parser = parse_threads)]
         threads: Option<usize>,
         /// Truth images to write beside the output, comma-separated: depth, normal,
@@ -69,7 +74,7 @@ enum Command {
         /// Inner corners as COLSxROWS, e.g. 9x6.
         #[arg(long)]
         board: String,
-        /// Side of a square, in the unit translations should come out in (default 1).
+        /// Side of a square, in the unit translations should come out in.
         #[arg(long, default_value_t = 1.0)]
         square: f64,
         /// Output: .yaml/.yml (OpenCV FileStorage) or .json.
@@ -99,11 +104,14 @@ enum Command {
         /// and optionally Normal_gt.mat.
         #[arg(long)]
         dataset: PathBuf,
-        /// lambertian (least squares over every light) or robust (shadows and highlights
-        /// left out).
+        /// lambertian (least squares over every light), robust (shadows, highlights and
+        /// saturated values left out) or blinn-phong (normal, diffuse and specular albedo and
+        /// shininess per pixel).
         #[arg(long, default_value = "robust")]
         model: String,
-        /// Output folder: normals.exr/.png, albedo.exr/.png, error.png, summary.json.
+        /// Output folder: normals.exr/.png, albedo.exr/.png, error.png (with ground truth),
+        /// depth.exr and surface.obj (the integrated surface), summary.json; with blinn-phong
+        /// also specular.exr and shininess.exr.
         #[arg(long)]
         out: PathBuf,
     },
@@ -113,7 +121,7 @@ enum Command {
         #[arg(long)]
         camera: PathBuf,
         /// 0 keeps only valid pixels, 1 keeps every source pixel (OpenCV's
-        /// getOptimalNewCameraMatrix); default 0.
+        /// getOptimalNewCameraMatrix).
         #[arg(long, default_value_t = 0.0)]
         alpha: f64,
         /// Input image (.png, .jpg or .exr).
@@ -525,8 +533,8 @@ fn ps_cmd(dir: &Path, model: &str, out: &Path) -> Result<()> {
         None => String::new(),
     };
     eprintln!(
-        "{:?}: {} pixels solved, {} masked; {err}{} lights, condition number {:.2}{}; read {read_s:.2} s, solved in {:.3} s ({:.1} M pixel-lights/s); wrote {}",
-        s.model,
+        "{}: {} pixels solved, {} masked; {err}{} lights, condition number {:.2}{}; read {read_s:.2} s, solved in {:.3} s ({:.1} M pixel-lights/s); wrote {}",
+        s.model.name(),
         s.pixels,
         s.masked_pixels,
         s.lights,

@@ -88,6 +88,17 @@ pub enum Model {
     BlinnPhong,
 }
 
+impl Model {
+    /// The name `--model` and pipeline files use.
+    pub fn name(self) -> &'static str {
+        match self {
+            Model::Lambertian => "lambertian",
+            Model::Robust => "robust",
+            Model::BlinnPhong => "blinn-phong",
+        }
+    }
+}
+
 impl std::str::FromStr for Model {
     type Err = String;
     fn from_str(s: &str) -> Result<Model, String> {

@@ -282,7 +282,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Trut
         w,
         h,
         settings.spp,
-        model_name(model)
+        model.name()
     )];
     let input = photometric::Input {
         width: w,
@@ -301,14 +301,6 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Trut
         files.extend(bytes.into_iter().map(|(n, b)| (folder.join(n), Kept::Bytes(b))));
     }
     Ok((input, Truth { normals, albedo }, Findings { notes, files, ..Default::default() }))
-}
-
-fn model_name(m: Model) -> &'static str {
-    match m {
-        Model::Lambertian => "lambertian",
-        Model::Robust => "robust",
-        Model::BlinnPhong => "blinn-phong",
-    }
 }
 
 pub fn solve(c: &Config, input: &photometric::Input) -> Result<Output, StageError> {
