@@ -98,9 +98,7 @@ pub fn bench_convergence(
             let t = std::time::Instant::now();
             let film = render::render(&scene, &settings);
             let secs = t.elapsed().as_secs_f64();
-            let se: f64 =
-                film.mean.data.iter().zip(&truth.data).map(|(a, b)| (*a as f64 - *b as f64).powi(2)).sum();
-            row.push(((se / truth.data.len() as f64).sqrt(), secs));
+            row.push((lumen::image::metrics::rmse(&film.mean, &truth), secs));
         }
         println!(
             "| {n} | {:.5} | {:.2} | {:.5} | {:.2} | {:.2} |",

@@ -291,8 +291,8 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
         })
         .collect();
     let time_s = t.elapsed().as_secs_f64();
+    let cond = light_condition_number(&input.lights);
     if solved.iter().all(Option::is_none) {
-        let cond = light_condition_number(&input.lights);
         return Err(Error::Unsolvable {
             message: format!(
                 "{} pixels under {} lights (light matrix condition number {cond:.3e}): every pixel has fewer than 3 usable observations or lights in one plane",
@@ -306,7 +306,6 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     let ok: Vec<&Solved> = solved.iter().flatten().collect();
     let used = ok.iter().map(|p| p.used as f64).sum::<f64>() / ok.len().max(1) as f64;
     let glossy = model == Model::BlinnPhong;
-    let cond = light_condition_number(&input.lights);
     let summary = Summary {
         model,
         pixels: ok.len(),
@@ -325,6 +324,11 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     let trace = (glossy && config.trace)
         .then(|| solved.into_iter().map(|s| s.map_or_else(Vec::new, |p| p.history)).collect());
     Ok(Output { model, normals, albedo, specular, trace, summary })
+}
+
+/// Angle in degrees between a unit normal and a truth normal of any length.
+fn angle_deg(n: DVec3, truth: DVec3) -> f64 {
+    n.dot(truth.normalize()).clamp(-1.0, 1.0).acos().to_degrees()
 }
 
 /// A usable truth normal: finite and not zero.
@@ -358,7 +362,7 @@ fn error_by_iteration(trace: &[Vec<DVec3>], normals: &[Option<DVec3>], truth: &[
             for ((hist, normal), t) in trace.iter().zip(normals).zip(truth) {
                 if let (Some(last), true) = (normal, usable(t)) {
                     let normal = hist.get(k).or(hist.last()).copied().unwrap_or(*last);
-                    sum += normal.dot(t.normalize()).clamp(-1.0, 1.0).acos().to_degrees();
+                    sum += angle_deg(normal, *t);
                     n += 1;
                 }
             }
@@ -374,7 +378,7 @@ pub fn angular_errors(normals: &[Option<DVec3>], truth: &[DVec3]) -> Vec<f64> {
         .iter()
         .zip(truth)
         .filter(|(_, t)| usable(t))
-        .filter_map(|(n, t)| n.map(|n| n.dot(t.normalize()).clamp(-1.0, 1.0).acos().to_degrees()))
+        .filter_map(|(n, t)| n.map(|n| angle_deg(n, *t)))
         .collect()
 }
 
@@ -439,7 +443,7 @@ pub fn write(dir: &Path, data: &Input, out: &Output, truth: Option<&[DVec3]>) ->
             err[i] = match out.normals[k] {
                 Some(_) if !usable(&truth[k]) => 0,
                 Some(n) => {
-                    let deg = n.dot(truth[k].normalize()).clamp(-1.0, 1.0).acos().to_degrees();
+                    let deg = angle_deg(n, truth[k]);
                     (deg / 20.0 * 255.0).round().clamp(0.0, 255.0) as u16
                 }
                 None => 255,

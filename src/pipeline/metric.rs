@@ -33,9 +33,28 @@ pub struct Metric {
 impl Metric {
     /// A measured value; a non-finite one is recorded as missing ("not finite: NaN").
     pub fn new(name: &str, value: f64, unit: &str, better: Better) -> Metric {
-        let mut m = Metric {
+        if value.is_finite() {
+            Metric { value: Some(value), ..Metric::empty(name, unit, better) }
+        } else {
+            Metric::missing(name, unit, better, format!("not finite: {value}"))
+        }
+    }
+
+    /// A quantity that could not be measured, with the reason.
+    pub fn missing(name: &str, unit: &str, better: Better, why: impl Into<String>) -> Metric {
+        Metric { missing: Some(why.into()), ..Metric::empty(name, unit, better) }
+    }
+
+    /// A quantity left unmeasured on purpose, with the reason (shown as skipped).
+    pub fn skipped(name: &str, unit: &str, better: Better, why: impl Into<String>) -> Metric {
+        Metric { skipped: Some(why.into()), ..Metric::empty(name, unit, better) }
+    }
+
+    /// No value, bound or verdict yet.
+    fn empty(name: &str, unit: &str, better: Better) -> Metric {
+        Metric {
             name: name.into(),
-            value: Some(value),
+            value: None,
             unit: unit.into(),
             better,
             bound: None,
@@ -43,28 +62,7 @@ impl Metric {
             missing: None,
             skipped: None,
             expected_miss: None,
-        };
-        if !value.is_finite() {
-            m.value = None;
-            m.missing = Some(format!("not finite: {value}"));
         }
-        m
-    }
-
-    /// A quantity that could not be measured, with the reason.
-    pub fn missing(name: &str, unit: &str, better: Better, why: impl Into<String>) -> Metric {
-        let mut m = Metric::new(name, 0.0, unit, better);
-        m.value = None;
-        m.missing = Some(why.into());
-        m
-    }
-
-    /// A quantity left unmeasured on purpose, with the reason (shown as skipped).
-    pub fn skipped(name: &str, unit: &str, better: Better, why: impl Into<String>) -> Metric {
-        let mut m = Metric::missing(name, unit, better, "");
-        m.missing = None;
-        m.skipped = Some(why.into());
-        m
     }
 
     /// A value of `Some(v)` as measured, `None` as missing for `why`.
@@ -87,11 +85,5 @@ impl Metric {
     /// A metric that missed its bound without a declared expected miss.
     pub fn failed(&self) -> bool {
         self.pass == Some(false) && self.expected_miss.is_none()
-    }
-
-    /// Whether the value depends on the machine's speed (throughput or time), so that it is
-    /// left out when runs are compared for determinism.
-    pub fn is_timing(&self) -> bool {
-        matches!(self.unit.as_str(), "s" | "1/s" | "M/s")
     }
 }
