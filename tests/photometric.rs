@@ -42,16 +42,7 @@ fn diligent_ball() {
     assert!(!robust.summary.lights_nearly_coplanar);
     let dir = tempfile::tempdir().unwrap();
     photometric::write(dir.path(), &ds.input, &robust, ds.truth.as_deref()).unwrap();
-    for f in [
-        "normals.exr",
-        "normals.png",
-        "albedo.exr",
-        "albedo.png",
-        "error.png",
-        "depth.exr",
-        "surface.obj",
-        "summary.json",
-    ] {
+    for f in common::PS_OUTPUTS {
         assert!(dir.path().join(f).is_file(), "{f} missing");
     }
     let summary: serde_json::Value =

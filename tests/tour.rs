@@ -74,16 +74,7 @@ fn readme_tour_writes_what_it_says() {
         assert!(ok, "{err}");
     }
     assert!(d.join("out/camera.yaml").is_file());
-    for f in [
-        "normals.exr",
-        "normals.png",
-        "albedo.exr",
-        "albedo.png",
-        "error.png",
-        "depth.exr",
-        "surface.obj",
-        "summary.json",
-    ] {
+    for f in common::PS_OUTPUTS {
         assert!(d.join("out/ps-ball").join(f).is_file(), "ps-ball/{f} missing");
     }
     assert!(d.join("out/undistorted.png").is_file());

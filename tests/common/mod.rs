@@ -11,6 +11,18 @@ pub fn scene(toml_text: &str, dir: &Path) -> Result<Scene, render::Error> {
     render::load(&path)
 }
 
+/// What `lumen ps` writes for a Lambertian model on a dataset with ground truth.
+pub const PS_OUTPUTS: [&str; 8] = [
+    "normals.exr",
+    "normals.png",
+    "albedo.exr",
+    "albedo.png",
+    "error.png",
+    "depth.exr",
+    "surface.obj",
+    "summary.json",
+];
+
 /// The project root.
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
