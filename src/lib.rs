@@ -20,6 +20,7 @@
 //!   results do not depend on the thread count.
 
 pub mod calib;
+pub mod color;
 #[cfg(feature = "opencv")]
 pub mod cv;
 pub mod image;
@@ -40,4 +41,6 @@ pub enum Error {
     Pipeline(#[from] pipeline::Error),
     #[error(transparent)]
     Photometric(#[from] photometric::Error),
+    #[error(transparent)]
+    Color(#[from] color::Error),
 }

@@ -2,6 +2,7 @@
 //! here.
 
 mod bench;
+mod color;
 
 use bench::{bench_calibrate, bench_convergence, bench_render, BenchRender};
 
@@ -129,6 +130,12 @@ enum Command {
         /// Output image: .png (8-bit, the input's code values) or .exr (float).
         output: PathBuf,
     },
+    /// Colour calibration from a ColorChecker 24: fit a model, apply it, or compute a
+    /// chart's camera RGB and XYZ from spectra.
+    Color {
+        #[command(subcommand)]
+        what: color::Color,
+    },
     /// Benchmarks.
     Bench {
         #[command(subcommand)]
@@ -227,6 +234,7 @@ pub fn main() -> i32 {
         Command::Undistort { camera, alpha, input, output } => {
             undistort_cmd(&camera, alpha, &input, &output).map(|_| 0)
         }
+        Command::Color { what } => color::run(what).map(|_| 0),
         Command::Bench {
             what: Bench::Render { scene, spp, max_depth, threads, repeat, sampler, one_path },
         } => {

@@ -191,7 +191,7 @@ pub fn write(path: &Path, img: &Image) -> Result<(), Error> {
 pub fn read(path: &Path) -> Result<Image, Error> {
     match extension(path).as_str() {
         "exr" => read_exr(path),
-        "png" | "jpg" | "jpeg" => read_raw(path),
+        "png" | "jpg" | "jpeg" | "tif" | "tiff" => read_raw(path),
         _ => Err(Error::Format { path: path.into() }),
     }
 }

@@ -1,0 +1,279 @@
+//! `lumen color`: fit a colour-correction model to a chart photograph, apply it to images,
+//! and compute a chart's camera RGB and XYZ from spectra.
+
+use anyhow::{bail, Context, Result};
+use clap::Subcommand;
+use lumen::color::{self, spectra, CcmFile, Input, PatchInput};
+use lumen::image::{self, Image};
+use std::path::{Path, PathBuf};
+
+#[derive(Subcommand)]
+pub enum Color {
+    /// Fit a model mapping camera RGB to XYZ from a photograph of a ColorChecker 24 (or from
+    /// patch values in a CSV); writes the model and its report (per-patch ΔE2000, mean, max,
+    /// leave-one-out mean) as JSON.
+    Fit {
+        /// Chart image: .exr (linear) or 8/16-bit .png/.tif (sRGB-decoded unless --linear).
+        #[arg(long, conflicts_with = "patches", required_unless_present = "patches")]
+        image: Option<PathBuf>,
+        /// The outer corners of the 6×4 cell grid, x1,y1,x2,y2,x3,y3,x4,y4: top-left,
+        /// top-right, bottom-right, bottom-left (the corner by patch 1 "dark skin" first),
+        /// pixel centres at integer coordinates.
+        #[arg(long, required_unless_present = "patches", allow_hyphen_values = true)]
+        corners: Option<String>,
+        /// Patch values instead of an image: CSV with the header patch,R,G,B (linear).
+        #[arg(long)]
+        patches: Option<PathBuf>,
+        /// linear-3x3, white-preserving, affine, root-poly-2, root-poly-3, cheung-N (N = 3,
+        /// 4, 5, 7, 8, 10, 11, 14, 16, 17, 19, 20, 22, 35) or de2000-opt.
+        #[arg(long, default_value = "root-poly-2")]
+        model: String,
+        /// Reference values: CSV with the header patch,X,Y,Z (Y = 1 for a perfect white);
+        /// default: the published ColorChecker 24 values (X-Rite, after Nov. 2014) under D50.
+        #[arg(long)]
+        reference: Option<PathBuf>,
+        /// The white of L*a*b* and ΔE as X,Y,Z (Y = 1); default D50 with the published
+        /// values, required with --reference.
+        #[arg(long, allow_hyphen_values = true)]
+        white: Option<String>,
+        /// Read a PNG/TIFF's code values as linear (raw sensor data), not sRGB-encoded.
+        #[arg(long)]
+        linear: bool,
+        /// The level at which a channel clips, in the image's units (default 1: full scale
+        /// of a PNG/TIFF, or of an EXR scaled to it).
+        #[arg(long, default_value_t = 1.0)]
+        saturation: f64,
+        /// The patch white-preserving maps exactly, 1 to 24 (default 19, "white 9.5").
+        #[arg(long, default_value_t = 19)]
+        white_patch: usize,
+        /// Output JSON: the model, its white and the report.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Apply a fitted model to an image: camera RGB to linear sRGB (D65, Bradford-adapted
+    /// from the model's white) or to XYZ.
+    Apply {
+        /// JSON written by `lumen color fit`.
+        #[arg(long)]
+        ccm: PathBuf,
+        /// `srgb` (linear in .exr, sRGB-encoded in .png) or `xyz` (relative to the model's
+        /// white, .exr).
+        #[arg(long, default_value = "srgb")]
+        space: String,
+        /// Read a PNG/TIFF's code values as linear (raw sensor data), not sRGB-encoded.
+        #[arg(long)]
+        linear: bool,
+        /// Input image: .exr, .png or .tif.
+        input: PathBuf,
+        /// Output image: .exr or .png.
+        output: PathBuf,
+    },
+    /// A ColorChecker 24's camera RGB and XYZ computed from spectra: the reflectances
+    /// (BabelColor average), a CIE illuminant and a camera's measured sensitivities; writes
+    /// rgb.csv (patch,R,G,B, a perfect white's strongest channel = 1), xyz.csv (patch,X,Y,Z,
+    /// Y = 1 for a perfect white) and white.csv (the illuminant's white).
+    Spectral {
+        /// nikon-d5100 or sigma-sd-merrill.
+        #[arg(long, default_value = "nikon-d5100")]
+        camera: String,
+        /// d65, d50, a or fl2.
+        #[arg(long, default_value = "d65")]
+        illuminant: String,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+    },
+}
+
+pub fn run(cmd: Color) -> Result<()> {
+    match cmd {
+        Color::Fit { image, corners, patches, model, reference, white, linear, saturation, white_patch, out } => {
+            let args = FitArgs { image, corners, patches, model, reference, white, linear, saturation, white_patch };
+            fit(&args, &out)
+        }
+        Color::Apply { ccm, space, linear, input, output } => apply(&ccm, &space, linear, &input, &output),
+        Color::Spectral { camera, illuminant, out } => spectral(&camera, &illuminant, &out),
+    }
+}
+
+struct FitArgs {
+    image: Option<PathBuf>,
+    corners: Option<String>,
+    patches: Option<PathBuf>,
+    model: String,
+    reference: Option<PathBuf>,
+    white: Option<String>,
+    linear: bool,
+    saturation: f64,
+    white_patch: usize,
+}
+
+/// Reads an image as linear RGB: EXR as stored, PNG/TIFF sRGB-decoded unless `linear`.
+/// Returns the image and how it was read.
+fn read_linear(path: &Path, linear: bool) -> Result<(Image, &'static str)> {
+    let mut img = image::io::read(path)?;
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_lowercase();
+    if ext == "exr" {
+        return Ok((img, "linear (EXR)"));
+    }
+    if linear {
+        return Ok((img, "code values read as linear (--linear)"));
+    }
+    img.data.iter_mut().for_each(|v| *v = image::srgb_decode(*v));
+    Ok((img, "sRGB-decoded (pass --linear for raw sensor data)"))
+}
+
+fn fit(a: &FitArgs, out: &Path) -> Result<()> {
+    let model: color::Model = a.model.parse().map_err(|e: String| anyhow::anyhow!("--model: {e}"))?;
+    if !(1..=24).contains(&a.white_patch) {
+        bail!("--white-patch {}: expected a patch number 1 to 24", a.white_patch);
+    }
+    if !(a.saturation.is_finite() && a.saturation > 0.0) {
+        bail!("--saturation {}: expected a positive number", a.saturation);
+    }
+    let (names, reference, white) = match (&a.reference, &a.white) {
+        (Some(path), Some(w)) => {
+            let white = color::parse_numbers::<3>(w, "--white").map_err(anyhow::Error::msg)?;
+            let names = spectra::chart().into_iter().map(|(n, _)| n).collect::<Vec<_>>();
+            (names, color::read_reference(path).context("--reference")?, white)
+        }
+        (Some(_), None) => bail!("--reference needs --white X,Y,Z: the white its values are relative to"),
+        (None, w) => {
+            let (published, d50) = color::published_reference();
+            let white = match w {
+                Some(w) => color::parse_numbers::<3>(w, "--white").map_err(anyhow::Error::msg)?,
+                None => d50,
+            };
+            let (names, xyz) = published.into_iter().unzip();
+            (names, xyz, white)
+        }
+    };
+    if !white.iter().all(|&v| v > 0.0) {
+        bail!("--white {white:?}: expected three positive numbers (X,Y,Z)");
+    }
+    let (samples, how): (Vec<([f64; 3], Option<color::Flag>)>, String) = match (&a.image, &a.patches) {
+        (Some(path), _) => {
+            let corners_text = a.corners.as_deref().unwrap_or("");
+            let c = color::parse_numbers::<8>(corners_text, "--corners").map_err(anyhow::Error::msg)?;
+            let corners = [[c[0], c[1]], [c[2], c[3]], [c[4], c[5]], [c[6], c[7]]];
+            let (img, how) = read_linear(path, a.linear)?;
+            let s = color::chart::sample(&img, corners, a.saturation)
+                .map_err(|m| anyhow::anyhow!("{}: {m}", path.display()))?;
+            (s.into_iter().map(|p| (p.rgb, p.flag)).collect(), format!("{}: {how}", path.display()))
+        }
+        (None, Some(path)) => {
+            let rgb = color::read_patch_rgb(path).context("--patches")?;
+            (rgb.into_iter().map(|c| (c, None)).collect(), format!("{}: patch values", path.display()))
+        }
+        (None, None) => bail!("give --image with --corners, or --patches"),
+    };
+    let input = Input {
+        patches: samples
+            .iter()
+            .zip(&reference)
+            .zip(&names)
+            .map(|(((rgb, flag), xyz), name)| PatchInput { name: name.clone(), rgb: *rgb, reference_xyz: *xyz, flag: *flag })
+            .collect(),
+        white,
+    };
+    let config = color::Config { model, white_patch: a.white_patch - 1, leave_one_out: true };
+    let result = color::run(&input, &config)?;
+    for w in &result.warnings {
+        eprintln!("warning: {w}");
+    }
+    let file = CcmFile { format: color::CCM_FORMAT.into(), fitted: result.fitted.clone(), white, report: Some(result.clone()) };
+    let json = serde_json::to_string_pretty(&file)?;
+    image::io::write_atomically(out, |tmp| std::fs::write(tmp, json).map_err(|e| e.to_string()))?;
+    let loo = result.loo_mean_de2000.map_or("none".to_string(), |v| format!("{v:.3}"));
+    eprintln!(
+        "{how}; {}: {} patches used, mean ΔE2000 {:.3}, max {:.3}, leave-one-out mean {loo} (fit {:.1} ms, leave-one-out {:.1} ms); wrote {}",
+        model.name(),
+        result.used_patches,
+        result.mean_de2000,
+        result.max_de2000,
+        1e3 * result.fit_s,
+        1e3 * result.loo_s,
+        out.display()
+    );
+    Ok(())
+}
+
+fn apply(ccm: &Path, space: &str, linear: bool, input: &Path, output: &Path) -> Result<()> {
+    let file = color::read_ccm(ccm).context("--ccm")?;
+    let to_srgb = match space {
+        "srgb" => Some(color::xyz_to_linear_srgb(file.white)),
+        "xyz" => None,
+        other => bail!("--space {other}: expected srgb or xyz"),
+    };
+    let out_ext = output.extension().and_then(|e| e.to_str()).unwrap_or("").to_lowercase();
+    if !["exr", "png"].contains(&out_ext.as_str()) {
+        bail!("{}: expected an .exr or .png output", output.display());
+    }
+    if to_srgb.is_none() && out_ext != "exr" {
+        bail!("{}: XYZ is written as .exr (a PNG would clip and sRGB-encode it)", output.display());
+    }
+    let t = std::time::Instant::now();
+    let (img, how) = read_linear(input, linear)?;
+    if img.channels < 3 {
+        bail!("{}: {} channel(s), expected RGB", input.display(), img.channels);
+    }
+    let read_s = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let c = img.channels as usize;
+    let mut out = Image::new(img.width, img.height, 3);
+    use rayon::prelude::*;
+    out.data.par_chunks_mut(3 * img.width as usize).zip(img.data.par_chunks(c * img.width as usize)).for_each(
+        |(dst, src)| {
+            for (d, s) in dst.chunks_exact_mut(3).zip(src.chunks_exact(c)) {
+                let xyz = file.fitted.apply([s[0] as f64, s[1] as f64, s[2] as f64]);
+                let v = match &to_srgb {
+                    Some(m) => m.map(|row| row[0] * xyz[0] + row[1] * xyz[1] + row[2] * xyz[2]),
+                    None => xyz,
+                };
+                for k in 0..3 {
+                    // A non-finite input pixel stays visible as 0 rather than poisoning the file.
+                    d[k] = if v[k].is_finite() { v[k] as f32 } else { 0.0 };
+                }
+            }
+        },
+    );
+    let apply_s = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    image::io::write(output, &out)?;
+    eprintln!(
+        "{}: {how}; {} ({}×{}, {:.1} Mpixel) to {space}: read {read_s:.2} s, applied in {apply_s:.3} s ({:.0} Mpixel/s), written in {:.2} s to {}",
+        input.display(),
+        file.fitted.model,
+        img.width,
+        img.height,
+        (img.width as f64 * img.height as f64) / 1e6,
+        (img.width as f64 * img.height as f64) / 1e6 / apply_s.max(1e-9),
+        t.elapsed().as_secs_f64(),
+        output.display()
+    );
+    Ok(())
+}
+
+fn spectral(camera: &str, illuminant: &str, out: &Path) -> Result<()> {
+    let cam = spectra::camera(camera).with_context(|| format!("--camera {camera}: expected one of {}", spectra::CAMERAS.join(", ")))?;
+    let ill = spectra::illuminant(illuminant)
+        .with_context(|| format!("--illuminant {illuminant}: expected one of {}", spectra::ILLUMINANTS.join(", ")))?;
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let chart = spectra::chart();
+    let rgb: Vec<[f64; 3]> = chart.iter().map(|(_, r)| spectra::camera_rgb(r, &ill, &cam)).collect();
+    let xyz: Vec<[f64; 3]> = chart.iter().map(|(_, r)| spectra::xyz(r, &ill)).collect();
+    let white = spectra::white(&ill);
+    let what = format!("ColorChecker 24 (BabelColor average) under {illuminant}, camera {camera}");
+    color::write_table(&out.join("rgb.csv"), ["R", "G", "B"], &rgb, &format!("{what}: camera RGB, a perfect white's strongest channel = 1"))?;
+    color::write_table(&out.join("xyz.csv"), ["X", "Y", "Z"], &xyz, &format!("{what}: CIE 1931 2° XYZ, Y = 1 for a perfect white"))?;
+    let text = format!("# the white of {illuminant} (CIE 1931 2°)\nX,Y,Z\n{:e},{:e},{:e}\n", white[0], white[1], white[2]);
+    image::io::write_atomically(&out.join("white.csv"), |tmp| std::fs::write(tmp, text).map_err(|e| e.to_string()))?;
+    eprintln!(
+        "{what}: wrote rgb.csv, xyz.csv and white.csv to {}; white {:.6},{:.6},{:.6}",
+        out.display(),
+        white[0],
+        white[1],
+        white[2]
+    );
+    Ok(())
+}

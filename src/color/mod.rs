@@ -1,0 +1,388 @@
+//! Colorimetric calibration from a colour chart: the model that maps a camera's linear RGB to
+//! CIE XYZ, fitted to a chart's patches and judged in CIEDE2000.
+//!
+//! `run(&Input, &Config)` is the solver `lumen color fit` and the pipeline's `color` stage
+//! both call: the patches' camera RGB and reference XYZ in, the fitted model (`models`) and
+//! its report out: per patch ΔE00 and ΔE*ab against the reference (L*a*b* relative to the
+//! input's white), their mean and maximum over the patches the fit used, and the
+//! leave-one-out mean: each patch predicted by the model fitted to the other patches, the
+//! error a patch that was not in the fit can expect, so over-fitting shows (a 35-term
+//! polynomial reproduces 24 patches nearly exactly and predicts the 25th badly).
+//!
+//! Patches flagged clipped or dark by the sampler (`chart`) are left out of the fit with a
+//! warning; too few usable patches for the model's terms is a clear error, never NaN.
+//!
+//! `spectra` holds the spectral data the pipeline's chart renders use and the published
+//! chart values; `delta_e` the colour differences.
+
+pub mod chart;
+pub mod delta_e;
+pub mod models;
+pub mod spectra;
+
+pub use chart::Flag;
+pub use models::{Fitted, Model};
+
+use delta_e::{delta_e2000, delta_e76, lab};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// The input or a setting is wrong (names what and why).
+    #[error("{0}")]
+    BadInput(String),
+    /// The patches do not determine the model.
+    #[error("{0}")]
+    Unsolvable(String),
+    #[error("{path}: {message}")]
+    File { path: PathBuf, message: String },
+    #[error(transparent)]
+    Image(#[from] crate::image::io::Error),
+}
+
+/// One patch as the solver sees it.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct PatchInput {
+    pub name: String,
+    /// Linear camera RGB.
+    pub rgb: [f64; 3],
+    /// Reference XYZ (Y = 1 for a perfect white).
+    pub reference_xyz: [f64; 3],
+    /// Set by the sampler: the patch is left out of the fit.
+    pub flag: Option<Flag>,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Input {
+    pub patches: Vec<PatchInput>,
+    /// The white of L*a*b* and ΔE (XYZ, Y = 1).
+    pub white: [f64; 3],
+}
+
+#[derive(Clone, Debug)]
+pub struct Config {
+    pub model: Model,
+    /// The patch (0-based) `white-preserving` maps exactly (default 18, "white 9.5").
+    pub white_patch: usize,
+    /// Compute the leave-one-out errors (one more fit per patch; default true).
+    pub leave_one_out: bool,
+}
+
+impl Config {
+    pub fn new(model: Model) -> Config {
+        Config { model, white_patch: WHITE_PATCH, leave_one_out: true }
+    }
+}
+
+/// The ColorChecker's "white 9.5 (.05 D)", 0-based.
+pub const WHITE_PATCH: usize = 18;
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct PatchResult {
+    pub name: String,
+    pub rgb: [f64; 3],
+    pub reference_xyz: [f64; 3],
+    pub predicted_xyz: [f64; 3],
+    pub de2000: f64,
+    pub de76: f64,
+    /// The patch predicted by the model fitted without it.
+    pub loo_de2000: Option<f64>,
+    /// Whether the fit used the patch.
+    pub used: bool,
+    pub flag: Option<Flag>,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Output {
+    pub fitted: Fitted,
+    pub white: [f64; 3],
+    pub patches: Vec<PatchResult>,
+    pub used_patches: usize,
+    /// Over the patches the fit used.
+    pub mean_de2000: f64,
+    pub max_de2000: f64,
+    pub mean_de76: f64,
+    /// Mean of `loo_de2000` over the used patches it exists for.
+    pub loo_mean_de2000: Option<f64>,
+    pub loo_max_de2000: Option<f64>,
+    pub warnings: Vec<String>,
+    /// Seconds for the fit alone and for the leave-one-out fits.
+    pub fit_s: f64,
+    pub loo_s: f64,
+}
+
+pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
+    check_input(input)?;
+    let mut warnings = Vec::new();
+    let used: Vec<usize> = (0..input.patches.len()).filter(|&i| input.patches[i].flag.is_none()).collect();
+    for (i, p) in input.patches.iter().enumerate() {
+        if let Some(flag) = p.flag {
+            let why = match flag {
+                Flag::Clipped => "clipped (a pixel reached saturation)",
+                Flag::Dark => "too dark (its value is not above the noise)",
+            };
+            warnings.push(format!("patch {} ({}) is {why}: left out of the fit", i + 1, p.name));
+        }
+    }
+    let white_patch = used.iter().position(|&i| i == config.white_patch);
+    if config.model == Model::WhitePreserving && config.white_patch >= input.patches.len() {
+        return Err(Error::BadInput(format!(
+            "white_patch = {}: the chart has {} patches",
+            config.white_patch + 1,
+            input.patches.len()
+        )));
+    }
+    let rgb: Vec<[f64; 3]> = used.iter().map(|&i| input.patches[i].rgb).collect();
+    let xyz: Vec<[f64; 3]> = used.iter().map(|&i| input.patches[i].reference_xyz).collect();
+    let t = std::time::Instant::now();
+    let fitted = models::fit(config.model, &rgb, &xyz, input.white, white_patch).map_err(|e| {
+        let msg = format!("model {}: {e}", config.model.name());
+        match e {
+            models::FitError::TooFew { .. } | models::FitError::NoWhite => Error::BadInput(msg),
+            models::FitError::RankDeficient { .. } => Error::Unsolvable(msg),
+        }
+    })?;
+    let fit_s = t.elapsed().as_secs_f64();
+
+    let t = std::time::Instant::now();
+    let mut loo = vec![None; input.patches.len()];
+    if config.leave_one_out {
+        use rayon::prelude::*;
+        // One fit per patch, independent of each other: in parallel.
+        let folds: Vec<(usize, Result<f64, models::FitError>)> = used
+            .par_iter()
+            .enumerate()
+            .filter(|&(j, _)| !(config.model == Model::WhitePreserving && Some(j) == white_patch))
+            .map(|(j, &i)| {
+                let keep = |v: &[[f64; 3]]| -> Vec<[f64; 3]> {
+                    v.iter().enumerate().filter(|&(k, _)| k != j).map(|(_, x)| *x).collect()
+                };
+                let wp = white_patch.map(|w| if w > j { w - 1 } else { w });
+                let fit = models::fit(config.model, &keep(&rgb), &keep(&xyz), input.white, wp);
+                (i, fit.map(|f| delta_e2000(lab(f.apply(rgb[j]), input.white), lab(xyz[j], input.white))))
+            })
+            .collect();
+        if let Some(w) = white_patch.filter(|_| config.model == Model::WhitePreserving) {
+            warnings.push(format!(
+                "leave-one-out: patch {} is the white white-preserving maps exactly, so it has no fit without it",
+                used[w] + 1
+            ));
+        }
+        let mut failed = Vec::new();
+        for (i, r) in folds {
+            match r {
+                Ok(d) => loo[i] = Some(d),
+                Err(e) => failed.push(format!("{} ({e})", i + 1)),
+            }
+        }
+        if !failed.is_empty() {
+            warnings.push(format!("leave-one-out: no fit without patch {}", failed.join(", ")));
+        }
+    }
+    let loo_s = t.elapsed().as_secs_f64();
+
+    let patches: Vec<PatchResult> = input
+        .patches
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let predicted = fitted.apply(p.rgb);
+            let (a, b) = (lab(predicted, input.white), lab(p.reference_xyz, input.white));
+            PatchResult {
+                name: p.name.clone(),
+                rgb: p.rgb,
+                reference_xyz: p.reference_xyz,
+                predicted_xyz: predicted,
+                de2000: delta_e2000(a, b),
+                de76: delta_e76(a, b),
+                loo_de2000: loo[i],
+                used: p.flag.is_none(),
+                flag: p.flag,
+            }
+        })
+        .collect();
+    let used_results: Vec<&PatchResult> = patches.iter().filter(|p| p.used).collect();
+    let n = used_results.len() as f64;
+    let mean = |f: &dyn Fn(&PatchResult) -> f64| used_results.iter().map(|p| f(p)).sum::<f64>() / n;
+    let loo_values: Vec<f64> = used_results.iter().filter_map(|p| p.loo_de2000).collect();
+    let out = Output {
+        mean_de2000: mean(&|p| p.de2000),
+        max_de2000: used_results.iter().map(|p| p.de2000).fold(0.0, f64::max),
+        mean_de76: mean(&|p| p.de76),
+        loo_mean_de2000: (!loo_values.is_empty()).then(|| loo_values.iter().sum::<f64>() / loo_values.len() as f64),
+        loo_max_de2000: loo_values.iter().copied().reduce(f64::max),
+        used_patches: used_results.len(),
+        fitted,
+        white: input.white,
+        patches,
+        warnings,
+        fit_s,
+        loo_s,
+    };
+    if out.patches.iter().any(|p| !(p.de2000.is_finite() && p.predicted_xyz.iter().all(|v| v.is_finite()))) {
+        return Err(Error::Unsolvable(format!(
+            "model {}: the fit predicts a non-finite colour",
+            config.model.name()
+        )));
+    }
+    Ok(out)
+}
+
+fn check_input(input: &Input) -> Result<(), Error> {
+    if input.patches.is_empty() {
+        return Err(Error::BadInput("no patches".into()));
+    }
+    if !input.white.iter().all(|v| v.is_finite() && *v > 0.0) {
+        return Err(Error::BadInput(format!("white {:?}: expected three positive numbers (XYZ)", input.white)));
+    }
+    for (i, p) in input.patches.iter().enumerate() {
+        if !p.rgb.iter().chain(&p.reference_xyz).all(|v| v.is_finite()) {
+            return Err(Error::BadInput(format!(
+                "patch {} ({}): RGB {:?} or reference XYZ {:?} is not finite",
+                i + 1,
+                p.name,
+                p.rgb,
+                p.reference_xyz
+            )));
+        }
+        if p.reference_xyz.iter().any(|&v| v < 0.0) {
+            return Err(Error::BadInput(format!(
+                "patch {} ({}): reference XYZ {:?} is negative",
+                i + 1,
+                p.name,
+                p.reference_xyz
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The published ColorChecker 24 values (X-Rite, after November 2014) under D50, and the D50
+/// white: the default reference.
+pub fn published_reference() -> (Vec<(String, [f64; 3])>, [f64; 3]) {
+    (spectra::chart_reference_d50(), spectra::d50_white())
+}
+
+/// Reads reference values: CSV with the header `patch,X,Y,Z`, patches 1 to 24 each once
+/// (any order), Y = 1 for a perfect white; `#` starts a comment line.
+pub fn read_reference(path: &Path) -> Result<Vec<[f64; 3]>, Error> {
+    read_table(path, ["patch", "x", "y", "z"], false)
+}
+
+/// Reads measured patch values: CSV with the header `patch,R,G,B` (linear camera RGB),
+/// patches 1 to 24 each once.
+pub fn read_patch_rgb(path: &Path) -> Result<Vec<[f64; 3]>, Error> {
+    read_table(path, ["patch", "r", "g", "b"], true)
+}
+
+fn read_table(path: &Path, columns: [&str; 4], negative_ok: bool) -> Result<Vec<[f64; 3]>, Error> {
+    let err = |message: String| Error::File { path: path.into(), message };
+    let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
+    let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
+    let header: Vec<String> = lines.next().map(|(_, l)| l.split(',').map(|s| s.trim().to_lowercase()).collect()).unwrap_or_default();
+    let shown = format!("{},{},{},{}", columns[0], columns[1].to_uppercase(), columns[2].to_uppercase(), columns[3].to_uppercase());
+    if header != columns {
+        return Err(err(format!("expected the header `{shown}`")));
+    }
+    let mut values: Vec<Option<[f64; 3]>> = vec![None; 24];
+    for (n, line) in lines {
+        let at = |m: String| err(format!("line {}: {m}", n + 1));
+        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
+        if cells.len() != 4 {
+            return Err(at(format!("{} fields: expected 4 ({shown})", cells.len())));
+        }
+        let patch: usize = cells[0].parse().map_err(|_| at(format!("patch `{}`: expected a number 1 to 24", cells[0])))?;
+        if !(1..=24).contains(&patch) {
+            return Err(at(format!("patch {patch}: expected 1 to 24")));
+        }
+        let mut v = [0.0; 3];
+        for c in 0..3 {
+            let x: f64 = cells[c + 1].parse().map_err(|_| at(format!("`{}`: expected a number", cells[c + 1])))?;
+            if !(x.is_finite() && (negative_ok || x >= 0.0)) {
+                let kind = if negative_ok { "finite" } else { "finite, non-negative" };
+                return Err(at(format!("{x}: expected a {kind} number")));
+            }
+            v[c] = x;
+        }
+        if values[patch - 1].replace(v).is_some() {
+            return Err(at(format!("patch {patch} is given twice")));
+        }
+    }
+    let missing: Vec<String> = (0..24).filter(|&i| values[i].is_none()).map(|i| (i + 1).to_string()).collect();
+    if !missing.is_empty() {
+        return Err(err(format!("no values for patch {}", missing.join(", "))));
+    }
+    Ok(values.into_iter().flatten().collect())
+}
+
+/// Writes a 24-row table with the header `patch,A,B,C` (full precision), atomically.
+pub fn write_table(path: &Path, columns: [&str; 3], rows: &[[f64; 3]], comment: &str) -> Result<(), Error> {
+    let mut text = format!("# {comment}\npatch,{},{},{}\n", columns[0], columns[1], columns[2]);
+    for (i, r) in rows.iter().enumerate() {
+        text.push_str(&format!("{},{:e},{:e},{:e}\n", i + 1, r[0], r[1], r[2]));
+    }
+    Ok(crate::image::io::write_atomically(path, |tmp| std::fs::write(tmp, &text).map_err(|e| e.to_string()))?)
+}
+
+/// Parses `X,Y,Z` (a white) or `x1,y1,…` (corners): `n` finite numbers.
+pub fn parse_numbers<const N: usize>(s: &str, what: &str) -> Result<[f64; N], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("{what} `{s}`: expected {N} comma-separated numbers"))?;
+    let arr: [f64; N] = v.try_into().map_err(|v: Vec<f64>| format!("{what} `{s}`: {} numbers, expected {N}", v.len()))?;
+    if arr.iter().any(|x| !x.is_finite()) {
+        return Err(format!("{what} `{s}`: expected finite numbers"));
+    }
+    Ok(arr)
+}
+
+/// The fitted model as `lumen color fit` writes it and `lumen color apply` reads it.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CcmFile {
+    /// Always `lumen-ccm`: what the file is.
+    pub format: String,
+    pub fitted: Fitted,
+    /// The reference white (XYZ) the model's output is relative to.
+    pub white: [f64; 3],
+    /// The fit's report (absent when written by hand).
+    #[serde(default)]
+    pub report: Option<Output>,
+}
+
+pub const CCM_FORMAT: &str = "lumen-ccm";
+
+pub fn read_ccm(path: &Path) -> Result<CcmFile, Error> {
+    let err = |message: String| Error::File { path: path.into(), message };
+    let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
+    let de = &mut serde_json::Deserializer::from_str(&text);
+    let file: CcmFile = serde_path_to_error::deserialize(de).map_err(|e| err(format!("{}: {}", e.path(), e.inner())))?;
+    if file.format != CCM_FORMAT {
+        return Err(err(format!("format `{}`: expected `{CCM_FORMAT}`", file.format)));
+    }
+    file.fitted.check().map_err(|m| err(format!("fitted: {m}")))?;
+    if !file.white.iter().all(|v| v.is_finite() && *v > 0.0) {
+        return Err(err(format!("white {:?}: expected three positive numbers", file.white)));
+    }
+    Ok(file)
+}
+
+/// XYZ (relative to `white`) → linear sRGB (D65), through the Bradford chromatic adaptation
+/// from `white` to D65 (IEC 61966-2-1's matrix).
+pub fn xyz_to_linear_srgb(white: [f64; 3]) -> [[f64; 3]; 3] {
+    use glam::DMat3;
+    let bradford = DMat3::from_cols_array(&[0.8951, -0.7502, 0.0389, 0.2664, 1.7135, -0.0685, -0.1614, 0.0367, 1.0296]);
+    let d65 = glam::DVec3::new(0.95047, 1.0, 1.08883);
+    let src = bradford * glam::DVec3::from_array(white);
+    let dst = bradford * d65;
+    let adapt = bradford.inverse() * DMat3::from_diagonal(dst / src) * bradford;
+    let to_srgb = DMat3::from_cols_array(&[
+        3.2404542, -0.9692660, 0.0556434, -1.5371385, 1.8760108, -0.2040259, -0.4985314, 0.0415560, 1.0572252,
+    ]);
+    let m = to_srgb * adapt;
+    let r = m.transpose().to_cols_array_2d();
+    [r[0], r[1], r[2]]
+}
