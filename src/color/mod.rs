@@ -119,7 +119,7 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     for (i, p) in input.patches.iter().enumerate() {
         if let Some(flag) = p.flag {
             let why = match flag {
-                Flag::Clipped => "clipped (a pixel reached saturation)",
+                Flag::Clipped => "clipped (over 10 % of its pixels at saturation)",
                 Flag::Dark => "too dark (its value is not above the noise)",
             };
             warnings.push(format!("patch {} ({}) is {why}: left out of the fit", i + 1, p.name));

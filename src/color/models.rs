@@ -295,7 +295,7 @@ impl std::fmt::Display for FitError {
     fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
         match self {
             FitError::TooFew { patches, needed } => {
-                write!(f, "{patches} usable patches, but the model needs at least {needed}")
+                write!(f, "{patches} usable patch(es), but the model needs at least {needed}")
             }
             FitError::RankDeficient { ratio } => write!(
                 f,

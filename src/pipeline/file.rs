@@ -38,6 +38,7 @@ pub enum Stage {
     Render(stages::render::Config),
     Calibrate(stages::calibrate::Config),
     Photometric(stages::photometric::Config),
+    Color(stages::color::Config),
 }
 
 impl Stage {
@@ -46,6 +47,7 @@ impl Stage {
             Stage::Render(_) => "render",
             Stage::Calibrate(_) => "calibrate",
             Stage::Photometric(_) => "photometric",
+            Stage::Color(_) => "color",
         }
     }
 
@@ -56,6 +58,7 @@ impl Stage {
             Stage::Render(_) => "mean_rel_err",
             Stage::Calibrate(_) => "fx_rel_err",
             Stage::Photometric(_) => "mean_angular_error_deg",
+            Stage::Color(_) => "loo_mean_de2000",
         }
     }
 }
@@ -154,7 +157,7 @@ pub fn parse(text: &str, path: &Path) -> Result<PipelineFile, Error> {
         let stage_name = match common_t.remove("stage") {
             Some(toml::Value::String(s)) => s,
             Some(other) => return Err(err(format!("`stage` = {other}: expected a stage name"))),
-            None => return Err(err("missing `stage` (render, calibrate or photometric)".into())),
+            None => return Err(err("missing `stage` (render, calibrate, photometric or color)".into())),
         };
         let common: Common = from_table(common_t).map_err(err)?;
         let err = |message: String| Error::Parse {
@@ -264,7 +267,8 @@ fn parse_stage(name: &str, own: toml::Table) -> Result<Stage, String> {
         "render" => Stage::Render(from_table(own)?),
         "calibrate" => Stage::Calibrate(from_table(own)?),
         "photometric" => Stage::Photometric(from_table(own)?),
-        other => return Err(format!("unknown stage `{other}`: expected render, calibrate or photometric")),
+        "color" => Stage::Color(from_table(own)?),
+        other => return Err(format!("unknown stage `{other}`: expected render, calibrate, photometric or color")),
     })
 }
 

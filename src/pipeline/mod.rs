@@ -103,6 +103,11 @@ fn run_cases(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Repo
                 |i| stages::photometric::solve(c, i),
                 |o, t| stages::photometric::validate(c, o, t),
             ),
+            Stage::Color(c) => run_case(
+                || stages::color::synthesize(c, &ctx),
+                |i| stages::color::solve(c, i),
+                |o, t| stages::color::validate(c, o, t),
+            ),
         };
         let total = t.elapsed().as_secs_f64();
         let (mut st, kept) = report_case(path, case, seed, result)?;

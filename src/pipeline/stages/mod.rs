@@ -12,6 +12,7 @@
 //! renderer.
 
 pub mod calibrate;
+pub mod color;
 pub mod photometric;
 pub mod render;
 
@@ -34,6 +35,8 @@ pub enum StageError {
     Calib(#[from] crate::calib::Error),
     #[error(transparent)]
     Photometric(#[from] crate::photometric::Error),
+    #[error(transparent)]
+    Color(#[from] crate::color::Error),
 }
 
 /// The kinds a pipeline entry can declare with `expect_error`.
@@ -59,6 +62,10 @@ impl StageError {
             StageError::Photometric(P::Unsolvable { .. }) => "numerical",
             StageError::Photometric(P::Image(I::Read { .. })) => "io",
             StageError::Photometric(_) => "bad-input",
+            StageError::Color(crate::color::Error::Unsolvable(_)) => "numerical",
+            StageError::Color(crate::color::Error::File { .. }) => "io",
+            StageError::Color(crate::color::Error::Image(I::Read { .. } | I::Write { .. })) => "io",
+            StageError::Color(_) => "bad-input",
         }
     }
 }

@@ -1,0 +1,267 @@
+//! Colour calibration: the fits against colour-science's figures, `lumen color fit` on the
+//! pipeline's rendered chart giving the pipeline's numbers, `color apply`, and bad input.
+
+mod common;
+
+use lumen::color::{self, spectra, Model};
+use std::path::Path;
+use std::process::Command;
+
+fn lumen(args: &[&str]) -> (i32, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_lumen")).args(args).output().expect("runs");
+    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+/// The noise-free D5100/D65 chart: camera RGB and XYZ from the spectra.
+fn spectral_input() -> color::Input {
+    let cam = spectra::camera("nikon-d5100").unwrap();
+    let ill = spectra::illuminant("d65").unwrap();
+    color::Input {
+        patches: spectra::chart()
+            .into_iter()
+            .map(|(name, r)| color::PatchInput {
+                name,
+                rgb: spectra::camera_rgb(&r, &ill, &cam),
+                reference_xyz: spectra::xyz(&r, &ill),
+                flag: None,
+            })
+            .collect(),
+        white: spectra::white(&ill),
+    }
+}
+
+/// colour-science 0.4.7's colour_correction on the same camera RGB and XYZ (measured with
+/// tools/color_vs_colour_science.py): mean ΔE00 1.0093 / 0.5677 / 0.3724 and leave-one-out
+/// 1.1530 / 0.7616 / 1.6603 for Cheung 2004 (3 terms) and Finlayson 2015 (degree 2, 3).
+/// lumen's least squares must give the same to the figures' rounding.
+#[test]
+fn least_squares_fits_match_colour_science() {
+    let input = spectral_input();
+    for (model, mean, loo) in [("linear-3x3", 1.0093, 1.1530), ("root-poly-2", 0.5677, 0.7616), ("root-poly-3", 0.3724, 1.6603)] {
+        let out = color::run(&input, &color::Config::new(model.parse().unwrap())).unwrap();
+        assert!((out.mean_de2000 - mean).abs() < 1e-4, "{model}: mean {}", out.mean_de2000);
+        let l = out.loo_mean_de2000.unwrap();
+        assert!((l - loo).abs() < 1e-4, "{model}: leave-one-out {l}");
+    }
+}
+
+/// The ΔE00-optimised root-polynomial predicts a left-out patch better than the best
+/// colour-science model (root-poly-2's 0.7616), and fits the chart better than its own start;
+/// the fit and its leave-one-out report take well under a second.
+#[test]
+fn de2000_optimised_beats_least_squares_out_of_sample() {
+    let input = spectral_input();
+    let ls = color::run(&input, &color::Config::new(Model::RootPoly(2))).unwrap();
+    let opt = color::run(&input, &color::Config::new("de2000-opt:root-poly-2".parse().unwrap())).unwrap();
+    assert!(opt.mean_de2000 < ls.mean_de2000, "{} vs {}", opt.mean_de2000, ls.mean_de2000);
+    assert!(opt.loo_mean_de2000.unwrap() < 0.7616, "{:?}", opt.loo_mean_de2000);
+    let three = color::run(&input, &color::Config::new(Model::De2000Opt(color::models::Basis::Linear3x3))).unwrap();
+    let ls3 = color::run(&input, &color::Config::new(Model::Linear3x3)).unwrap();
+    assert!(three.mean_de2000 < ls3.mean_de2000);
+}
+
+/// Every model on the same data: finite, and a model with more terms than patches refused.
+#[test]
+fn every_model_is_finite_or_refused() {
+    let input = spectral_input();
+    for n in color::models::CHEUNG_TERMS {
+        let r = color::run(&input, &color::Config::new(Model::Cheung(n)));
+        if n as usize > 24 {
+            assert!(matches!(r, Err(color::Error::BadInput(ref m)) if m.contains("needs at least 35")), "{n}");
+        } else {
+            let out = r.unwrap();
+            assert!(out.mean_de2000.is_finite() && out.patches.iter().all(|p| p.de2000.is_finite()), "cheung-{n}");
+        }
+    }
+    // Patches flagged by the sampler are left out, with a warning naming them.
+    let mut few = spectral_input();
+    few.patches.iter_mut().skip(4).for_each(|p| p.flag = Some(color::Flag::Clipped));
+    let err = color::run(&few, &color::Config::new(Model::RootPoly(2))).unwrap_err();
+    assert!(err.to_string().contains("4 usable patch(es), but the model needs at least 6"), "{err}");
+    let ok = color::run(&few, &color::Config::new(Model::Linear3x3)).unwrap();
+    assert_eq!(ok.used_patches, 4);
+    assert!(ok.warnings.iter().any(|w| w.contains("patch 5") && w.contains("clipped")));
+}
+
+fn write(path: &Path, text: &str) {
+    std::fs::write(path, text).unwrap();
+}
+
+/// The pipeline's rendered chart (kept with `save_image`) through `lumen color fit` gives the
+/// pipeline's numbers; `color apply` maps the chart's pixels as the model does.
+#[test]
+fn cli_fit_on_the_rendered_chart_gives_the_pipelines_numbers() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scene = common::root().join("pipelines/scenes/color-chart.toml");
+    write(
+        &d.join("p.toml"),
+        &format!(
+            "[[stages]]\nstage = \"color\"\ncase = \"chart\"\nscene = \"{}\"\nmodel = \"root-poly-2\"\nsave_image = true\n",
+            scene.display()
+        ),
+    );
+    let out = d.join("out");
+    let (code, err) = lumen(&["run", d.join("p.toml").to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-cache"]);
+    assert_eq!(code, 0, "{err}");
+    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let stage = &report["stages"][0];
+    let metric = |name: &str| {
+        stage["metrics"].as_array().unwrap().iter().find(|m| m["name"] == name).unwrap()["value"].as_f64().unwrap()
+    };
+    let notes: Vec<&str> = stage["notes"].as_array().unwrap().iter().filter_map(|n| n.as_str()).collect();
+    let corners = notes
+        .iter()
+        .find_map(|n| n.split("--corners ").nth(1))
+        .map(|s| s.trim_end_matches(['`', '.']).to_string())
+        .expect("the note gives the corners");
+
+    let spec = d.join("spectral");
+    let (code, err) = lumen(&["color", "spectral", "--out", spec.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let white = std::fs::read_to_string(spec.join("white.csv")).unwrap().lines().last().unwrap().to_string();
+    let ccm = d.join("ccm.json");
+    let image = out.join("chart.exr");
+    let (code, err) = lumen(&[
+        "color", "fit", "--image", image.to_str().unwrap(), "--corners", &corners, "--model", "root-poly-2",
+        "--reference", spec.join("xyz.csv").to_str().unwrap(), "--white", &white, "--out", ccm.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let file = color::read_ccm(&ccm).unwrap();
+    let rep = file.report.unwrap();
+    assert!((rep.mean_de2000 - metric("mean_de2000")).abs() < 1e-9, "{} vs {}", rep.mean_de2000, metric("mean_de2000"));
+    assert!((rep.loo_mean_de2000.unwrap() - metric("loo_mean_de2000")).abs() < 1e-9);
+
+    // apply: the patches' own values through the model, pixel by pixel.
+    let rgb: Vec<[f64; 3]> = rep.patches.iter().map(|p| p.rgb).collect();
+    let img = lumen::image::Image { width: 24, height: 1, channels: 3, data: rgb.iter().flatten().map(|&v| v as f32).collect() };
+    let (src, dst) = (d.join("patches.exr"), d.join("xyz.exr"));
+    lumen::image::io::write_exr(&src, &img).unwrap();
+    let (code, err) = lumen(&["color", "apply", "--ccm", ccm.to_str().unwrap(), "--space", "xyz", src.to_str().unwrap(), dst.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let xyz = lumen::image::io::read_exr(&dst).unwrap();
+    for (k, p) in rep.patches.iter().enumerate() {
+        let want = file.fitted.apply(rgb[k].map(|v| v as f32 as f64));
+        for c in 0..3 {
+            assert!((xyz.pixel(k as u32, 0)[c] as f64 - want[c]).abs() < 1e-5 * want[c].abs().max(1e-3), "patch {k}");
+            assert!((want[c] - p.predicted_xyz[c]).abs() < 1e-5);
+        }
+    }
+    // And to sRGB: each pixel is the model's XYZ through the Bradford-adapted sRGB matrix,
+    // which maps the model's white to (1, 1, 1).
+    let srgb = d.join("srgb.exr");
+    let (code, err) = lumen(&["color", "apply", "--ccm", ccm.to_str().unwrap(), src.to_str().unwrap(), srgb.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let s = lumen::image::io::read_exr(&srgb).unwrap();
+    let m = color::xyz_to_linear_srgb(file.white);
+    let to = |x: [f64; 3]| m.map(|row| row[0] * x[0] + row[1] * x[1] + row[2] * x[2]);
+    for (k, p) in rep.patches.iter().enumerate() {
+        let want = to(p.predicted_xyz);
+        for c in 0..3 {
+            assert!((s.pixel(k as u32, 0)[c] as f64 - want[c]).abs() < 1e-5, "patch {k}");
+        }
+    }
+    for white in [file.white, spectra::d50_white(), spectra::white(&spectra::illuminant("a").unwrap())] {
+        let w = color::xyz_to_linear_srgb(white);
+        let one = w.map(|row| row[0] * white[0] + row[1] * white[1] + row[2] * white[2]);
+        assert!(one.iter().all(|v| (v - 1.0).abs() < 1e-3), "{white:?} → {one:?}");
+    }
+}
+
+/// Malformed input to every `lumen color` command: exit 1 or 2, a message naming the
+/// problem, and no output file.
+#[test]
+fn cli_bad_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = d.join("ccm.json");
+    let o = out.to_str().unwrap();
+    let spec = d.join("spec");
+    assert_eq!(lumen(&["color", "spectral", "--out", spec.to_str().unwrap()]).0, 0);
+    let rgb = spec.join("rgb.csv");
+    let r = rgb.to_str().unwrap();
+    let img = d.join("chart.exr");
+    lumen::image::io::write_exr(&img, &lumen::image::Image::new(120, 80, 3)).unwrap();
+    let im = img.to_str().unwrap();
+    let bad_csv = |name: &str, text: &str| {
+        let p = d.join(name);
+        write(&p, text);
+        p.to_str().unwrap().to_string()
+    };
+    let dup = bad_csv("dup.csv", "patch,X,Y,Z\n1,0.1,0.1,0.1\n1,0.2,0.2,0.2\n");
+    let neg = bad_csv("neg.csv", "patch,X,Y,Z\n1,-0.1,0.1,0.1\n");
+    let header = bad_csv("header.csv", "patch,L,a,b\n");
+    let short = bad_csv("short.csv", "patch,X,Y,Z\n1,0.1,0.1,0.1\n");
+    let words = bad_csv("words.csv", "patch,R,G,B\n1,red,0.1,0.1\n");
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["--patches", r, "--model", "poly-9"], "--model"),
+        (vec!["--patches", r, "--model", "cheung-6"], "cheung-N"),
+        (vec!["--image", im, "--corners", "1,2,3"], "3 numbers, expected 8"),
+        (vec!["--image", im, "--corners", "1,2,3,4,5,6,7,nan"], "finite"),
+        (vec!["--image", im, "--corners", "5,5,115,5,115,75,500,75"], "corner 4"),
+        (vec!["--image", im, "--corners", "115,5,5,5,5,75,115,75"], "convex"),
+        (vec!["--image", im, "--corners", "5,5,15,5,15,10,5,10"], "expected at least 9"),
+        (vec!["--image", "/nonexistent/c.exr", "--corners", "5,5,115,5,115,75,5,75"], "/nonexistent/c.exr"),
+        (vec!["--image", im, "--corners", "5,5,115,5,115,75,5,75"], "too few|usable patch"),
+        (vec!["--patches", r, "--reference", &dup], "--white"),
+        (vec!["--patches", r, "--reference", &dup, "--white", "0.95,1,1.09"], "patch 1 is given twice"),
+        (vec!["--patches", r, "--reference", &neg, "--white", "0.95,1,1.09"], "non-negative"),
+        (vec!["--patches", r, "--reference", &header, "--white", "0.95,1,1.09"], "patch,X,Y,Z"),
+        (vec!["--patches", r, "--reference", &short, "--white", "0.95,1,1.09"], "no values for patch 2"),
+        (vec!["--patches", &words], "`red`: expected a number"),
+        (vec!["--patches", r, "--white", "0,1,1"], "positive"),
+        (vec!["--patches", r, "--white-patch", "25"], "1 to 24"),
+        (vec!["--patches", r, "--saturation", "0"], "--saturation"),
+    ];
+    for (args, want) in cases {
+        let mut all = vec!["color", "fit", "--out", o];
+        all.extend(&args);
+        let (code, err) = lumen(&all);
+        assert!(code == 1 || code == 2, "{args:?}: exit {code}: {err}");
+        assert!(want.split('|').any(|w| err.contains(w)), "{args:?}: {err}");
+        assert!(!out.exists(), "{args:?} left {o}");
+    }
+
+    // apply: a bad model file, a bad space, a bad output.
+    assert_eq!(lumen(&["color", "fit", "--patches", r, "--model", "linear-3x3", "--out", o]).0, 0);
+    let good = std::fs::read_to_string(&out).unwrap();
+    let mut v: serde_json::Value = serde_json::from_str(&good).unwrap();
+    v["fitted"]["matrix"][1] = serde_json::json!([1.0, 2.0]);
+    let rows = bad_csv("rows.json", &v.to_string());
+    let mut v: serde_json::Value = serde_json::from_str(&good).unwrap();
+    v["format"] = serde_json::json!("opencv");
+    let format = bad_csv("format.json", &v.to_string());
+    let mut v: serde_json::Value = serde_json::from_str(&good).unwrap();
+    v["extra"] = serde_json::json!(1);
+    let extra = bad_csv("extra.json", &v.to_string());
+    let grey = d.join("grey.png");
+    image::GrayImage::new(4, 4).save(&grey).unwrap();
+    let res = d.join("res.exr");
+    let rs = res.to_str().unwrap();
+    let (jpg, png) = (d.join("x.jpg"), d.join("x.png"));
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["--ccm", &rows, im, rs], "2 coefficients for 3 terms"),
+        (vec!["--ccm", &format, im, rs], "format `opencv`"),
+        (vec!["--ccm", &extra, im, rs], "extra"),
+        (vec!["--ccm", "/nonexistent/m.json", im, rs], "/nonexistent/m.json"),
+        (vec!["--ccm", o, "--space", "lab", im, rs], "--space lab"),
+        (vec!["--ccm", o, im, jpg.to_str().unwrap()], ".exr or .png"),
+        (vec!["--ccm", o, "--space", "xyz", im, png.to_str().unwrap()], "XYZ is written as .exr"),
+        (vec!["--ccm", o, grey.to_str().unwrap(), rs], "channel"),
+    ];
+    for (args, want) in cases {
+        let mut all = vec!["color", "apply"];
+        all.extend(&args);
+        let (code, err) = lumen(&all);
+        assert!(code == 1 || code == 2, "{args:?}: exit {code}: {err}");
+        assert!(err.contains(want), "{args:?}: {err}");
+        assert!(!res.exists(), "{args:?} left {rs}");
+    }
+    // spectral: unknown names.
+    let (code, err) = lumen(&["color", "spectral", "--camera", "canon", "--out", d.join("s2").to_str().unwrap()]);
+    assert_eq!(code, 1);
+    assert!(err.contains("nikon-d5100"), "{err}");
+    let (code, err) = lumen(&["color", "spectral", "--illuminant", "d75", "--out", d.join("s3").to_str().unwrap()]);
+    assert_eq!(code, 1);
+    assert!(err.contains("fl2"), "{err}");
+}

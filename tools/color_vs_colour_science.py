@@ -1,0 +1,74 @@
+"""lumen's colour fits against colour-science's on the same camera RGB and XYZ.
+
+Usage (the peers' virtual environment, ../shared/tools/peers-venv.sh):
+    target/release/lumen color spectral --camera nikon-d5100 --illuminant d65 --out out/spectral-d65
+    for m in linear-3x3 root-poly-2 root-poly-3; do
+        target/release/lumen color fit --patches out/spectral-d65/rgb.csv \
+            --reference out/spectral-d65/xyz.csv --white "$(tail -1 out/spectral-d65/white.csv)" \
+            --model $m --out out/spectral-d65/$m.json
+    done
+    $PEERS_PY tools/color_vs_colour_science.py out/spectral-d65
+
+Prints, per method, colour-science's mean ΔE2000 and leave-one-out mean on lumen's patch
+values, lumen's, and the largest per-patch difference of the two fits' ΔE2000.
+"""
+import json
+import sys
+import warnings
+
+import numpy as np
+
+warnings.filterwarnings("ignore")
+import colour  # noqa: E402
+
+
+def table(path):
+    rows = [l for l in open(path) if l.strip() and not l.startswith("#")][1:]
+    return np.array([[float(v) for v in r.split(",")[1:]] for r in rows])
+
+
+def main(folder):
+    rgb, xyz = table(f"{folder}/rgb.csv"), table(f"{folder}/xyz.csv")
+    white = [l for l in open(f"{folder}/white.csv") if l.strip() and not l.startswith("#")][1]
+    white = np.array([float(v) for v in white.split(",")])
+    xy = colour.XYZ_to_xy(white)
+    lab = lambda v: colour.XYZ_to_Lab(v, illuminant=xy)  # noqa: E731
+    methods = {
+        "linear-3x3": dict(method="Cheung 2004", terms=3),
+        "root-poly-2": dict(method="Finlayson 2015", degree=2),
+        "root-poly-3": dict(method="Finlayson 2015", degree=3),
+    }
+    print(f"{'model':<12} {'cs mean':>9} {'lumen mean':>11} {'max |Δ|':>9} {'cs loo':>8} {'lumen loo':>10}")
+    for name, kw in methods.items():
+        pred = colour.colour_correction(rgb, rgb, xyz, **kw)
+        de = colour.delta_E(lab(pred), lab(xyz), method="CIE 2000")
+        loo = []
+        for i in range(len(rgb)):
+            keep = np.arange(len(rgb)) != i
+            p = colour.colour_correction(rgb[i], rgb[keep], xyz[keep], **kw)
+            loo.append(colour.delta_E(lab(p), lab(xyz[i]), method="CIE 2000"))
+        try:
+            ours = json.load(open(f"{folder}/{name}.json"))["report"]
+        except FileNotFoundError:
+            print(f"{name:<12} {de.mean():9.4f} {'(no ' + name + '.json)':>11}")
+            continue
+        ours_de = np.array([p["de2000"] for p in ours["patches"]])
+        print(
+            f"{name:<12} {de.mean():9.4f} {ours['mean_de2000']:11.4f} {np.abs(ours_de - de).max():9.2e} "
+            f"{np.mean(loo):8.4f} {ours['loo_mean_de2000']:10.4f}"
+        )
+    # colour-science's own integration of the same spectra: lumen's XYZ to within the tables.
+    shape = colour.SpectralShape(380, 780, 5)
+    cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"].copy().align(shape)
+    d65 = colour.SDS_ILLUMINANTS["D65"].copy().align(shape)
+    refl = [l for l in open("data/color/colorchecker24_babelcolor_average.csv") if not l.startswith("#")][1:]
+    worst = 0.0
+    for i, line in enumerate(refl):
+        values = [float(v) for v in line.split(",")[2:]]
+        sd = colour.SpectralDistribution(dict(zip(range(380, 785, 5), values)))
+        cs = colour.sd_to_XYZ(sd, cmfs, d65, method="Integration") / 100
+        worst = max(worst, float(np.abs(cs - xyz[i]).max()))
+    print(f"largest |XYZ(colour-science sd_to_XYZ) - XYZ(lumen)| over the 24 patches: {worst:.2e}")
+
+if __name__ == "__main__":
+    main(sys.argv[1] if len(sys.argv) > 1 else "out/spectral-d65")
