@@ -132,6 +132,34 @@ fn cli_fit_on_the_rendered_chart_gives_the_pipelines_numbers() {
     assert!((rep.mean_de2000 - metric("mean_de2000")).abs() < 1e-9, "{} vs {}", rep.mean_de2000, metric("mean_de2000"));
     assert!((rep.loo_mean_de2000.unwrap() - metric("loo_mean_de2000")).abs() < 1e-9);
 
+    // The same chart as a 16-bit TIFF of linear code values: with --linear the same fit to
+    // the 16-bit quantisation (a step of 1.5e-5 of full scale; the darkest patch is at 0.025),
+    // and the message says how the file was read; without it, sRGB-decoded, a worse fit.
+    let exr = lumen::image::io::read_exr(&image).unwrap();
+    let codes: Vec<u16> = exr.data.iter().map(|&v| (v.clamp(0.0, 1.0) * 65535.0).round() as u16).collect();
+    let tif = d.join("chart.tif");
+    image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(exr.width, exr.height, codes).unwrap().save(&tif).unwrap();
+    let ccm16 = d.join("ccm16.json");
+    let xyz_csv = spec.join("xyz.csv");
+    let fit16 = |linear: bool| {
+        let mut args = vec![
+            "color", "fit", "--image", tif.to_str().unwrap(), "--corners", &corners, "--model", "root-poly-2",
+            "--reference", xyz_csv.to_str().unwrap(), "--white", &white, "--out", ccm16.to_str().unwrap(),
+        ];
+        if linear {
+            args.push("--linear");
+        }
+        let (code, err) = lumen(&args);
+        assert_eq!(code, 0, "{err}");
+        (color::read_ccm(&ccm16).unwrap().report.unwrap().mean_de2000, err)
+    };
+    let (linear, msg) = fit16(true);
+    assert!((linear - rep.mean_de2000).abs() < 0.01, "{linear} vs {}", rep.mean_de2000);
+    assert!(msg.contains("code values read as linear (--linear)"), "{msg}");
+    let (decoded, msg) = fit16(false);
+    assert!(msg.contains("sRGB-decoded"), "{msg}");
+    assert!(decoded > rep.mean_de2000, "{decoded}");
+
     // apply: the patches' own values through the model, pixel by pixel.
     let rgb: Vec<[f64; 3]> = rep.patches.iter().map(|p| p.rgb).collect();
     let img = lumen::image::Image { width: 24, height: 1, channels: 3, data: rgb.iter().flatten().map(|&v| v as f32).collect() };

@@ -7,7 +7,7 @@ mod common;
 use std::path::Path;
 use std::process::Command;
 
-/// The tour's `lumen render|calibrate|ps|undistort` lines, from the README's tour block.
+/// The tour's `lumen render|calibrate|ps|undistort|color` lines, from the README's tour block.
 fn tour_commands() -> Vec<String> {
     let readme = std::fs::read_to_string(common::root().join("README.md")).unwrap();
     let tour = readme.split("## A tour of the command line").nth(1).expect("the README has a tour");
@@ -16,7 +16,7 @@ fn tour_commands() -> Vec<String> {
     block
         .lines()
         .filter(|l| {
-            ["lumen render ", "lumen calibrate ", "lumen ps ", "lumen undistort "]
+            ["lumen render ", "lumen calibrate ", "lumen ps ", "lumen undistort ", "lumen color "]
                 .iter()
                 .any(|p| l.starts_with(p))
         })
@@ -47,7 +47,7 @@ fn run(line: &str, dir: &Path, photos: &Path) -> (bool, String) {
 #[test]
 fn readme_tour_writes_what_it_says() {
     let lines = tour_commands();
-    assert_eq!(lines.len(), 4, "the tour's commands: {lines:?}");
+    assert_eq!(lines.len(), 7, "the tour's commands: {lines:?}");
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let shared = common::root().join("../shared/data");
@@ -66,10 +66,31 @@ fn readme_tour_writes_what_it_says() {
     ] {
         assert!(d.join("out").join(f).is_file(), "{f} missing after: {err}");
     }
+    // Colour: the chart the README's pipeline run keeps (its case chart-d65-root-poly-2),
+    // made here by that one case, then the tour's three colour commands.
+    let pipeline = d.join("out/chart.toml");
+    std::fs::create_dir_all(d.join("out")).unwrap();
+    let all = std::fs::read_to_string(common::root().join("pipelines/all.toml")).unwrap();
+    let entry = all.split("[[stages]]").find(|e| e.contains("case = \"chart-d65-root-poly-2\"")).unwrap();
+    let entry = entry.replace("\"scenes/", &format!("\"{}/pipelines/scenes/", common::root().display()));
+    std::fs::write(&pipeline, format!("[[stages]]{entry}")).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_lumen"))
+        .args(["run", "out/chart.toml", "--out", "out/all", "--no-cache"])
+        .current_dir(d)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for line in &lines[4..7] {
+        let (ok, err) = run(line, d, &photos);
+        assert!(ok, "{err}");
+    }
+    for f in ["spectral-d65/rgb.csv", "spectral-d65/xyz.csv", "spectral-d65/white.csv", "ccm.json", "chart-srgb.png"] {
+        assert!(d.join("out").join(f).is_file(), "{f} missing");
+    }
     if common::shared_data().is_none() {
         return;
     }
-    for line in &lines[1..] {
+    for line in &lines[1..4] {
         let (ok, err) = run(line, d, &photos);
         assert!(ok, "{err}");
     }

@@ -48,6 +48,11 @@ impl Term {
 
     pub fn eval(&self, rgb: [f64; 3]) -> f64 {
         let p: f64 = (0..3).map(|c| rgb[c].powi(self.exponents[c] as i32)).product();
+        self.root_of(p)
+    }
+
+    /// The term's root of its monomial's value.
+    fn root_of(&self, p: f64) -> f64 {
         match self.root {
             0 | 1 => p,
             2 => p.signum() * p.abs().sqrt(),
@@ -251,8 +256,23 @@ pub struct Fitted {
 
 impl Fitted {
     pub fn apply(&self, rgb: [f64; 3]) -> [f64; 3] {
-        let e: Vec<f64> = self.terms.iter().map(|t| t.eval(rgb)).collect();
-        self.matrix.each_ref().map(|row| row.iter().zip(&e).map(|(m, x)| m * x).sum())
+        // Term by term from a table of powers, without a buffer: this runs once per pixel in
+        // `lumen color apply` (`check` keeps exponents at most 8).
+        let mut pow = [[1.0f64; 9]; 3];
+        for c in 0..3 {
+            for e in 1..9 {
+                pow[c][e] = pow[c][e - 1] * rgb[c];
+            }
+        }
+        let mut out = [0.0; 3];
+        for (k, t) in self.terms.iter().enumerate() {
+            let [i, j, l] = t.exponents.map(|e| (e as usize).min(8));
+            let e = t.root_of(pow[0][i] * pow[1][j] * pow[2][l]);
+            for c in 0..3 {
+                out[c] += self.matrix[c][k] * e;
+            }
+        }
+        out
     }
 
     /// The model read from a file is usable: three rows as long as its terms, every number
