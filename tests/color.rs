@@ -293,3 +293,32 @@ fn cli_bad_input() {
     assert_eq!(code, 1);
     assert!(err.contains("fl2"), "{err}");
 }
+
+/// The hard cases of `pipelines/stress.toml`'s colour section, each with its declared outcome
+/// (illuminant A, low exposure with read noise, a nearly black 8-bit chart, an overexposed
+/// one, too few usable patches for root-poly-3, another camera against the published values):
+/// `lumen run` exits 0 only when every case ends as declared and meets its bounds.
+#[test]
+fn stress_cases_end_as_declared() {
+    let stress = std::fs::read_to_string(common::root().join("pipelines/stress.toml")).unwrap();
+    let colour = stress.split("# ---------------------------------------------------------------- colour").nth(1).unwrap();
+    let colour = colour.split("# ----------------------------------------------------------------").next().unwrap();
+    let scenes = common::root().join("pipelines/scenes");
+    let text = format!("seed = 11\n{}", colour.replace("\"scenes/", &format!("\"{}/", scenes.display())));
+    assert_eq!(text.matches("[[stages]]").count(), 6, "the colour section's cases");
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("stress-color.toml");
+    write(&file, &text);
+    let out = dir.path().join("out");
+    let (code, err) = lumen(&["run", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-cache"]);
+    assert_eq!(code, 0, "{err}");
+    let report = std::fs::read_to_string(out.join("report.json")).unwrap();
+    assert!(report.contains("1 usable patch(es), but the model needs at least 13"), "the refusal names the numbers");
+    // Every metric of every case that ran has a finite value (JSON writes NaN as null).
+    let v: serde_json::Value = serde_json::from_str(&report).unwrap();
+    for stage in v["stages"].as_array().unwrap() {
+        for m in stage["metrics"].as_array().into_iter().flatten() {
+            assert!(m["value"].as_f64().is_some_and(f64::is_finite), "{}: {m}", stage["case"]);
+        }
+    }
+}
