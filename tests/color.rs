@@ -73,6 +73,18 @@ fn every_model_is_finite_or_refused() {
             assert!(out.mean_de2000.is_finite() && out.patches.iter().all(|p| p.de2000.is_finite()), "cheung-{n}");
         }
     }
+    // Values near f64's end: a clear refusal, never a hang in the SVD or NaN.
+    let mut huge = spectral_input();
+    huge.patches[3].rgb = [1e300, 1.0, 1.0];
+    let err = color::run(&huge, &color::Config::new(Model::RootPoly(2))).unwrap_err();
+    assert!(err.to_string().contains("patch 4") && err.to_string().contains("1e30"), "{err}");
+    let mut big = spectral_input();
+    big.patches.iter_mut().enumerate().for_each(|(i, p)| p.rgb = [1e29 * (i + 1) as f64, 1e28, 1e-30]);
+    for model in ["cheung-22", "root-poly-3", "de2000-opt:root-poly-2"] {
+        let r = color::run(&big, &color::Config::new(model.parse().unwrap()));
+        assert!(r.as_ref().map_or(true, |o| o.patches.iter().all(|p| p.de2000.is_finite())), "{model}");
+    }
+
     // Patches flagged by the sampler are left out, with a warning naming them.
     let mut few = spectral_input();
     few.patches.iter_mut().skip(4).for_each(|p| p.flag = Some(color::Flag::Clipped));
@@ -296,7 +308,8 @@ fn cli_bad_input() {
 
 /// The hard cases of `pipelines/stress.toml`'s colour section, each with its declared outcome
 /// (illuminant A, low exposure with read noise, a nearly black 8-bit chart, an overexposed
-/// one, too few usable patches for root-poly-3, another camera against the published values):
+/// one, too few usable patches for root-poly-3, another camera against the published values,
+/// malformed settings):
 /// `lumen run` exits 0 only when every case ends as declared and meets its bounds.
 #[test]
 fn stress_cases_end_as_declared() {
@@ -305,7 +318,7 @@ fn stress_cases_end_as_declared() {
     let colour = colour.split("# ----------------------------------------------------------------").next().unwrap();
     let scenes = common::root().join("pipelines/scenes");
     let text = format!("seed = 11\n{}", colour.replace("\"scenes/", &format!("\"{}/", scenes.display())));
-    assert_eq!(text.matches("[[stages]]").count(), 6, "the colour section's cases");
+    assert_eq!(text.matches("[[stages]]").count(), 12, "the colour section's cases");
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("stress-color.toml");
     write(&file, &text);

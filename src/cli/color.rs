@@ -222,6 +222,7 @@ fn apply(ccm: &Path, space: &str, linear: bool, input: &Path, output: &Path) -> 
     let c = img.channels as usize;
     let mut out = Image::new(img.width, img.height, 3);
     use rayon::prelude::*;
+    let non_finite = std::sync::atomic::AtomicUsize::new(0);
     out.data.par_chunks_mut(3 * img.width as usize).zip(img.data.par_chunks(c * img.width as usize)).for_each(
         |(dst, src)| {
             for (d, s) in dst.chunks_exact_mut(3).zip(src.chunks_exact(c)) {
@@ -230,14 +231,25 @@ fn apply(ccm: &Path, space: &str, linear: bool, input: &Path, output: &Path) -> 
                     Some(m) => m.map(|row| row[0] * xyz[0] + row[1] * xyz[1] + row[2] * xyz[2]),
                     None => xyz,
                 };
-                for k in 0..3 {
-                    // A non-finite input pixel stays visible as 0 rather than poisoning the file.
-                    d[k] = if v[k].is_finite() { v[k] as f32 } else { 0.0 };
+                if v.iter().all(|x| (*x as f32).is_finite()) {
+                    for k in 0..3 {
+                        d[k] = v[k] as f32;
+                    }
+                } else {
+                    // Written as 0 and counted, rather than poisoning the file with NaN.
+                    d.fill(0.0);
+                    non_finite.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 }
             }
         },
     );
     let apply_s = t.elapsed().as_secs_f64();
+    let non_finite = non_finite.into_inner();
+    if non_finite > 0 {
+        eprintln!(
+            "warning: {non_finite} pixel(s) gave a colour that is not a finite float (a non-finite input or an overflowing term): written as 0"
+        );
+    }
     let t = std::time::Instant::now();
     image::io::write(output, &out)?;
     eprintln!(

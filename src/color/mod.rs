@@ -139,7 +139,9 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     let fitted = models::fit(config.model, &rgb, &xyz, input.white, white_patch).map_err(|e| {
         let msg = format!("model {}: {e}", config.model.name());
         match e {
-            models::FitError::TooFew { .. } | models::FitError::NoWhite => Error::BadInput(msg),
+            models::FitError::TooFew { .. } | models::FitError::NoWhite | models::FitError::Overflow => {
+                Error::BadInput(msg)
+            }
             models::FitError::RankDeficient { .. } => Error::Unsolvable(msg),
         }
     })?;
@@ -229,14 +231,25 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     Ok(out)
 }
 
+/// The largest magnitude of an RGB or XYZ value the solver takes.
+pub const MAX_VALUE: f64 = 1e30;
+
 fn check_input(input: &Input) -> Result<(), Error> {
     if input.patches.is_empty() {
         return Err(Error::BadInput("no patches".into()));
     }
-    if !input.white.iter().all(|v| v.is_finite() && *v > 0.0) {
-        return Err(Error::BadInput(format!("white {:?}: expected three positive numbers (XYZ)", input.white)));
+    if !input.white.iter().all(|v| v.is_finite() && *v > 0.0 && *v <= MAX_VALUE) {
+        return Err(Error::BadInput(format!("white {:?}: expected three positive numbers up to 1e30 (XYZ)", input.white)));
     }
     for (i, p) in input.patches.iter().enumerate() {
+        // Beyond 1e30 (float32 images end near 3e38) a degree-4 term overflows f64.
+        if let Some(v) = p.rgb.iter().chain(&p.reference_xyz).find(|v| v.abs() > MAX_VALUE) {
+            return Err(Error::BadInput(format!(
+                "patch {} ({}): value {v:e} is beyond ±1e30: expected linear RGB and XYZ near 0 to 1",
+                i + 1,
+                p.name
+            )));
+        }
         if !p.rgb.iter().chain(&p.reference_xyz).all(|v| v.is_finite()) {
             return Err(Error::BadInput(format!(
                 "patch {} ({}): RGB {:?} or reference XYZ {:?} is not finite",

@@ -309,6 +309,8 @@ pub enum FitError {
     RankDeficient { ratio: f64 },
     /// The white patch, needed by `white-preserving`, is not among the usable patches.
     NoWhite,
+    /// A term of some patch's RGB overflows f64.
+    Overflow,
 }
 
 impl std::fmt::Display for FitError {
@@ -322,6 +324,7 @@ impl std::fmt::Display for FitError {
                 "the usable patches do not determine the model's coefficients (singular value ratio {ratio:.1e}, below 1e-10): too few distinct colours for its terms"
             ),
             FitError::NoWhite => write!(f, "the white patch is not usable, and white-preserving must map it exactly"),
+            FitError::Overflow => write!(f, "a patch's RGB is so large that the model's terms overflow"),
         }
     }
 }
@@ -349,7 +352,11 @@ pub fn fit(
         return Err(FitError::TooFew { patches: rgb.len(), needed });
     }
     let a = design(&terms, rgb);
-    let svd = a.clone().svd(true, true);
+    if a.iter().any(|v| !v.is_finite()) {
+        return Err(FitError::Overflow);
+    }
+    // Bounded iterations: an SVD that does not converge is a refusal, not a hang.
+    let svd = a.clone().try_svd(true, true, f64::EPSILON, 10_000).ok_or(FitError::RankDeficient { ratio: 0.0 })?;
     let (smax, smin) = svd.singular_values.iter().fold((0.0f64, f64::INFINITY), |(hi, lo), &s| (hi.max(s), lo.min(s)));
     let ratio = if smax > 0.0 { smin / smax } else { 0.0 };
     if !(ratio >= MIN_SINGULAR_RATIO) {
