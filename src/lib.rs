@@ -21,6 +21,7 @@
 
 pub mod calib;
 pub mod color;
+pub mod hdr;
 #[cfg(feature = "opencv")]
 pub mod cv;
 pub mod image;
@@ -43,4 +44,6 @@ pub enum Error {
     Photometric(#[from] photometric::Error),
     #[error(transparent)]
     Color(#[from] color::Error),
+    #[error(transparent)]
+    Hdr(#[from] hdr::Error),
 }

@@ -1,0 +1,196 @@
+//! `lumen hdr`: recover a camera's response from an exposure stack and merge the radiance.
+
+use anyhow::{bail, Context, Result};
+use lumen::hdr::{self, merge, response, Frame, Input, Method, Weights};
+use lumen::image::{self, Image};
+use std::path::{Path, PathBuf};
+
+pub struct HdrArgs {
+    pub images: Vec<PathBuf>,
+    pub times: Vec<String>,
+    pub list: Option<PathBuf>,
+    pub response: String,
+    pub lambda: f64,
+    pub samples_per_value: usize,
+    pub weights: String,
+    pub gain: Option<f64>,
+    pub read_noise: f64,
+    pub exclude_color: Option<String>,
+    pub out: PathBuf,
+}
+
+/// `1/30`, `0.5` or `6.1035e-05` seconds.
+pub fn parse_time(s: &str) -> Result<f64, String> {
+    let v = match s.split_once('/') {
+        Some((a, b)) => {
+            let (a, b): (f64, f64) = (
+                a.trim().parse().map_err(|_| format!("exposure time `{s}`: expected a number or a fraction such as 1/30"))?,
+                b.trim().parse().map_err(|_| format!("exposure time `{s}`: expected a number or a fraction such as 1/30"))?,
+            );
+            a / b
+        }
+        None => s.trim().parse().map_err(|_| format!("exposure time `{s}`: expected a number or a fraction such as 1/30"))?,
+    };
+    if !(v.is_finite() && v > 0.0) {
+        return Err(format!("exposure time `{s}`: expected a positive, finite number of seconds"));
+    }
+    Ok(v)
+}
+
+/// The frames and their times from `--images`/`--times` or `--list` (a name and a time per
+/// line, names relative to the list's folder, `#` comments).
+fn stack(a: &HdrArgs) -> Result<Vec<(PathBuf, f64)>> {
+    match &a.list {
+        Some(list) => {
+            if !a.images.is_empty() || !a.times.is_empty() {
+                bail!("give --list, or --images with --times, not both");
+            }
+            let text = std::fs::read_to_string(list).with_context(|| format!("cannot read --list {}", list.display()))?;
+            let dir = list.parent().unwrap_or(Path::new("."));
+            let mut out = Vec::new();
+            for (n, line) in text.lines().enumerate() {
+                let line = line.trim();
+                if line.is_empty() || line.starts_with('#') {
+                    continue;
+                }
+                let mut parts = line.split_whitespace();
+                let (Some(name), Some(time), None) = (parts.next(), parts.next(), parts.next()) else {
+                    bail!("{} line {}: expected a file name and an exposure time in seconds", list.display(), n + 1);
+                };
+                let t = parse_time(time).map_err(|m| anyhow::anyhow!("{} line {}: {m}", list.display(), n + 1))?;
+                out.push((dir.join(name), t));
+            }
+            Ok(out)
+        }
+        None => {
+            if a.images.len() != a.times.len() {
+                bail!("{} image(s) but {} exposure time(s): give one time per image, in the same order", a.images.len(), a.times.len());
+            }
+            let times: Vec<f64> = a.times.iter().map(|t| parse_time(t)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
+            Ok(a.images.iter().cloned().zip(times).collect())
+        }
+    }
+}
+
+/// Reads an 8- or 16-bit image's code values as RGB, with its number of levels.
+fn read_codes(path: &Path) -> Result<(u32, u32, usize, Vec<u16>)> {
+    use ::image::DynamicImage as D;
+    let img = ::image::open(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let (w, h) = (img.width(), img.height());
+    let (levels, codes) = match img {
+        D::ImageLuma8(_) | D::ImageLumaA8(_) | D::ImageRgb8(_) | D::ImageRgba8(_) => {
+            (256, img.into_rgb8().into_raw().into_iter().map(u16::from).collect())
+        }
+        D::ImageLuma16(_) | D::ImageLumaA16(_) | D::ImageRgb16(_) | D::ImageRgba16(_) => (65536, img.into_rgb16().into_raw()),
+        _ => bail!("{}: expected 8- or 16-bit integer samples (a float image is already radiance)", path.display()),
+    };
+    Ok((w, h, levels, codes))
+}
+
+pub fn run(a: &HdrArgs) -> Result<()> {
+    if a.out.extension().and_then(|e| e.to_str()).map(str::to_lowercase).as_deref() != Some("exr") {
+        bail!("--out {}: the radiance is written as .exr", a.out.display());
+    }
+    let frames_in = stack(a)?;
+    if frames_in.len() < 2 {
+        bail!("{} image(s): a stack needs at least 2 exposures", frames_in.len());
+    }
+    let weights = match (a.weights.as_str(), a.gain) {
+        ("hat", _) => Weights::Hat,
+        ("noise", Some(g)) if g.is_finite() && g > 0.0 && a.read_noise.is_finite() && a.read_noise >= 0.0 => {
+            Weights::Noise { gain: g, read_noise: a.read_noise }
+        }
+        ("noise", Some(g)) => bail!("--gain {g} --read-noise {}: expected a positive gain and a non-negative read noise", a.read_noise),
+        ("noise", None) => bail!("--weights noise needs --gain (linear units per electron at the response's scale)"),
+        (other, _) => bail!("--weights {other}: expected hat or noise"),
+    };
+    if !(a.lambda.is_finite() && a.lambda >= 0.0) {
+        bail!("--lambda {}: expected a non-negative number", a.lambda);
+    }
+    if a.samples_per_value == 0 || a.samples_per_value > 1000 {
+        bail!("--samples-per-value {}: expected 1 to 1000", a.samples_per_value);
+    }
+    let exclude = a
+        .exclude_color
+        .as_deref()
+        .map(|s| {
+            let v: Vec<u16> = s.split(',').map(|x| x.trim().parse::<u16>()).collect::<Result<_, _>>().map_err(|_| ())?;
+            <[u16; 3]>::try_from(v).map_err(|_| ())
+        })
+        .transpose()
+        .map_err(|_| anyhow::anyhow!("--exclude-color: expected three code values R,G,B"))?;
+    let t = std::time::Instant::now();
+    let mut frames = Vec::new();
+    let (mut size, mut levels) = (None, 0);
+    for (path, time) in &frames_in {
+        let (w, h, l, codes) = read_codes(path)?;
+        match size {
+            None => {
+                size = Some((w, h));
+                levels = l;
+            }
+            Some((w0, h0)) if (w0, h0) != (w, h) => {
+                bail!("{}: {w}×{h}, but {} is {w0}×{h0}: every frame must have the same size", path.display(), frames_in[0].0.display())
+            }
+            Some(_) if l != levels => bail!("{}: {} levels, but the first frame has {levels}: mixed bit depths", path.display(), l),
+            Some(_) => {}
+        }
+        frames.push(Frame { name: path.display().to_string(), time_s: *time, codes });
+    }
+    let read_s = t.elapsed().as_secs_f64();
+    let (w, h) = size.unwrap_or((0, 0));
+    let n = (w * h) as usize;
+    let usable = exclude.map(|c| {
+        (0..n).map(|i| frames.iter().all(|f| f.codes[3 * i..3 * i + 3] != c)).collect::<Vec<bool>>()
+    });
+    let method = match a.response.as_str() {
+        "debevec" => Method::Debevec { lambda: a.lambda, samples_per_value: a.samples_per_value },
+        "robertson" => Method::Robertson { iterations: 50 },
+        file => {
+            let text = std::fs::read_to_string(file).with_context(|| format!("--response {file}: not debevec, robertson or a readable file"))?;
+            Method::Given(response::from_csv(&text).map_err(|m| anyhow::anyhow!("--response {file}: {m}"))?)
+        }
+    };
+    let input = Input { width: w as usize, height: h as usize, levels, frames, usable };
+    let out = hdr::run(&input, &hdr::Config { method, weights })?;
+
+    let dir = a.out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let radiance = Image { width: w, height: h, channels: 3, data: out.radiance.clone() };
+    image::io::write_exr(&a.out, &radiance)?;
+    let write = |name: &str, bytes: Vec<u8>| -> Result<()> {
+        let p = dir.join(name);
+        image::io::write_atomically(&p, |tmp| std::fs::write(tmp, &bytes).map_err(|e| e.to_string()))?;
+        Ok(())
+    };
+    write("response.csv", response::to_csv(&out.response).into_bytes())?;
+    write("response.svg", response::plot_svg(&out.response, &format!("response ({})", out.summary.method)).into_bytes())?;
+    let mut mask = Image::new(w, h, 3);
+    for (i, m) in out.mask.iter().enumerate() {
+        let v: [f32; 3] = match *m {
+            merge::SATURATED => [1.0, 0.0, 0.0],
+            merge::DARK => [0.0, 0.0, 1.0],
+            _ => [0.0, 0.0, 0.0],
+        };
+        mask.data[3 * i..3 * i + 3].copy_from_slice(&v);
+    }
+    image::io::write_png_srgb(&dir.join("mask.png"), &mask)?;
+    image::io::write_png_srgb(&dir.join("preview.png"), &hdr::tonemap::reinhard(&radiance))?;
+    write("summary.json", serde_json::to_string_pretty(&out.summary)?.into_bytes())?;
+    let s = &out.summary;
+    eprintln!(
+        "{} frames {w}×{h} ({} levels): response by {} in {:.3} s ({} samples), merged in {:.3} s ({:.0} Mpixel-frames/s); {:.1} stops well exposed; {} pixels saturated in every frame (lower bounds), {} dark in every frame (upper bounds); read {read_s:.2} s; wrote {} and response.csv, response.svg, mask.png (red: saturated, blue: dark), preview.png, summary.json beside it",
+        s.frames,
+        s.levels,
+        s.method,
+        s.response_s,
+        s.samples,
+        s.merge_s,
+        s.merge_megapixel_frames_per_s,
+        s.dynamic_range_stops,
+        s.saturated_pixels,
+        s.dark_pixels,
+        a.out.display()
+    );
+    Ok(())
+}

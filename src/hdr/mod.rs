@@ -1,0 +1,235 @@
+//! HDR fusion: the camera's response curve from an exposure stack, and the scene's radiance
+//! merged from it.
+//!
+//! `run(&Input, &Config)` is the solver `lumen hdr` calls: frames of code values with their
+//! exposure times in, the response per channel (`response`: Debevec & Malik 1997, Robertson
+//! et al. 2003, or a given curve) and the merged radiance with its mask (`merge`) out. The
+//! radiance has the response's arbitrary scale per channel (g(z_mid) = 0): exposure × time
+//! is known only up to that factor.
+//!
+//! `tonemap` holds Reinhard et al.'s global operator for PNG previews.
+
+pub mod merge;
+pub mod response;
+pub mod tonemap;
+
+pub use merge::Weights;
+pub use response::Response;
+
+use serde::{Deserialize, Serialize};
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// The stack or a setting is wrong (names what and why).
+    #[error("{0}")]
+    BadInput(String),
+    /// The stack does not determine a response.
+    #[error("{0}")]
+    Unsolvable(String),
+    #[error("{path}: {message}")]
+    File { path: std::path::PathBuf, message: String },
+    #[error(transparent)]
+    Image(#[from] crate::image::io::Error),
+}
+
+/// One exposure: interleaved RGB code values.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    pub name: String,
+    /// Exposure time in seconds (any consistent unit: only ratios matter).
+    pub time_s: f64,
+    pub codes: Vec<u16>,
+}
+
+#[derive(Clone, Debug)]
+pub struct Input {
+    pub width: usize,
+    pub height: usize,
+    /// Code values run from 0 to `levels − 1` (256 for 8-bit frames).
+    pub levels: usize,
+    pub frames: Vec<Frame>,
+    /// Pixels to leave out of the response fit (registration borders): `true` to use.
+    pub usable: Option<Vec<bool>>,
+}
+
+#[derive(Clone, Debug)]
+pub enum Method {
+    /// `lambda`: smoothness weight; `samples_per_value`: sample pixels per code value.
+    Debevec { lambda: f64, samples_per_value: usize },
+    Robertson { iterations: usize },
+    Given(Response),
+}
+
+#[derive(Clone, Debug)]
+pub struct Config {
+    pub method: Method,
+    pub weights: Weights,
+}
+
+impl Default for Config {
+    fn default() -> Config {
+        Config { method: Method::Debevec { lambda: 10.0, samples_per_value: 2 }, weights: Weights::Hat }
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct Output {
+    pub response: Response,
+    /// Linear radiance, interleaved RGB, width × height.
+    pub radiance: Vec<f32>,
+    /// Per pixel: `merge::WELL_EXPOSED`, `SATURATED` (a lower bound) or `DARK` (an upper bound).
+    pub mask: Vec<u8>,
+    pub summary: Summary,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Summary {
+    pub frames: usize,
+    pub width: usize,
+    pub height: usize,
+    pub levels: usize,
+    pub method: String,
+    /// Sample pixels of Debevec's fit (0 for the others).
+    pub samples: usize,
+    pub saturated_pixels: usize,
+    pub dark_pixels: usize,
+    /// log₂ of the brightest over the darkest well-exposed luminance (1st to 99.9th
+    /// percentile would hide the range; these are the extremes of well-exposed pixels).
+    pub dynamic_range_stops: f64,
+    pub response_s: f64,
+    pub merge_s: f64,
+    /// Megapixels × frames merged per second.
+    pub merge_megapixel_frames_per_s: f64,
+}
+
+pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
+    check(input)?;
+    let n = input.width * input.height;
+    let usable = input.usable.clone().unwrap_or_else(|| vec![true; n]);
+    // Frames sorted by time, longest first, for the response fits' "middle frame".
+    let mut order: Vec<usize> = (0..input.frames.len()).collect();
+    order.sort_by(|&a, &b| input.frames[b].time_s.total_cmp(&input.frames[a].time_s));
+    let times: Vec<f64> = order.iter().map(|&j| input.frames[j].time_s).collect();
+    let t = std::time::Instant::now();
+    let mut samples = 0;
+    let (response, method) = match &config.method {
+        Method::Given(r) => {
+            if r.levels != input.levels || r.g.len() != 3 || r.g.iter().any(|g| g.len() != r.levels) {
+                return Err(Error::BadInput(format!(
+                    "the given response has {} levels in {} channel(s); the frames need {} levels in 3",
+                    r.levels,
+                    r.g.len(),
+                    input.levels
+                )));
+            }
+            (r.clone(), "given".to_string())
+        }
+        Method::Debevec { lambda, samples_per_value } => {
+            if !(lambda.is_finite() && *lambda >= 0.0) {
+                return Err(Error::BadInput(format!("lambda = {lambda}: expected a non-negative number")));
+            }
+            let mut g = Vec::new();
+            for c in 0..3 {
+                let codes: Vec<Vec<u16>> = order.iter().map(|&j| channel(&input.frames[j].codes, c)).collect();
+                let ch = response::Channel { codes: &codes, times: &times, levels: input.levels };
+                let s = response::choose_samples(&ch, input.width, input.height, (*samples_per_value).max(1), &usable);
+                samples = samples.max(s.len());
+                g.push(response::debevec(&ch, &s, *lambda).map_err(|m| Error::Unsolvable(format!("channel {c}: {m}")))?);
+            }
+            (Response { levels: input.levels, g }, format!("debevec (λ = {lambda})"))
+        }
+        Method::Robertson { iterations } => {
+            use rayon::prelude::*;
+            let g = (0..3)
+                .into_par_iter()
+                .map(|c| {
+                    let codes: Vec<Vec<u16>> = order.iter().map(|&j| channel(&input.frames[j].codes, c)).collect();
+                    let ch = response::Channel { codes: &codes, times: &times, levels: input.levels };
+                    response::robertson(&ch, &usable, *iterations).map_err(|m| Error::Unsolvable(format!("channel {c}: {m}")))
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            (Response { levels: input.levels, g }, "robertson".to_string())
+        }
+    };
+    let response_s = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let frames: Vec<&[u16]> = order.iter().map(|&j| input.frames[j].codes.as_slice()).collect();
+    let (radiance, mask) = merge::merge(&frames, &times, &response, config.weights);
+    let merge_s = t.elapsed().as_secs_f64();
+    if radiance.iter().any(|v| !v.is_finite()) {
+        return Err(Error::Unsolvable("the merge gave a radiance that is not a finite float32".into()));
+    }
+    let lum: Vec<f64> = (0..n)
+        .filter(|&i| mask[i] == merge::WELL_EXPOSED)
+        .map(|i| {
+            let p = &radiance[3 * i..3 * i + 3];
+            0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64
+        })
+        .filter(|&l| l > 0.0)
+        .collect();
+    let (lo, hi) = lum.iter().fold((f64::INFINITY, 0.0f64), |(a, b), &l| (a.min(l), b.max(l)));
+    let summary = Summary {
+        frames: input.frames.len(),
+        width: input.width,
+        height: input.height,
+        levels: input.levels,
+        method,
+        samples,
+        saturated_pixels: mask.iter().filter(|&&m| m == merge::SATURATED).count(),
+        dark_pixels: mask.iter().filter(|&&m| m == merge::DARK).count(),
+        dynamic_range_stops: if hi > 0.0 && lo.is_finite() { (hi / lo).log2() } else { 0.0 },
+        response_s,
+        merge_s,
+        merge_megapixel_frames_per_s: (n * input.frames.len()) as f64 / 1e6 / merge_s.max(1e-9),
+    };
+    Ok(Output { response, radiance, mask, summary })
+}
+
+fn channel(codes: &[u16], c: usize) -> Vec<u16> {
+    codes.iter().skip(c).step_by(3).copied().collect()
+}
+
+fn check(input: &Input) -> Result<(), Error> {
+    if input.frames.len() < 2 {
+        return Err(Error::BadInput(format!("{} frame(s): a stack needs at least 2 exposures", input.frames.len())));
+    }
+    if !(2..=65536).contains(&input.levels) {
+        return Err(Error::BadInput(format!("{} levels: expected 2 to 65536", input.levels)));
+    }
+    let n = input.width * input.height;
+    if n == 0 {
+        return Err(Error::BadInput("the frames have no pixels".into()));
+    }
+    for f in &input.frames {
+        if !(f.time_s.is_finite() && f.time_s > 0.0) {
+            return Err(Error::BadInput(format!("{}: exposure time {} s: expected a positive number", f.name, f.time_s)));
+        }
+        if f.codes.len() != 3 * n {
+            return Err(Error::BadInput(format!(
+                "{}: {} values, expected {} ({}×{} RGB)",
+                f.name,
+                f.codes.len(),
+                3 * n,
+                input.width,
+                input.height
+            )));
+        }
+        if let Some(z) = f.codes.iter().find(|&&z| z as usize >= input.levels) {
+            return Err(Error::BadInput(format!("{}: code value {z} is not below {} levels", f.name, input.levels)));
+        }
+    }
+    let mut times: Vec<f64> = input.frames.iter().map(|f| f.time_s).collect();
+    times.sort_by(f64::total_cmp);
+    if times.windows(2).all(|w| w[0] == w[1]) {
+        return Err(Error::BadInput(format!(
+            "every frame has the exposure time {} s: a stack needs at least two different times",
+            times[0]
+        )));
+    }
+    if let Some(u) = &input.usable {
+        if u.len() != n {
+            return Err(Error::BadInput(format!("the usable-pixel mask has {} entries for {n} pixels", u.len())));
+        }
+    }
+    Ok(())
+}
