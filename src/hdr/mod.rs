@@ -128,14 +128,19 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
             if !(lambda.is_finite() && *lambda >= 0.0) {
                 return Err(Error::BadInput(format!("lambda = {lambda}: expected a non-negative number")));
             }
-            let mut g = Vec::new();
-            for c in 0..3 {
-                let codes: Vec<Vec<u16>> = order.iter().map(|&j| channel(&input.frames[j].codes, c)).collect();
-                let ch = response::Channel { codes: &codes, times: &times, levels: input.levels };
-                let s = response::choose_samples(&ch, input.width, input.height, (*samples_per_value).max(1), &usable);
-                samples = samples.max(s.len());
-                g.push(response::debevec(&ch, &s, *lambda).map_err(|m| Error::Unsolvable(format!("channel {c}: {m}")))?);
-            }
+            use rayon::prelude::*;
+            let fits = (0..3)
+                .into_par_iter()
+                .map(|c| {
+                    let codes: Vec<Vec<u16>> = order.iter().map(|&j| channel(&input.frames[j].codes, c)).collect();
+                    let ch = response::Channel { codes: &codes, times: &times, levels: input.levels };
+                    let s = response::choose_samples(&ch, input.width, input.height, (*samples_per_value).max(1), &usable);
+                    let g = response::debevec(&ch, &s, *lambda).map_err(|m| Error::Unsolvable(format!("channel {c}: {m}")))?;
+                    Ok((g, s.len()))
+                })
+                .collect::<Result<Vec<_>, Error>>()?;
+            samples = fits.iter().map(|f| f.1).max().unwrap_or(0);
+            let g = fits.into_iter().map(|f| f.0).collect();
             (Response { levels: input.levels, g }, format!("debevec (λ = {lambda})"))
         }
         Method::Robertson { iterations } => {

@@ -97,40 +97,68 @@ fn unbin(g_bins: &[f64], shift: usize, levels: usize) -> Vec<f64> {
 /// each binned value not yet covered, the pixel nearest the image centre showing it.
 pub fn choose_samples(ch: &Channel, width: usize, height: usize, per_value: usize, valid: &[bool]) -> Vec<usize> {
     let (bins, shift) = binning(ch.levels);
-    let n = width * height;
-    let (cx, cy) = ((width as f64 - 1.0) / 2.0, (height as f64 - 1.0) / 2.0);
-    let dist = |i: usize| ((i % width) as f64 - cx).powi(2) + ((i / width) as f64 - cy).powi(2);
-    let mut order: Vec<usize> = (0..n).filter(|&i| valid[i]).collect();
-    order.sort_by(|&a, &b| dist(a).total_cmp(&dist(b)).then(a.cmp(&b)));
+    let n = valid.len();
     let frames = ch.codes.len();
     // A pixel whose value does not grow with the exposure time (registration borders,
     // moving objects, specks) would teach the fit a wrong curve: only pixels whose values are
     // non-decreasing in time (to one bin) and inside the range in two frames are sampled.
     let mut by_time: Vec<usize> = (0..frames).collect();
     by_time.sort_by(|&a, &b| ch.times[a].total_cmp(&ch.times[b]));
-    let consistent = |i: usize| {
-        let z: Vec<usize> = by_time.iter().map(|&j| (ch.codes[j][i] as usize) >> shift).collect();
-        z.windows(2).all(|w| w[1] + 1 >= w[0]) && z.iter().filter(|&&v| v > 0 && v + 1 < bins).count() >= 2
+    let usable: Vec<bool> = (0..n)
+        .map(|i| {
+            if !valid[i] {
+                return false;
+            }
+            let (mut previous, mut inside) = (0usize, 0usize);
+            for &j in &by_time {
+                let z = (ch.codes[j][i] as usize) >> shift;
+                if z + 1 < previous {
+                    return false;
+                }
+                previous = z;
+                inside += usize::from(z > 0 && z + 1 < bins);
+            }
+            inside >= 2
+        })
+        .collect();
+    // Nearest the centre first: squared distance, doubled to stay an integer, then index.
+    let key = |i: usize| {
+        let (dx, dy) = (2 * (i % width) as i64 - (width as i64 - 1), 2 * (i / width) as i64 - (height as i64 - 1));
+        (dx * dx + dy * dy, i)
     };
-    order.retain(|&i| consistent(i));
     let mut frame_order: Vec<usize> = (0..frames).collect();
     let mid = frames / 2;
     frame_order.sort_by_key(|&j| (j as i64 - mid as i64).abs());
     let mut count = vec![0usize; bins];
-    let mut chosen = Vec::new();
     let mut taken = vec![false; n];
+    let mut chosen = Vec::new();
     for &j in &frame_order {
-        for &i in &order {
-            if taken[i] {
+        // Per value, the nearest pixels still wanted, in one pass over the frame in memory
+        // order.
+        let mut best: Vec<Vec<((i64, usize), usize)>> = vec![Vec::new(); bins];
+        for i in 0..n {
+            if !usable[i] || taken[i] {
                 continue;
             }
             let b = (ch.codes[j][i] as usize) >> shift;
-            if b == 0 || b + 1 >= bins || count[b] >= per_value {
+            let want = per_value.saturating_sub(count[b]);
+            if b == 0 || b + 1 >= bins || want == 0 {
                 continue;
             }
-            count[b] += 1;
-            taken[i] = true;
-            chosen.push(i);
+            let k = key(i);
+            let list = &mut best[b];
+            if list.len() < want {
+                list.push((k, i));
+            } else if let Some(worst) = list.iter_mut().max_by_key(|e| e.0).filter(|e| k < e.0) {
+                *worst = (k, i);
+            }
+        }
+        for (b, list) in best.into_iter().enumerate() {
+            for (_, i) in list {
+                count[b] += 1;
+                taken[i] = true;
+                chosen.push(i);
+            }
         }
     }
     chosen.sort_unstable();
