@@ -7,7 +7,7 @@ mod common;
 use std::path::Path;
 use std::process::Command;
 
-/// The tour's `lumen render|calibrate|ps|undistort|color` lines, from the README's tour block.
+/// The tour's `lumen render|calibrate|ps|undistort|color|hdr` lines, from the README's tour block.
 fn tour_commands() -> Vec<String> {
     let readme = std::fs::read_to_string(common::root().join("README.md")).unwrap();
     let tour = readme.split("## A tour of the command line").nth(1).expect("the README has a tour");
@@ -16,7 +16,7 @@ fn tour_commands() -> Vec<String> {
     block
         .lines()
         .filter(|l| {
-            ["lumen render ", "lumen calibrate ", "lumen ps ", "lumen undistort ", "lumen color "]
+            ["lumen render ", "lumen calibrate ", "lumen ps ", "lumen undistort ", "lumen color ", "lumen hdr "]
                 .iter()
                 .any(|p| l.starts_with(p))
         })
@@ -47,7 +47,7 @@ fn run(line: &str, dir: &Path, photos: &Path) -> (bool, String) {
 #[test]
 fn readme_tour_writes_what_it_says() {
     let lines = tour_commands();
-    assert_eq!(lines.len(), 7, "the tour's commands: {lines:?}");
+    assert_eq!(lines.len(), 8, "the tour's commands: {lines:?}");
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let shared = common::root().join("../shared/data");
@@ -99,6 +99,11 @@ fn readme_tour_writes_what_it_says() {
         assert!(d.join("out/ps-ball").join(f).is_file(), "ps-ball/{f} missing");
     }
     assert!(d.join("out/undistorted.png").is_file());
+    let (ok, err) = run(&lines[7], d, &photos);
+    assert!(ok, "{err}");
+    for f in ["radiance.exr", "response.csv", "response.svg", "mask.png", "preview.png", "summary.json"] {
+        assert!(d.join("out/memorial").join(f).is_file(), "memorial/{f} missing");
+    }
     // Nothing outside out/.
     let top: Vec<_> = std::fs::read_dir(d).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert_eq!(top, vec![std::ffi::OsString::from("out")], "the tour wrote outside out/");
