@@ -93,8 +93,8 @@ pub struct Summary {
     pub samples: usize,
     pub saturated_pixels: usize,
     pub dark_pixels: usize,
-    /// log₂ of the brightest over the darkest well-exposed luminance (1st to 99.9th
-    /// percentile would hide the range; these are the extremes of well-exposed pixels).
+    /// log₂ of the brightest over the darkest positive luminance among the pixels not
+    /// masked saturated or dark.
     pub dynamic_range_stops: f64,
     pub response_s: f64,
     pub merge_s: f64,

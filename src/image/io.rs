@@ -146,12 +146,22 @@ fn write_png_bytes(path: &Path, w: u32, h: u32, c: u32, bytes: &[u8]) -> Result<
     })
 }
 
-/// Writes raw integer sample values (already quantised) as an 8- or 16-bit PNG.
+/// Writes raw integer sample values (already quantised) as an 8- or 16-bit PNG. Values of 10
+/// or 12 bits are stored in 16-bit samples shifted to the top bits (a 10-bit 1023 is written
+/// 65472), as cameras' 16-bit files hold them, so full scale stays full scale for a reader.
 pub fn write_png_raw(path: &Path, w: u32, h: u32, c: u32, values: &[u16], bits: u8) -> Result<(), Error> {
     if bits == 8 {
         let bytes: Vec<u8> = values.iter().map(|&v| v.min(255) as u8).collect();
         return write_png_bytes(path, w, h, c, &bytes);
     }
+    let shift = 16u32.saturating_sub(bits as u32).min(8);
+    let shifted: Vec<u16>;
+    let values = if shift > 0 {
+        shifted = values.iter().map(|&v| v << shift).collect();
+        &shifted
+    } else {
+        values
+    };
     let ct = color_type(c, true)
         .ok_or_else(|| Error::Write { path: path.into(), message: format!("{c} channels") })?;
     // PNG stores 16-bit samples big-endian; `save_buffer` expects native-endian u16 bytes.

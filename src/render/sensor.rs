@@ -1,12 +1,14 @@
-//! A simple linear sensor: exposure, photon (Poisson) noise, read (Gaussian) noise, and
-//! quantisation with clipping to 8 or 16 bits.
+//! A sensor: exposure, photon (Poisson) noise, read (Gaussian) noise, a camera response curve,
+//! and quantisation with clipping to 8, 10, 12 or 16 bits.
 //!
 //! electrons e = Poisson(L · exposure · full_well) + Normal(0, read_noise²)
-//! code value  = clamp(round(e / full_well · (2^bits − 1)), 0, 2^bits − 1)
+//! code value  = clamp(round(f(clamp(e / full_well, 0, 1)) · (2^bits − 1)), 0, 2^bits − 1)
 //!
-//! so a radiance of 1/exposure reaches full scale. Noise is drawn from a generator seeded by
-//! (seed, pixel), so it does not depend on the thread count. A non-linear response curve is
-//! not modelled here.
+//! so a radiance of 1/exposure reaches full scale. f is the response (`Response`): linear
+//! by default, or a gamma, the sRGB curve, or a film-like S-curve, each increasing from
+//! f(0) = 0 to f(1) = 1; `Response::inverse` gives the truth a response recovery is judged
+//! against. Noise is drawn from a generator seeded by (seed, pixel), so it does not depend on
+//! the thread count.
 
 use crate::image::Image;
 use rand::SeedableRng;
@@ -28,9 +30,78 @@ pub struct Sensor {
     /// Standard deviation of the read noise in electrons (default 0).
     #[serde(default)]
     pub read_noise: f64,
-    /// Bits per sample of the output PNG: 8 or 16 (default 8).
+    /// Bits per sample: 8, 10, 12 or 16 (default 8); above 8 the PNG holds 16-bit samples.
     #[serde(default = "eight")]
     pub bits: u8,
+    /// The camera response between exposure and code value (default linear).
+    #[serde(default)]
+    pub response: Response,
+}
+
+/// A camera response curve f: [0, 1] → [0, 1], increasing, f(0) = 0, f(1) = 1.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Deserialize, Serialize)]
+#[serde(rename_all = "kebab-case", tag = "type", deny_unknown_fields)]
+pub enum Response {
+    #[default]
+    Linear,
+    /// f(x) = x^(1/gamma).
+    Gamma { gamma: f64 },
+    /// IEC 61966-2-1's encoding.
+    Srgb,
+    /// A film-like curve with a toe and a shoulder: Narkowicz's fit of the ACES filmic curve,
+    /// x(2.51x + 0.03)/(x(2.43x + 0.59) + 0.14), on exposures scaled by `stops` stops above full
+    /// scale (so full scale maps to f(1) = 1, more stops put more of the range in the toe).
+    Film { stops: f64 },
+}
+
+impl Response {
+    pub fn validate(&self) -> Result<(), String> {
+        match *self {
+            Response::Gamma { gamma } if !(gamma.is_finite() && (0.1..=10.0).contains(&gamma)) => {
+                Err(format!("response gamma = {gamma}: expected 0.1 to 10"))
+            }
+            Response::Film { stops } if !(stops.is_finite() && (0.0..=10.0).contains(&stops)) => {
+                Err(format!("response stops = {stops}: expected 0 to 10"))
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// f(x) for x in [0, 1].
+    pub fn apply(&self, x: f64) -> f64 {
+        let x = x.clamp(0.0, 1.0);
+        match *self {
+            Response::Linear => x,
+            Response::Gamma { gamma } => x.powf(1.0 / gamma),
+            Response::Srgb => {
+                if x <= 0.003_130_8 {
+                    12.92 * x
+                } else {
+                    1.055 * x.powf(1.0 / 2.4) - 0.055
+                }
+            }
+            Response::Film { stops } => {
+                let aces = |v: f64| v * (2.51 * v + 0.03) / (v * (2.43 * v + 0.59) + 0.14);
+                let k = 2f64.powf(stops);
+                aces(k * x) / aces(k)
+            }
+        }
+    }
+
+    /// f⁻¹(y) for y in [0, 1] (bisection: 60 halvings reach f64's resolution).
+    pub fn inverse(&self, y: f64) -> f64 {
+        let y = y.clamp(0.0, 1.0);
+        let (mut lo, mut hi) = (0.0f64, 1.0f64);
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if self.apply(mid) < y {
+                lo = mid
+            } else {
+                hi = mid
+            }
+        }
+        0.5 * (lo + hi)
+    }
 }
 
 fn one() -> f64 {
@@ -48,7 +119,7 @@ fn eight() -> u8 {
 
 impl Default for Sensor {
     fn default() -> Self {
-        Sensor { exposure: 1.0, full_well: full_well(), photon_noise: true, read_noise: 0.0, bits: 8 }
+        Sensor { exposure: 1.0, full_well: full_well(), photon_noise: true, read_noise: 0.0, bits: 8, response: Response::Linear }
     }
 }
 
@@ -63,10 +134,10 @@ impl Sensor {
         if !(self.read_noise.is_finite() && self.read_noise >= 0.0) {
             return Err(format!("read_noise = {} must be non-negative", self.read_noise));
         }
-        if self.bits != 8 && self.bits != 16 {
-            return Err(format!("bits = {} must be 8 or 16", self.bits));
+        if ![8, 10, 12, 16].contains(&self.bits) {
+            return Err(format!("bits = {} must be 8, 10, 12 or 16", self.bits));
         }
-        Ok(())
+        self.response.validate()
     }
 
     pub fn max_code(&self) -> u16 {
@@ -102,7 +173,9 @@ impl Sensor {
                         if let Some(n) = &read {
                             e += n.sample(&mut rng);
                         }
-                        (e / self.full_well * max).round().clamp(0.0, max) as u16
+                        let x = (e / self.full_well).clamp(0.0, 1.0);
+                        let y = if self.response == Response::Linear { x } else { self.response.apply(x) };
+                        (y * max).round().clamp(0.0, max) as u16
                     })
                     .collect::<Vec<_>>()
             })
@@ -120,7 +193,7 @@ mod tests {
     /// An absurd exposure saturates every code at once instead of looping in the sampler.
     #[test]
     fn huge_exposure_saturates_without_hanging() {
-        let s = Sensor { exposure: 1e300, full_well: 4e4, read_noise: 2.0, bits: 16, photon_noise: true };
+        let s = Sensor { exposure: 1e300, full_well: 4e4, read_noise: 2.0, bits: 16, photon_noise: true, response: Response::Linear };
         let img = Image { width: 16, height: 16, channels: 3, data: vec![0.5; 768] };
         let t = std::time::Instant::now();
         let codes = s.expose(&img, 1);
@@ -134,7 +207,7 @@ mod tests {
     fn noise_statistics_and_clipping() {
         let mut img = Image::new(200, 100, 3);
         img.data.iter_mut().for_each(|v| *v = 0.5);
-        let s = Sensor { exposure: 1.0, full_well: 10_000.0, photon_noise: true, read_noise: 30.0, bits: 16 };
+        let s = Sensor { exposure: 1.0, full_well: 10_000.0, photon_noise: true, read_noise: 30.0, bits: 16, response: Response::Linear };
         let codes = s.expose(&img, 3);
         let n = codes.len() as f64;
         let mean = codes.iter().map(|&c| c as f64).sum::<f64>() / n;
@@ -151,5 +224,27 @@ mod tests {
         img.data.iter_mut().for_each(|v| *v = 0.5);
         assert_eq!(s.expose(&img, 3), codes);
         assert_ne!(s.expose(&img, 4), codes);
+    }
+
+    /// Every response is increasing from 0 to 1 and its inverse undoes it; a 10-bit sensor
+    /// with the sRGB curve writes the codes the curve gives.
+    #[test]
+    fn responses_and_bit_depths() {
+        for r in [Response::Linear, Response::Gamma { gamma: 2.2 }, Response::Srgb, Response::Film { stops: 2.0 }] {
+            assert!(r.apply(0.0).abs() < 1e-12 && (r.apply(1.0) - 1.0).abs() < 1e-12, "{r:?}");
+            let ys: Vec<f64> = (0..=1000).map(|k| r.apply(k as f64 / 1000.0)).collect();
+            assert!(ys.windows(2).all(|w| w[1] > w[0]), "{r:?} is not increasing");
+            for k in 1..100 {
+                let x = k as f64 / 100.0;
+                assert!((r.inverse(r.apply(x)) - x).abs() < 1e-9, "{r:?} at {x}");
+            }
+        }
+        assert!(Response::Gamma { gamma: 0.0 }.validate().is_err());
+        let img = Image { width: 4, height: 1, channels: 3, data: vec![0.25; 12] };
+        let s = Sensor { bits: 10, photon_noise: false, response: Response::Srgb, ..Sensor::default() };
+        s.validate().unwrap();
+        let want = (Response::Srgb.apply(0.25) * 1023.0).round() as u16;
+        assert!(s.expose(&img, 1).iter().all(|&c| c == want), "{want}");
+        assert!(Sensor { bits: 9, ..Sensor::default() }.validate().is_err());
     }
 }
