@@ -153,7 +153,7 @@ fn bad_values() {
         &[],
     );
     assert!(e.contains("missing.png"), "{e}");
-    let e = scene_error("[sensor]\nbits = 12\n", &[]);
+    let e = scene_error("[sensor]\nbits = 9\n", &[]);
     assert!(e.contains("sensor") && e.contains("bits"), "{e}");
     let glossy = |rest: &str| format!("[[materials]]\nname = \"g\"\nalbedo = [0.3, 0.3, 0.3]\n{rest}");
     let e = scene_error(&glossy("type = \"lambertian\"\nexponent = 10.0\n"), &[]);

@@ -90,7 +90,7 @@ fn synthetic_stack_recovers_response_and_radiance() {
     let (truth, input) = synthetic(1e5, &times);
     for method in [Method::Debevec { lambda: 10.0, samples_per_value: 1 }, Method::Robertson { iterations: 200 }] {
         let name = format!("{method:?}");
-        let config = hdr::Config { method: method.clone(), weights: Weights::Noise { gain: 1e-12, read_noise: 0.0 } };
+        let config = hdr::Config { method: method.clone(), weights: Weights::Noise { full_well: 1e12, read_noise: 0.0 } };
         let out = hdr::run(&input, &config).unwrap();
         for c in 0..3 {
             let g = &out.response.g[c];
@@ -289,7 +289,7 @@ fn cli_inputs_and_refusals() {
         (vec!["--list", &list], "line 2"),
         (vec!["--images", &a, &b, "--times", "1", "2", "--response", &bad_csv], "does not increase"),
         (vec!["--images", &a, &b, "--times", "1", "2", "--response", "/nonexistent/r.csv"], "not debevec, robertson"),
-        (vec!["--images", &a, &b, "--times", "1", "2", "--weights", "noise"], "--gain"),
+        (vec!["--images", &a, &b, "--times", "1", "2", "--weights", "noise"], "--full-well"),
         (vec!["--images", &a, &b, "--times", "1", "2", "--weights", "tent"], "hat or noise"),
         (vec!["--images", &a, &b, "--times", "1", "2", "--lambda", "nan"], "--lambda"),
         (vec!["--images", &a, &b, "--times", "1", "2", "--exclude-color", "0,0"], "--exclude-color"),

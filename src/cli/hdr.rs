@@ -13,7 +13,7 @@ pub struct HdrArgs {
     pub lambda: f64,
     pub samples_per_value: usize,
     pub weights: String,
-    pub gain: Option<f64>,
+    pub full_well: Option<f64>,
     pub read_noise: f64,
     pub exclude_color: Option<String>,
     pub out: PathBuf,
@@ -95,13 +95,13 @@ pub fn run(a: &HdrArgs) -> Result<()> {
     if frames_in.len() < 2 {
         bail!("{} image(s): a stack needs at least 2 exposures", frames_in.len());
     }
-    let weights = match (a.weights.as_str(), a.gain) {
+    let weights = match (a.weights.as_str(), a.full_well) {
         ("hat", _) => Weights::Hat,
-        ("noise", Some(g)) if g.is_finite() && g > 0.0 && a.read_noise.is_finite() && a.read_noise >= 0.0 => {
-            Weights::Noise { gain: g, read_noise: a.read_noise }
+        ("noise", Some(fw)) if fw.is_finite() && fw >= 1.0 && a.read_noise.is_finite() && a.read_noise >= 0.0 => {
+            Weights::Noise { full_well: fw, read_noise: a.read_noise }
         }
-        ("noise", Some(g)) => bail!("--gain {g} --read-noise {}: expected a positive gain and a non-negative read noise", a.read_noise),
-        ("noise", None) => bail!("--weights noise needs --gain (linear units per electron at the response's scale)"),
+        ("noise", Some(fw)) => bail!("--full-well {fw} --read-noise {}: expected at least 1 electron and a non-negative read noise", a.read_noise),
+        ("noise", None) => bail!("--weights noise needs --full-well (electrons at full scale) and --read-noise (electrons)"),
         (other, _) => bail!("--weights {other}: expected hat or noise"),
     };
     if !(a.lambda.is_finite() && a.lambda >= 0.0) {

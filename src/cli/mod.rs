@@ -161,13 +161,13 @@ enum Command {
         #[arg(long, default_value_t = 1)]
         samples_per_value: usize,
         /// hat (Debevec & Malik) or noise (inverse variance under photon, read and
-        /// quantisation noise; needs --gain).
+        /// quantisation noise; needs --full-well).
         #[arg(long, default_value = "hat")]
         weights: String,
-        /// For --weights noise: linear units (at the response's scale) per electron.
+        /// For --weights noise: the sensor's electrons at full scale.
         #[arg(long)]
-        gain: Option<f64>,
-        /// For --weights noise: read noise in linear units.
+        full_well: Option<f64>,
+        /// For --weights noise: the sensor's read noise in electrons.
         #[arg(long, default_value_t = 0.0)]
         read_noise: f64,
         /// Leave pixels of this colour (R,G,B code values) in any frame out of the response
@@ -286,7 +286,7 @@ pub fn main() -> i32 {
             lambda,
             samples_per_value,
             weights,
-            gain,
+            full_well,
             read_noise,
             exclude_color,
             out,
@@ -299,7 +299,7 @@ pub fn main() -> i32 {
                 lambda,
                 samples_per_value,
                 weights,
-                gain,
+                full_well,
                 read_noise,
                 exclude_color,
                 out,

@@ -8,10 +8,11 @@
 //!   codes move the result by their share of the weight in ln units, not in linear ones;
 //! - `noise`: inverse variance of Eⱼ under photon, read and quantisation noise (Granados et
 //!   al., "Optimal HDR reconstruction with linear digital cameras", CVPR 2010; Hasinoff et
-//!   al. 2010): with X = exp(g(Z)) the linearised value, var(Eⱼ) = (k·X + σ_r² + (X′·q)²/12)/Δtⱼ²,
-//!   k the gain (linear units per electron) and σ_r the read noise in linear units, so
-//!   w = Δtⱼ² / (k·X + σ_r² + X′²/12), averaging Eⱼ itself; codes at black or saturation get
-//!   weight 0.
+//!   al. 2010): with X = exp(g(Z)) the linearised value, var(Eⱼ) = (k·X + σ_r² + X′²/12)/Δtⱼ²,
+//!   with k = X(full scale)/full_well the gain (linear units per electron, from the recovered
+//!   response's value at full scale and the sensor's full-well capacity), σ_r = k·read noise
+//!   and X′ the response's step per code; so w = Δtⱼ² / (k·X + σ_r² + X′²/12), averaging Eⱼ
+//!   itself; codes at black or saturation get weight 0.
 //!
 //! A pixel whose every frame is saturated in a channel has no estimate: it is given the
 //! shortest frame's value as a lower bound and marked `saturated` in the mask; one black in
@@ -24,8 +25,8 @@ use serde::{Deserialize, Serialize};
 #[serde(rename_all = "kebab-case")]
 pub enum Weights {
     Hat,
-    /// `gain`: linear units (exp g) per electron; `read_noise`: in the same units.
-    Noise { gain: f64, read_noise: f64 },
+    /// The sensor's electrons at full scale and its read noise in electrons.
+    Noise { full_well: f64, read_noise: f64 },
 }
 
 /// The mask's values per pixel: 0 well exposed in some frame (every channel), 1 saturated
@@ -54,9 +55,11 @@ pub fn merge(frames: &[&[u16]], times: &[f64], response: &Response, weights: Wei
                 .map(|z| match weights {
                     _ if z == 0 || z == levels - 1 => 0.0,
                     Weights::Hat => hat(z, levels),
-                    Weights::Noise { gain, read_noise } => {
+                    Weights::Noise { full_well, read_noise } => {
+                        let gain = x[levels - 1] / full_well;
+                        let read = gain * read_noise;
                         let slope = 0.5 * (x[(z + 1).min(levels - 1)] - x[z.saturating_sub(1)]);
-                        1.0 / (gain * x[z] + read_noise * read_noise + slope * slope / 12.0).max(1e-300)
+                        1.0 / (gain * x[z] + read * read + slope * slope / 12.0).max(1e-300)
                     }
                 })
                 .collect();

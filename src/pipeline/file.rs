@@ -39,6 +39,7 @@ pub enum Stage {
     Calibrate(stages::calibrate::Config),
     Photometric(stages::photometric::Config),
     Color(stages::color::Config),
+    Hdr(stages::hdr::Config),
 }
 
 impl Stage {
@@ -48,6 +49,7 @@ impl Stage {
             Stage::Calibrate(_) => "calibrate",
             Stage::Photometric(_) => "photometric",
             Stage::Color(_) => "color",
+            Stage::Hdr(_) => "hdr",
         }
     }
 
@@ -59,6 +61,7 @@ impl Stage {
             Stage::Calibrate(_) => "fx_rel_err",
             Stage::Photometric(_) => "mean_angular_error_deg",
             Stage::Color(_) => "loo_mean_de2000",
+            Stage::Hdr(_) => "radiance_median_rel_err",
         }
     }
 }
@@ -157,7 +160,7 @@ pub fn parse(text: &str, path: &Path) -> Result<PipelineFile, Error> {
         let stage_name = match common_t.remove("stage") {
             Some(toml::Value::String(s)) => s,
             Some(other) => return Err(err(format!("`stage` = {other}: expected a stage name"))),
-            None => return Err(err("missing `stage` (render, calibrate, photometric or color)".into())),
+            None => return Err(err("missing `stage` (render, calibrate, photometric, color or hdr)".into())),
         };
         let common: Common = from_table(common_t).map_err(err)?;
         let err = |message: String| Error::Parse {
@@ -268,7 +271,8 @@ fn parse_stage(name: &str, own: toml::Table) -> Result<Stage, String> {
         "calibrate" => Stage::Calibrate(from_table(own)?),
         "photometric" => Stage::Photometric(from_table(own)?),
         "color" => Stage::Color(from_table(own)?),
-        other => return Err(format!("unknown stage `{other}`: expected render, calibrate, photometric or color")),
+        "hdr" => Stage::Hdr(from_table(own)?),
+        other => return Err(format!("unknown stage `{other}`: expected render, calibrate, photometric, color or hdr")),
     })
 }
 

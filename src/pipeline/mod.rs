@@ -108,6 +108,11 @@ fn run_cases(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Repo
                 |i| stages::color::solve(c, i),
                 |o, t| stages::color::validate(c, o, t),
             ),
+            Stage::Hdr(c) => run_case(
+                || stages::hdr::synthesize(c, &ctx),
+                |i| stages::hdr::solve(c, i),
+                |o, t| stages::hdr::validate(c, o, t),
+            ),
         };
         let total = t.elapsed().as_secs_f64();
         let (mut st, kept) = report_case(path, case, seed, result)?;

@@ -13,6 +13,7 @@
 
 pub mod calibrate;
 pub mod color;
+pub mod hdr;
 pub mod photometric;
 pub mod render;
 
@@ -37,6 +38,8 @@ pub enum StageError {
     Photometric(#[from] crate::photometric::Error),
     #[error(transparent)]
     Color(#[from] crate::color::Error),
+    #[error(transparent)]
+    Hdr(#[from] crate::hdr::Error),
 }
 
 /// The kinds a pipeline entry can declare with `expect_error`.
@@ -66,6 +69,10 @@ impl StageError {
             StageError::Color(crate::color::Error::File { .. }) => "io",
             StageError::Color(crate::color::Error::Image(I::Read { .. } | I::Write { .. })) => "io",
             StageError::Color(_) => "bad-input",
+            StageError::Hdr(crate::hdr::Error::Unsolvable(_)) => "numerical",
+            StageError::Hdr(crate::hdr::Error::File { .. }) => "io",
+            StageError::Hdr(crate::hdr::Error::Image(I::Read { .. } | I::Write { .. })) => "io",
+            StageError::Hdr(_) => "bad-input",
         }
     }
 }

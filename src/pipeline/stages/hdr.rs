@@ -1,0 +1,285 @@
+//! The `hdr` stage: renders an HDR scene once as linear radiance (the truth), exposes it into
+//! a stack through the sensor model with a camera response curve, and runs `hdr::run`, the
+//! function `lumen hdr` calls.
+//!
+//! Frame k (0-based) has the exposure time t_k = 2^(−k·stop_step) (longest first, 1 s), and
+//! its codes are the sensor's `expose` of the radiance with exposure × t_k, each frame with its
+//! own noise seed. The render goes through the render cache; the stack, cheap, does not.
+//!
+//! Truth: the radiance, and the response's inverse: the code z of a `bits`-bit sensor is
+//! reached at the exposure f⁻¹(z/(2^bits − 1)) (fraction of full scale), so the true
+//! g(z) = ln f⁻¹(z/(2^bits − 1)) up to the offset every recovery is free to choose.
+//!
+//! Metrics:
+//! - `response_err_ln`: the largest |g − g_true − offset| over the values that occur in the
+//!   stack (offset: the mean difference), channels included, among values whose quantisation
+//!   bin (the fit's: 1 code up to 1024 levels, 2^(bits−10) codes above) spans less than 0.2 in
+//!   ln exposure (below, one bin holds more exposure than a 0.02 bound can resolve);
+//! - `radiance_median_rel_err`, `radiance_p95_rel_err`: against the true radiance over the
+//!   pixel channels well exposed (10 % to 90 % of full scale) in at least one frame, after one
+//!   scale per channel (the median ratio); `radiance_median_err_stops` the same in stops;
+//! - `saturated_pixels`, `dark_pixels` (masked as bounds), `true_dynamic_range` (brightest
+//!   over darkest positive true luminance), `merge_megapixel_frames_per_s`.
+
+use super::{apply_overrides, Context, Findings, SettingsKey, StageError};
+use crate::hdr::{self, Frame, Method, Weights};
+use crate::image::Image;
+use crate::pipeline::cache::scene_digest;
+use crate::pipeline::metric::{Better, Metric};
+use crate::render::{self, sensor::Response};
+use serde::{Deserialize, Serialize};
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// Scene file, relative to the pipeline file.
+    pub scene: String,
+    /// Number of exposures (default 7, at least 2).
+    #[serde(default = "default_exposures")]
+    pub exposures: usize,
+    /// Stops between consecutive exposures (default 2).
+    #[serde(default = "default_stop_step")]
+    pub stop_step: f64,
+    /// Exposure of the longest frame: radiance → fraction of full scale (default 1).
+    #[serde(default = "one")]
+    pub exposure: f64,
+    /// The sensor's response (default: a gamma of 2.2), as a scene's `[sensor] response`.
+    #[serde(default = "default_response")]
+    pub response: Response,
+    /// Bits per sample: 8, 10, 12 or 16 (default 8).
+    #[serde(default = "default_bits")]
+    pub bits: u8,
+    /// Electrons at full scale (default 20000) and read noise in electrons (default 3).
+    #[serde(default = "default_full_well")]
+    pub full_well: f64,
+    #[serde(default = "default_read_noise")]
+    pub read_noise: f64,
+    /// `debevec` or `robertson` (default debevec).
+    #[serde(default = "default_method")]
+    pub method: String,
+    /// Debevec's λ (default 10) and sample pixels per value (default 1).
+    #[serde(default = "default_lambda")]
+    pub lambda: f64,
+    #[serde(default = "one_usize")]
+    pub samples_per_value: usize,
+    /// `hat` or `noise` (default noise: the sensor's own gain and read noise).
+    #[serde(default = "default_weights")]
+    pub weights: String,
+    /// Samples per pixel (default: the scene's).
+    pub spp: Option<u32>,
+}
+
+fn default_exposures() -> usize {
+    7
+}
+fn default_stop_step() -> f64 {
+    2.0
+}
+fn one() -> f64 {
+    1.0
+}
+fn one_usize() -> usize {
+    1
+}
+fn default_response() -> Response {
+    Response::Gamma { gamma: 2.2 }
+}
+fn default_bits() -> u8 {
+    8
+}
+fn default_full_well() -> f64 {
+    20000.0
+}
+fn default_read_noise() -> f64 {
+    3.0
+}
+fn default_method() -> String {
+    "debevec".into()
+}
+fn default_lambda() -> f64 {
+    10.0
+}
+fn default_weights() -> String {
+    "noise".into()
+}
+
+pub struct Truth {
+    radiance: Image,
+    response: Response,
+    max_code: f64,
+    /// Per channel: which code values occur in the stack.
+    occurs: Vec<Vec<bool>>,
+    /// Per channel and pixel: some frame shows it well exposed (10 % to 90 % of full scale).
+    well_exposed: Vec<Vec<bool>>,
+}
+
+#[derive(Serialize)]
+struct FilmRecipe<'a> {
+    product: &'static str,
+    scene: &'a str,
+    settings: SettingsKey,
+}
+
+pub fn synthesize(c: &Config, ctx: &Context) -> Result<(hdr::Input, Truth, Findings), StageError> {
+    if c.exposures < 2 || c.exposures > 64 {
+        return Err(StageError::Config(format!("exposures = {}: expected 2 to 64", c.exposures)));
+    }
+    if !(c.stop_step.is_finite() && c.stop_step > 0.0 && c.stop_step <= 10.0) {
+        return Err(StageError::Config(format!("stop_step = {}: expected a number in (0, 10]", c.stop_step)));
+    }
+    let sensor = render::sensor::Sensor {
+        exposure: c.exposure,
+        full_well: c.full_well,
+        photon_noise: true,
+        read_noise: c.read_noise,
+        bits: c.bits,
+        response: c.response,
+    };
+    sensor.validate().map_err(StageError::Config)?;
+    method(c)?;
+    let scene_path = ctx.dir.join(&c.scene);
+    let scene = render::load(&scene_path)?;
+    let digest = scene_digest(&scene_path)?;
+    let mut settings = render::Settings::from_scene(&scene);
+    apply_overrides(&mut settings, c.spp, None)?;
+    settings.seed = ctx.seed;
+    let recipe = FilmRecipe { product: "hdr-film", scene: &digest, settings: SettingsKey::from(&settings) };
+    let film = ctx.cache.images(ctx.case, "radiance", &recipe, || {
+        Ok::<_, StageError>(vec![render::render(&scene, &settings).mean])
+    })?;
+    let Some(radiance) = film.into_iter().next() else {
+        return Err(StageError::Config("the cached render is empty".into()));
+    };
+    let max_code = sensor.max_code() as f64;
+    let frames: Vec<Frame> = (0..c.exposures)
+        .map(|k| {
+            let t = 2f64.powf(-(k as f64) * c.stop_step);
+            let s = render::sensor::Sensor { exposure: c.exposure * t, ..sensor.clone() };
+            let codes = s.expose(&radiance, render::sampler::mix64(ctx.seed ^ (0x4d52 + k as u64)));
+            Frame { name: format!("frame {k} ({t} s)"), time_s: t, codes }
+        })
+        .collect();
+    let levels = sensor.max_code() as usize + 1;
+    let n = (radiance.width * radiance.height) as usize;
+    let (lo_code, hi_code) = ((0.1 * max_code) as u16, (0.9 * max_code) as u16);
+    let mut occurs = vec![vec![false; levels]; 3];
+    let mut well_exposed = vec![vec![false; n]; 3];
+    for f in &frames {
+        for (k, &z) in f.codes.iter().enumerate() {
+            occurs[k % 3][z as usize] = true;
+            if (lo_code..=hi_code).contains(&z) {
+                well_exposed[k % 3][k / 3] = true;
+            }
+        }
+    }
+    let input = hdr::Input {
+        width: radiance.width as usize,
+        height: radiance.height as usize,
+        levels,
+        frames,
+        usable: None,
+    };
+    let lum: Vec<f64> = radiance
+        .data
+        .chunks_exact(3)
+        .map(|p| 0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64)
+        .filter(|&l| l > 0.0)
+        .collect();
+    let (lo, hi) = lum.iter().fold((f64::INFINITY, 0.0f64), |(a, b), &l| (a.min(l), b.max(l)));
+    let notes = vec![format!(
+        "{}: {}×{} px, {} spp, radiance from {lo:.3e} to {hi:.3e}; {} exposures {} stops apart from 1 s, sensor {} bits, response {:?}, full well {} e⁻, read noise {} e⁻.",
+        c.scene,
+        radiance.width,
+        radiance.height,
+        settings.spp,
+        c.exposures,
+        c.stop_step,
+        c.bits,
+        c.response,
+        c.full_well,
+        c.read_noise
+    )];
+    Ok((input, Truth { radiance, response: c.response, max_code, occurs, well_exposed }, Findings { notes, ..Default::default() }))
+}
+
+fn method(c: &Config) -> Result<(Method, Weights), StageError> {
+    let m = match c.method.as_str() {
+        "debevec" => Method::Debevec { lambda: c.lambda, samples_per_value: c.samples_per_value.max(1) },
+        "robertson" => Method::Robertson { iterations: 200 },
+        other => return Err(StageError::Config(format!("method = \"{other}\": expected debevec or robertson"))),
+    };
+    let w = match c.weights.as_str() {
+        "hat" => Weights::Hat,
+        // The sensor's specification, as a camera's data sheet gives it.
+        "noise" => Weights::Noise { full_well: c.full_well, read_noise: c.read_noise },
+        other => return Err(StageError::Config(format!("weights = \"{other}\": expected hat or noise"))),
+    };
+    Ok((m, w))
+}
+
+pub fn solve(c: &Config, input: &hdr::Input) -> Result<hdr::Output, StageError> {
+    let (method, weights) = method(c)?;
+    Ok(hdr::run(input, &hdr::Config { method, weights })?)
+}
+
+pub fn validate(_c: &Config, out: &hdr::Output, truth: &Truth) -> Findings {
+    let mut f = Findings::default();
+    let levels = out.response.levels;
+    // The response against the truth, over values that occur with a bin narrower than 0.2.
+    let true_g = |z: f64| truth.response.inverse((z / truth.max_code).clamp(0.0, 1.0)).max(1e-300).ln();
+    let mut worst: Option<f64> = None;
+    // The fit's resolution: above 1024 levels it works on bins (`hdr::response`).
+    let bin = (levels / hdr::response::MAX_FIT_LEVELS).max(1) as f64;
+    for c in 0..3 {
+        let zs: Vec<usize> = (1..levels - 1)
+            .filter(|&z| truth.occurs[c][z] && true_g(z as f64 + 0.5 * bin) - true_g(z as f64 - 0.5 * bin) < 0.2)
+            .collect();
+        if zs.is_empty() {
+            continue;
+        }
+        let g = &out.response.g[c];
+        let offset = zs.iter().map(|&z| g[z] - true_g(z as f64)).sum::<f64>() / zs.len() as f64;
+        let w = zs.iter().map(|&z| (g[z] - true_g(z as f64) - offset).abs()).fold(0.0, f64::max);
+        worst = Some(worst.map_or(w, |v: f64| v.max(w)));
+    }
+    let m = &mut f.metrics;
+    m.push(Metric::maybe("response_err_ln", worst, "ln", Better::Lower, "no value inside the range occurs"));
+    // The radiance against the truth.
+    let n = out.mask.len();
+    let mut errs = Vec::new();
+    for c in 0..3 {
+        let pairs: Vec<(f64, f64)> = (0..n)
+            .filter(|&i| truth.well_exposed[c][i])
+            .map(|i| (truth.radiance.data[3 * i + c] as f64, out.radiance[3 * i + c] as f64))
+            .filter(|(t, _)| *t > 0.0)
+            .collect();
+        if pairs.is_empty() {
+            continue;
+        }
+        let mut ratios: Vec<f64> = pairs.iter().map(|(t, e)| e / t).collect();
+        ratios.sort_by(f64::total_cmp);
+        let k = ratios[ratios.len() / 2];
+        errs.extend(pairs.iter().map(|(t, e)| (e / k - t).abs() / t));
+    }
+    errs.sort_by(f64::total_cmp);
+    let pick = |q: f64| (!errs.is_empty()).then(|| errs[((errs.len() - 1) as f64 * q) as usize]);
+    let none = "no pixel well exposed in any frame";
+    m.push(Metric::maybe("radiance_median_rel_err", pick(0.5), "", Better::Lower, none));
+    m.push(Metric::maybe("radiance_p95_rel_err", pick(0.95), "", Better::Lower, none));
+    m.push(Metric::maybe("radiance_median_err_stops", pick(0.5).map(|e| (1.0 + e).log2()), "stops", Better::Lower, none));
+    let s = &out.summary;
+    m.push(Metric::new("saturated_pixels", s.saturated_pixels as f64, "pixels", Better::Lower));
+    m.push(Metric::new("dark_pixels", s.dark_pixels as f64, "pixels", Better::Lower));
+    let lum: Vec<f64> = truth
+        .radiance
+        .data
+        .chunks_exact(3)
+        .map(|p| 0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64)
+        .filter(|&l| l > 0.0)
+        .collect();
+    let (tlo, thi) = lum.iter().fold((f64::INFINITY, 0.0f64), |(a, b), &l| (a.min(l), b.max(l)));
+    m.push(Metric::maybe("true_dynamic_range", (thi > 0.0 && tlo.is_finite()).then(|| thi / tlo), "×", Better::Higher, "no light"));
+    m.push(Metric::new("merge_megapixel_frames_per_s", s.merge_megapixel_frames_per_s, "1/s", Better::Higher));
+    m.push(Metric::new("response_s", s.response_s, "s", Better::Lower));
+    f
+}
