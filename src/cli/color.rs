@@ -12,44 +12,7 @@ pub enum Color {
     /// Fit a model mapping camera RGB to XYZ from a photograph of a ColorChecker 24 (or from
     /// patch values in a CSV); writes the model and its report (per-patch ΔE2000, mean, max,
     /// leave-one-out mean) as JSON.
-    Fit {
-        /// Chart image: .exr (linear) or 8/16-bit .png/.tif (sRGB-decoded unless --linear).
-        #[arg(long, conflicts_with = "patches", required_unless_present = "patches")]
-        image: Option<PathBuf>,
-        /// The outer corners of the 6×4 cell grid, x1,y1,x2,y2,x3,y3,x4,y4: top-left,
-        /// top-right, bottom-right, bottom-left (the corner by patch 1 "dark skin" first),
-        /// pixel centres at integer coordinates.
-        #[arg(long, required_unless_present = "patches", allow_hyphen_values = true)]
-        corners: Option<String>,
-        /// Patch values instead of an image: CSV with the header patch,R,G,B (linear).
-        #[arg(long)]
-        patches: Option<PathBuf>,
-        /// linear-3x3, white-preserving, affine, root-poly-2, root-poly-3, cheung-N (N = 3,
-        /// 4, 5, 7, 8, 10, 11, 14, 16, 17, 19, 20, 22, 35) or de2000-opt.
-        #[arg(long, default_value = "root-poly-2")]
-        model: String,
-        /// Reference values: CSV with the header patch,X,Y,Z (Y = 1 for a perfect white);
-        /// default: the published ColorChecker 24 values (X-Rite, after Nov. 2014) under D50.
-        #[arg(long)]
-        reference: Option<PathBuf>,
-        /// The white of L*a*b* and ΔE as X,Y,Z (Y = 1); default D50 with the published
-        /// values, required with --reference.
-        #[arg(long, allow_hyphen_values = true)]
-        white: Option<String>,
-        /// Read a PNG/TIFF's code values as linear (raw sensor data), not sRGB-encoded.
-        #[arg(long)]
-        linear: bool,
-        /// The level at which a channel clips, in the image's units (default 1: full scale
-        /// of a PNG/TIFF, or of an EXR scaled to it).
-        #[arg(long, default_value_t = 1.0)]
-        saturation: f64,
-        /// The patch white-preserving maps exactly, 1 to 24 (default 19, "white 9.5").
-        #[arg(long, default_value_t = 19)]
-        white_patch: usize,
-        /// Output JSON: the model, its white and the report.
-        #[arg(long)]
-        out: PathBuf,
-    },
+    Fit(FitArgs),
     /// Apply a fitted model to an image: camera RGB to linear sRGB (D65, Bradford-adapted
     /// from the model's white) or to XYZ.
     Apply {
@@ -87,25 +50,51 @@ pub enum Color {
 
 pub fn run(cmd: Color) -> Result<()> {
     match cmd {
-        Color::Fit { image, corners, patches, model, reference, white, linear, saturation, white_patch, out } => {
-            let args = FitArgs { image, corners, patches, model, reference, white, linear, saturation, white_patch };
-            fit(&args, &out)
-        }
+        Color::Fit(args) => fit(&args),
         Color::Apply { ccm, space, linear, input, output } => apply(&ccm, &space, linear, &input, &output),
         Color::Spectral { camera, illuminant, out } => spectral(&camera, &illuminant, &out),
     }
 }
 
-struct FitArgs {
+/// `lumen color fit`'s flags.
+#[derive(clap::Args)]
+pub struct FitArgs {
+    /// Chart image: .exr (linear) or 8/16-bit .png/.tif (sRGB-decoded unless --linear).
+    #[arg(long, conflicts_with = "patches", required_unless_present = "patches")]
     image: Option<PathBuf>,
+    /// The outer corners of the 6×4 cell grid, x1,y1,x2,y2,x3,y3,x4,y4: top-left,
+    /// top-right, bottom-right, bottom-left (the corner by patch 1 "dark skin" first),
+    /// pixel centres at integer coordinates.
+    #[arg(long, required_unless_present = "patches", allow_hyphen_values = true)]
     corners: Option<String>,
+    /// Patch values instead of an image: CSV with the header patch,R,G,B (linear).
+    #[arg(long)]
     patches: Option<PathBuf>,
+    /// linear-3x3, white-preserving, affine, root-poly-2, root-poly-3, cheung-N (N = 3,
+    /// 4, 5, 7, 8, 10, 11, 14, 16, 17, 19, 20, 22, 35) or de2000-opt.
+    #[arg(long, default_value = "root-poly-2")]
     model: String,
+    /// Reference values: CSV with the header patch,X,Y,Z (Y = 1 for a perfect white);
+    /// default: the published ColorChecker 24 values (X-Rite, after Nov. 2014) under D50.
+    #[arg(long)]
     reference: Option<PathBuf>,
+    /// The white of L*a*b* and ΔE as X,Y,Z (Y = 1); default D50 with the published
+    /// values, required with --reference.
+    #[arg(long, allow_hyphen_values = true)]
     white: Option<String>,
+    /// Read a PNG/TIFF's code values as linear (raw sensor data), not sRGB-encoded.
+    #[arg(long)]
     linear: bool,
+    /// The level at which a channel clips, in the image's units (default 1: full scale
+    /// of a PNG/TIFF, or of an EXR scaled to it).
+    #[arg(long, default_value_t = 1.0)]
     saturation: f64,
+    /// The patch white-preserving maps exactly, 1 to 24 (default 19, "white 9.5").
+    #[arg(long, default_value_t = 19)]
     white_patch: usize,
+    /// Output JSON: the model, its white and the report.
+    #[arg(long)]
+    out: PathBuf,
 }
 
 /// Reads an image as linear RGB: EXR as stored, PNG/TIFF sRGB-decoded unless `linear`.
@@ -123,7 +112,8 @@ fn read_linear(path: &Path, linear: bool) -> Result<(Image, &'static str)> {
     Ok((img, "sRGB-decoded (pass --linear for raw sensor data)"))
 }
 
-fn fit(a: &FitArgs, out: &Path) -> Result<()> {
+fn fit(a: &FitArgs) -> Result<()> {
+    let out = &a.out;
     let model: color::Model = a.model.parse().map_err(|e: String| anyhow::anyhow!("--model: {e}"))?;
     if !(1..=24).contains(&a.white_patch) {
         bail!("--white-patch {}: expected a patch number 1 to 24", a.white_patch);

@@ -5,17 +5,46 @@ use lumen::hdr::{self, merge, response, Frame, Input, Method, Weights};
 use lumen::image::{self, Image};
 use std::path::{Path, PathBuf};
 
+/// `lumen hdr`'s flags.
+#[derive(clap::Args)]
 pub struct HdrArgs {
+    /// The frames: 8- or 16-bit PNG, TIFF or JPEG, all the same size.
+    #[arg(long, num_args = 1..)]
     pub images: Vec<PathBuf>,
+    /// Exposure time of each image in seconds, in the same order: 1/30, 0.5 or 6.1035e-05.
+    #[arg(long, num_args = 1.., allow_negative_numbers = true)]
     pub times: Vec<String>,
+    /// Instead of --images and --times: a file with a name and a time per line (names
+    /// relative to the file's folder).
+    #[arg(long)]
     pub list: Option<PathBuf>,
+    /// debevec, robertson, or a response.csv to use as it is.
+    #[arg(long, default_value = "debevec")]
     pub response: String,
+    /// Debevec's smoothness weight λ.
+    #[arg(long, default_value_t = 10.0)]
     pub lambda: f64,
+    /// Debevec's sample pixels per pixel value (chosen to cover every value, nearest the
+    /// image centre first).
+    #[arg(long, default_value_t = 1)]
     pub samples_per_value: usize,
+    /// hat (Debevec & Malik) or noise (inverse variance under photon, read and
+    /// quantisation noise; needs --full-well).
+    #[arg(long, default_value = "hat")]
     pub weights: String,
+    /// For --weights noise: the sensor's electrons at full scale.
+    #[arg(long)]
     pub full_well: Option<f64>,
+    /// For --weights noise: the sensor's read noise in electrons.
+    #[arg(long, default_value_t = 0.0)]
     pub read_noise: f64,
+    /// Leave pixels of this colour (R,G,B code values) in any frame out of the response
+    /// fit, e.g. 0,0,255 for registration borders.
+    #[arg(long)]
     pub exclude_color: Option<String>,
+    /// Output radiance (.exr); response.csv, response.svg, mask.png, preview.png and
+    /// summary.json go beside it.
+    #[arg(long)]
     pub out: PathBuf,
 }
 

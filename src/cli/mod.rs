@@ -139,46 +139,7 @@ enum Command {
     },
     /// HDR fusion of an exposure stack: the camera's response (Debevec & Malik or Robertson)
     /// and the merged radiance.
-    Hdr {
-        /// The frames: 8- or 16-bit PNG, TIFF or JPEG, all the same size.
-        #[arg(long, num_args = 1..)]
-        images: Vec<PathBuf>,
-        /// Exposure time of each image in seconds, in the same order: 1/30, 0.5 or 6.1035e-05.
-        #[arg(long, num_args = 1.., allow_negative_numbers = true)]
-        times: Vec<String>,
-        /// Instead of --images and --times: a file with a name and a time per line (names
-        /// relative to the file's folder).
-        #[arg(long)]
-        list: Option<PathBuf>,
-        /// debevec, robertson, or a response.csv to use as it is.
-        #[arg(long, default_value = "debevec")]
-        response: String,
-        /// Debevec's smoothness weight λ.
-        #[arg(long, default_value_t = 10.0)]
-        lambda: f64,
-        /// Debevec's sample pixels per pixel value (chosen to cover every value, nearest the
-        /// image centre first).
-        #[arg(long, default_value_t = 1)]
-        samples_per_value: usize,
-        /// hat (Debevec & Malik) or noise (inverse variance under photon, read and
-        /// quantisation noise; needs --full-well).
-        #[arg(long, default_value = "hat")]
-        weights: String,
-        /// For --weights noise: the sensor's electrons at full scale.
-        #[arg(long)]
-        full_well: Option<f64>,
-        /// For --weights noise: the sensor's read noise in electrons.
-        #[arg(long, default_value_t = 0.0)]
-        read_noise: f64,
-        /// Leave pixels of this colour (R,G,B code values) in any frame out of the response
-        /// fit, e.g. 0,0,255 for registration borders.
-        #[arg(long)]
-        exclude_color: Option<String>,
-        /// Output radiance (.exr); response.csv, response.svg, mask.png, preview.png and
-        /// summary.json go beside it.
-        #[arg(long)]
-        out: PathBuf,
-    },
+    Hdr(hdr::HdrArgs),
     /// Benchmarks.
     Bench {
         #[command(subcommand)]
@@ -278,34 +239,7 @@ pub fn main() -> i32 {
             undistort_cmd(&camera, alpha, &input, &output).map(|_| 0)
         }
         Command::Color { what } => color::run(what).map(|_| 0),
-        Command::Hdr {
-            images,
-            times,
-            list,
-            response,
-            lambda,
-            samples_per_value,
-            weights,
-            full_well,
-            read_noise,
-            exclude_color,
-            out,
-        } => {
-            let args = hdr::HdrArgs {
-                images,
-                times,
-                list,
-                response,
-                lambda,
-                samples_per_value,
-                weights,
-                full_well,
-                read_noise,
-                exclude_color,
-                out,
-            };
-            hdr::run(&args).map(|_| 0)
-        }
+        Command::Hdr(args) => hdr::run(&args).map(|_| 0),
         Command::Bench {
             what: Bench::Render { scene, spp, max_depth, threads, repeat, sampler, one_path },
         } => {
