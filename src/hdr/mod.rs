@@ -164,15 +164,8 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     if radiance.iter().any(|v| !v.is_finite()) {
         return Err(Error::Unsolvable("the merge gave a radiance that is not a finite float32".into()));
     }
-    let lum: Vec<f64> = (0..n)
-        .filter(|&i| mask[i] == merge::WELL_EXPOSED)
-        .map(|i| {
-            let p = &radiance[3 * i..3 * i + 3];
-            0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64
-        })
-        .filter(|&l| l > 0.0)
-        .collect();
-    let (lo, hi) = lum.iter().fold((f64::INFINITY, 0.0f64), |(a, b), &l| (a.min(l), b.max(l)));
+    let well = radiance.chunks_exact(3).zip(&mask).filter(|(_, &m)| m == merge::WELL_EXPOSED);
+    let range = crate::image::luminance_range(well.map(|(p, _)| p));
     let summary = Summary {
         frames: input.frames.len(),
         width: input.width,
@@ -182,7 +175,7 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
         samples,
         saturated_pixels: mask.iter().filter(|&&m| m == merge::SATURATED).count(),
         dark_pixels: mask.iter().filter(|&&m| m == merge::DARK).count(),
-        dynamic_range_stops: if hi > 0.0 && lo.is_finite() { (hi / lo).log2() } else { 0.0 },
+        dynamic_range_stops: range.map_or(0.0, |(lo, hi)| (hi / lo).log2()),
         response_s,
         merge_s,
         merge_megapixel_frames_per_s: (n * input.frames.len()) as f64 / 1e6 / merge_s.max(1e-9),

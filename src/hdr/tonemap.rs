@@ -11,11 +11,7 @@ use crate::image::Image;
 /// Tone-maps linear RGB radiance to display values in [0, 1].
 pub fn reinhard(radiance: &Image) -> Image {
     let c = radiance.channels as usize;
-    let lum: Vec<f64> = radiance
-        .data
-        .chunks_exact(c)
-        .map(|p| 0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64)
-        .collect();
+    let lum: Vec<f64> = radiance.data.chunks_exact(c).map(crate::image::luminance).collect();
     let n = lum.len().max(1) as f64;
     let delta = 1e-6 * lum.iter().copied().fold(0.0, f64::max).max(1e-30);
     let log_mean = (lum.iter().map(|l| (delta + l.max(0.0)).ln()).sum::<f64>() / n).exp();

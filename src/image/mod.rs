@@ -48,6 +48,20 @@ impl Image {
     }
 }
 
+/// Luminance of a linear RGB pixel (Rec. 709 / sRGB primaries).
+pub fn luminance(p: &[f32]) -> f64 {
+    0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64
+}
+
+/// The darkest and the brightest positive luminance among RGB pixels, or `None` when no
+/// pixel's luminance is positive.
+pub fn luminance_range<'a>(pixels: impl Iterator<Item = &'a [f32]>) -> Option<(f64, f64)> {
+    pixels.map(luminance).filter(|&l| l > 0.0).fold(None, |r, l| match r {
+        None => Some((l, l)),
+        Some((lo, hi)) => Some((lo.min(l), hi.max(l))),
+    })
+}
+
 /// sRGB transfer function (linear → encoded), IEC 61966-2-1.
 pub fn srgb_encode(v: f32) -> f32 {
     let v = v.clamp(0.0, 1.0);

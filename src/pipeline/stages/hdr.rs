@@ -111,6 +111,8 @@ pub struct Truth {
     occurs: Vec<Vec<bool>>,
     /// Per channel and pixel: some frame shows it well exposed (10 % to 90 % of full scale).
     well_exposed: Vec<Vec<bool>>,
+    /// The radiance's darkest and brightest positive luminance.
+    luminance_range: Option<(f64, f64)>,
 }
 
 #[derive(Serialize)]
@@ -179,15 +181,10 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(hdr::Input, Truth, Findi
         frames,
         usable: None,
     };
-    let lum: Vec<f64> = radiance
-        .data
-        .chunks_exact(3)
-        .map(|p| 0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64)
-        .filter(|&l| l > 0.0)
-        .collect();
-    let (lo, hi) = lum.iter().fold((f64::INFINITY, 0.0f64), |(a, b), &l| (a.min(l), b.max(l)));
+    let luminance_range = crate::image::luminance_range(radiance.data.chunks_exact(3));
+    let (lo, hi) = luminance_range.unwrap_or((0.0, 0.0));
     let notes = vec![format!(
-        "{}: {}×{} px, {} spp, radiance from {lo:.3e} to {hi:.3e}; {} exposures {} stops apart from 1 s, sensor {} bits, response {:?}, full well {} e⁻, read noise {} e⁻.",
+        "{}: {}×{} px, {} spp, luminance from {lo:.3e} to {hi:.3e}; {} exposures {} stops apart from 1 s, sensor {} bits, response {:?}, full well {} e⁻, read noise {} e⁻.",
         c.scene,
         radiance.width,
         radiance.height,
@@ -199,7 +196,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(hdr::Input, Truth, Findi
         c.full_well,
         c.read_noise
     )];
-    Ok((input, Truth { radiance, response: c.response, max_code, occurs, well_exposed }, Findings { notes, ..Default::default() }))
+    Ok((input, Truth { radiance, response: c.response, max_code, occurs, well_exposed, luminance_range }, Findings { notes, ..Default::default() }))
 }
 
 fn method(c: &Config) -> Result<(Method, Weights), StageError> {
@@ -270,15 +267,8 @@ pub fn validate(_c: &Config, out: &hdr::Output, truth: &Truth) -> Findings {
     let s = &out.summary;
     m.push(Metric::new("saturated_pixels", s.saturated_pixels as f64, "pixels", Better::Lower));
     m.push(Metric::new("dark_pixels", s.dark_pixels as f64, "pixels", Better::Lower));
-    let lum: Vec<f64> = truth
-        .radiance
-        .data
-        .chunks_exact(3)
-        .map(|p| 0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64)
-        .filter(|&l| l > 0.0)
-        .collect();
-    let (tlo, thi) = lum.iter().fold((f64::INFINITY, 0.0f64), |(a, b), &l| (a.min(l), b.max(l)));
-    m.push(Metric::maybe("true_dynamic_range", (thi > 0.0 && tlo.is_finite()).then(|| thi / tlo), "×", Better::Higher, "no light"));
+    let range = truth.luminance_range.map(|(lo, hi)| hi / lo);
+    m.push(Metric::maybe("true_dynamic_range", range, "×", Better::Higher, "no light"));
     m.push(Metric::new("merge_megapixel_frames_per_s", s.merge_megapixel_frames_per_s, "1/s", Better::Higher));
     m.push(Metric::new("response_s", s.response_s, "s", Better::Lower));
     f
