@@ -3,8 +3,9 @@
 
 mod common;
 
+use common::lumen;
+
 use lumen::render;
-use std::process::Command;
 
 const CAMERA: &str = r#"
 [camera]
@@ -211,11 +212,6 @@ fn bad_camera() {
     assert!(e.contains("camera.focus_distance") && e.contains("-2"), "{e}");
     let e = common::scene(&lens.replace("0.1", "-0.1"), dir.path()).err().unwrap().to_string();
     assert!(e.contains("camera.aperture_radius") && e.contains("-0.1"), "{e}");
-}
-
-fn lumen(args: &[&str]) -> (i32, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_lumen")).args(args).output().expect("runs");
-    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stderr).into_owned())
 }
 
 #[test]

@@ -2,10 +2,11 @@
 
 mod common;
 
+use common::lumen;
+
 use glam::{DVec2, DVec3};
 use lumen::calib::{self, detect::BoardSize, Config};
 use lumen::math::{CameraModel, Distortion, Intrinsics, Pose};
-use std::process::Command;
 
 const BOARD: BoardSize = BoardSize { cols: 9, rows: 6 };
 
@@ -152,11 +153,6 @@ fn files_round_trip() {
     std::fs::write(&bad, "%YAML:1.0\nimage_width: 640\nimage_height: 480\ncamera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ 1, 2 ]\n").unwrap();
     let e = calib::file::read(&bad).unwrap_err().to_string();
     assert!(e.contains("bad.yaml") && e.contains("camera_matrix"), "{e}");
-}
-
-fn lumen(args: &[&str]) -> (i32, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_lumen")).args(args).output().unwrap();
-    (o.status.code().unwrap_or(-1), String::from_utf8_lossy(&o.stderr).into_owned())
 }
 
 #[test]

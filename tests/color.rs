@@ -3,14 +3,10 @@
 
 mod common;
 
+use common::lumen;
+
 use lumen::color::{self, spectra, Model};
 use std::path::Path;
-use std::process::Command;
-
-fn lumen(args: &[&str]) -> (i32, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_lumen")).args(args).output().expect("runs");
-    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stderr).into_owned())
-}
 
 /// The noise-free D5100/D65 chart: camera RGB and XYZ from the spectra.
 fn spectral_input() -> color::Input {
@@ -37,7 +33,9 @@ fn spectral_input() -> color::Input {
 #[test]
 fn least_squares_fits_match_colour_science() {
     let input = spectral_input();
-    for (model, mean, loo) in [("linear-3x3", 1.0093, 1.1530), ("root-poly-2", 0.5677, 0.7616), ("root-poly-3", 0.3724, 1.6603)] {
+    for (model, mean, loo) in
+        [("linear-3x3", 1.0093, 1.1530), ("root-poly-2", 0.5677, 0.7616), ("root-poly-3", 0.3724, 1.6603)]
+    {
         let out = color::run(&input, &color::Config::new(model.parse().unwrap())).unwrap();
         assert!((out.mean_de2000 - mean).abs() < 1e-4, "{model}: mean {}", out.mean_de2000);
         let l = out.loo_mean_de2000.unwrap();
@@ -55,7 +53,8 @@ fn de2000_optimised_beats_least_squares_out_of_sample() {
     let opt = color::run(&input, &color::Config::new("de2000-opt:root-poly-2".parse().unwrap())).unwrap();
     assert!(opt.mean_de2000 < ls.mean_de2000, "{} vs {}", opt.mean_de2000, ls.mean_de2000);
     assert!(opt.loo_mean_de2000.unwrap() < 0.7616, "{:?}", opt.loo_mean_de2000);
-    let three = color::run(&input, &color::Config::new(Model::De2000Opt(color::models::Basis::Linear3x3))).unwrap();
+    let three =
+        color::run(&input, &color::Config::new(Model::De2000Opt(color::models::Basis::Linear3x3))).unwrap();
     let ls3 = color::run(&input, &color::Config::new(Model::Linear3x3)).unwrap();
     assert!(three.mean_de2000 < ls3.mean_de2000);
 }
@@ -67,10 +66,16 @@ fn every_model_is_finite_or_refused() {
     for n in color::models::CHEUNG_TERMS {
         let r = color::run(&input, &color::Config::new(Model::Cheung(n)));
         if n as usize > 24 {
-            assert!(matches!(r, Err(color::Error::BadInput(ref m)) if m.contains("needs at least 35")), "{n}");
+            assert!(
+                matches!(r, Err(color::Error::BadInput(ref m)) if m.contains("needs at least 35")),
+                "{n}"
+            );
         } else {
             let out = r.unwrap();
-            assert!(out.mean_de2000.is_finite() && out.patches.iter().all(|p| p.de2000.is_finite()), "cheung-{n}");
+            assert!(
+                out.mean_de2000.is_finite() && out.patches.iter().all(|p| p.de2000.is_finite()),
+                "cheung-{n}"
+            );
         }
     }
     // Values near f64's end: a clear refusal, never a hang in the SVD or NaN.
@@ -114,12 +119,16 @@ fn cli_fit_on_the_rendered_chart_gives_the_pipelines_numbers() {
         ),
     );
     let out = d.join("out");
-    let (code, err) = lumen(&["run", d.join("p.toml").to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-cache"]);
+    let (code, err) =
+        lumen(&["run", d.join("p.toml").to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-cache"]);
     assert_eq!(code, 0, "{err}");
-    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     let stage = &report["stages"][0];
     let metric = |name: &str| {
-        stage["metrics"].as_array().unwrap().iter().find(|m| m["name"] == name).unwrap()["value"].as_f64().unwrap()
+        stage["metrics"].as_array().unwrap().iter().find(|m| m["name"] == name).unwrap()["value"]
+            .as_f64()
+            .unwrap()
     };
     let notes: Vec<&str> = stage["notes"].as_array().unwrap().iter().filter_map(|n| n.as_str()).collect();
     let corners = notes
@@ -135,13 +144,30 @@ fn cli_fit_on_the_rendered_chart_gives_the_pipelines_numbers() {
     let ccm = d.join("ccm.json");
     let image = out.join("chart.exr");
     let (code, err) = lumen(&[
-        "color", "fit", "--image", image.to_str().unwrap(), "--corners", &corners, "--model", "root-poly-2",
-        "--reference", spec.join("xyz.csv").to_str().unwrap(), "--white", &white, "--out", ccm.to_str().unwrap(),
+        "color",
+        "fit",
+        "--image",
+        image.to_str().unwrap(),
+        "--corners",
+        &corners,
+        "--model",
+        "root-poly-2",
+        "--reference",
+        spec.join("xyz.csv").to_str().unwrap(),
+        "--white",
+        &white,
+        "--out",
+        ccm.to_str().unwrap(),
     ]);
     assert_eq!(code, 0, "{err}");
     let file = color::read_ccm(&ccm).unwrap();
     let rep = file.report.unwrap();
-    assert!((rep.mean_de2000 - metric("mean_de2000")).abs() < 1e-9, "{} vs {}", rep.mean_de2000, metric("mean_de2000"));
+    assert!(
+        (rep.mean_de2000 - metric("mean_de2000")).abs() < 1e-9,
+        "{} vs {}",
+        rep.mean_de2000,
+        metric("mean_de2000")
+    );
     assert!((rep.loo_mean_de2000.unwrap() - metric("loo_mean_de2000")).abs() < 1e-9);
 
     // The same chart as a 16-bit TIFF of linear code values: with --linear the same fit to
@@ -150,13 +176,28 @@ fn cli_fit_on_the_rendered_chart_gives_the_pipelines_numbers() {
     let exr = lumen::image::io::read_exr(&image).unwrap();
     let codes: Vec<u16> = exr.data.iter().map(|&v| (v.clamp(0.0, 1.0) * 65535.0).round() as u16).collect();
     let tif = d.join("chart.tif");
-    image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(exr.width, exr.height, codes).unwrap().save(&tif).unwrap();
+    image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(exr.width, exr.height, codes)
+        .unwrap()
+        .save(&tif)
+        .unwrap();
     let ccm16 = d.join("ccm16.json");
     let xyz_csv = spec.join("xyz.csv");
     let fit16 = |linear: bool| {
         let mut args = vec![
-            "color", "fit", "--image", tif.to_str().unwrap(), "--corners", &corners, "--model", "root-poly-2",
-            "--reference", xyz_csv.to_str().unwrap(), "--white", &white, "--out", ccm16.to_str().unwrap(),
+            "color",
+            "fit",
+            "--image",
+            tif.to_str().unwrap(),
+            "--corners",
+            &corners,
+            "--model",
+            "root-poly-2",
+            "--reference",
+            xyz_csv.to_str().unwrap(),
+            "--white",
+            &white,
+            "--out",
+            ccm16.to_str().unwrap(),
         ];
         if linear {
             args.push("--linear");
@@ -174,23 +215,47 @@ fn cli_fit_on_the_rendered_chart_gives_the_pipelines_numbers() {
 
     // apply: the patches' own values through the model, pixel by pixel.
     let rgb: Vec<[f64; 3]> = rep.patches.iter().map(|p| p.rgb).collect();
-    let img = lumen::image::Image { width: 24, height: 1, channels: 3, data: rgb.iter().flatten().map(|&v| v as f32).collect() };
+    let img = lumen::image::Image {
+        width: 24,
+        height: 1,
+        channels: 3,
+        data: rgb.iter().flatten().map(|&v| v as f32).collect(),
+    };
     let (src, dst) = (d.join("patches.exr"), d.join("xyz.exr"));
     lumen::image::io::write_exr(&src, &img).unwrap();
-    let (code, err) = lumen(&["color", "apply", "--ccm", ccm.to_str().unwrap(), "--space", "xyz", src.to_str().unwrap(), dst.to_str().unwrap()]);
+    let (code, err) = lumen(&[
+        "color",
+        "apply",
+        "--ccm",
+        ccm.to_str().unwrap(),
+        "--space",
+        "xyz",
+        src.to_str().unwrap(),
+        dst.to_str().unwrap(),
+    ]);
     assert_eq!(code, 0, "{err}");
     let xyz = lumen::image::io::read_exr(&dst).unwrap();
     for (k, p) in rep.patches.iter().enumerate() {
         let want = file.fitted.apply(rgb[k].map(|v| v as f32 as f64));
         for c in 0..3 {
-            assert!((xyz.pixel(k as u32, 0)[c] as f64 - want[c]).abs() < 1e-5 * want[c].abs().max(1e-3), "patch {k}");
+            assert!(
+                (xyz.pixel(k as u32, 0)[c] as f64 - want[c]).abs() < 1e-5 * want[c].abs().max(1e-3),
+                "patch {k}"
+            );
             assert!((want[c] - p.predicted_xyz[c]).abs() < 1e-5);
         }
     }
     // And to sRGB: each pixel is the model's XYZ through the Bradford-adapted sRGB matrix,
     // which maps the model's white to (1, 1, 1).
     let srgb = d.join("srgb.exr");
-    let (code, err) = lumen(&["color", "apply", "--ccm", ccm.to_str().unwrap(), src.to_str().unwrap(), srgb.to_str().unwrap()]);
+    let (code, err) = lumen(&[
+        "color",
+        "apply",
+        "--ccm",
+        ccm.to_str().unwrap(),
+        src.to_str().unwrap(),
+        srgb.to_str().unwrap(),
+    ]);
     assert_eq!(code, 0, "{err}");
     let s = lumen::image::io::read_exr(&srgb).unwrap();
     let m = color::xyz_to_linear_srgb(file.white);
@@ -298,10 +363,12 @@ fn cli_bad_input() {
         assert!(!res.exists(), "{args:?} left {rs}");
     }
     // spectral: unknown names.
-    let (code, err) = lumen(&["color", "spectral", "--camera", "canon", "--out", d.join("s2").to_str().unwrap()]);
+    let (code, err) =
+        lumen(&["color", "spectral", "--camera", "canon", "--out", d.join("s2").to_str().unwrap()]);
     assert_eq!(code, 1);
     assert!(err.contains("nikon-d5100"), "{err}");
-    let (code, err) = lumen(&["color", "spectral", "--illuminant", "d75", "--out", d.join("s3").to_str().unwrap()]);
+    let (code, err) =
+        lumen(&["color", "spectral", "--illuminant", "d75", "--out", d.join("s3").to_str().unwrap()]);
     assert_eq!(code, 1);
     assert!(err.contains("fl2"), "{err}");
 }
@@ -314,8 +381,12 @@ fn cli_bad_input() {
 #[test]
 fn stress_cases_end_as_declared() {
     let stress = std::fs::read_to_string(common::root().join("pipelines/stress.toml")).unwrap();
-    let colour = stress.split("# ---------------------------------------------------------------- colour").nth(1).unwrap();
-    let colour = colour.split("# ----------------------------------------------------------------").next().unwrap();
+    let colour = stress
+        .split("# ---------------------------------------------------------------- colour")
+        .nth(1)
+        .unwrap();
+    let colour =
+        colour.split("# ----------------------------------------------------------------").next().unwrap();
     let scenes = common::root().join("pipelines/scenes");
     let text = format!("seed = 11\n{}", colour.replace("\"scenes/", &format!("\"{}/", scenes.display())));
     assert_eq!(text.matches("[[stages]]").count(), 12, "the colour section's cases");
@@ -326,7 +397,10 @@ fn stress_cases_end_as_declared() {
     let (code, err) = lumen(&["run", file.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-cache"]);
     assert_eq!(code, 0, "{err}");
     let report = std::fs::read_to_string(out.join("report.json")).unwrap();
-    assert!(report.contains("1 usable patch(es), but the model needs at least 13"), "the refusal names the numbers");
+    assert!(
+        report.contains("1 usable patch(es), but the model needs at least 13"),
+        "the refusal names the numbers"
+    );
     // Every metric of every case that ran has a finite value (JSON writes NaN as null).
     let v: serde_json::Value = serde_json::from_str(&report).unwrap();
     for stage in v["stages"].as_array().unwrap() {

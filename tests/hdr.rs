@@ -4,14 +4,10 @@
 
 mod common;
 
+use common::lumen;
+
 use lumen::hdr::{self, Frame, Input, Method, Weights};
 use std::path::Path;
-use std::process::Command;
-
-fn lumen(args: &[&str]) -> (i32, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_lumen")).args(args).output().expect("runs");
-    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stderr).into_owned())
-}
 
 /// A uniform number in [0, 1) from a key (splitmix64).
 fn hash(k: u64) -> f64 {
@@ -88,20 +84,32 @@ fn merge_errors(truth: &[f64], input: &Input, out: &hdr::Output) -> (f64, f64) {
 fn synthetic_stack_recovers_response_and_radiance() {
     let times: Vec<f64> = [1.0, 0.3, 0.11, 0.025, 0.009, 0.002, 0.0007, 0.0001].to_vec();
     let (truth, input) = synthetic(1e5, &times);
-    for method in [Method::Debevec { lambda: 10.0, samples_per_value: 1 }, Method::Robertson { iterations: 200 }] {
+    for method in
+        [Method::Debevec { lambda: 10.0, samples_per_value: 1 }, Method::Robertson { iterations: 200 }]
+    {
         let name = format!("{method:?}");
-        let config = hdr::Config { method: method.clone(), weights: Weights::Noise { full_well: 1e12, read_noise: 0.0 } };
+        let config = hdr::Config {
+            method: method.clone(),
+            weights: Weights::Noise { full_well: 1e12, read_noise: 0.0 },
+        };
         let out = hdr::run(&input, &config).unwrap();
         for c in 0..3 {
             let g = &out.response.g[c];
-            assert!(g.iter().all(|v| v.is_finite()) && g.windows(2).all(|p| p[1] > p[0]), "{name}: channel {c}");
+            assert!(
+                g.iter().all(|v| v.is_finite()) && g.windows(2).all(|p| p[1] > p[0]),
+                "{name}: channel {c}"
+            );
             // True g: the ln of the exposure at each code's centre, inverted numerically.
             let truth_g = |z: f64| {
                 let (mut lo, mut hi) = (0.0f64, 1.0f64);
                 for _ in 0..60 {
                     let mid = 0.5 * (lo + hi);
                     let s = mid / (mid + 0.15 * (1.0 - mid));
-                    if 255.0 * s.powf(1.0 / 2.2) < z { lo = mid } else { hi = mid }
+                    if 255.0 * s.powf(1.0 / 2.2) < z {
+                        lo = mid
+                    } else {
+                        hi = mid
+                    }
                 }
                 (0.5 * (lo + hi)).ln()
             };
@@ -117,7 +125,8 @@ fn synthetic_stack_recovers_response_and_radiance() {
                 .collect();
             assert!(zs.len() > 180, "{} values compared", zs.len());
             let offset = zs.iter().map(|&z| g[z as usize] - truth_g(z as f64)).sum::<f64>() / zs.len() as f64;
-            let worst = zs.iter().map(|&z| (g[z as usize] - truth_g(z as f64) - offset).abs()).fold(0.0, f64::max);
+            let worst =
+                zs.iter().map(|&z| (g[z as usize] - truth_g(z as f64) - offset).abs()).fold(0.0, f64::max);
             if matches!(method, Method::Debevec { .. }) {
                 assert!(worst < 0.02, "{name}: channel {c}: worst {worst}");
             }
@@ -135,7 +144,9 @@ fn synthetic_stack_recovers_response_and_radiance() {
 #[test]
 fn hard_stacks() {
     let run = |input: &Input| hdr::run(input, &hdr::Config::default()).unwrap();
-    let finite = |o: &hdr::Output| o.radiance.iter().all(|v| v.is_finite()) && o.response.g.iter().flatten().all(|v| v.is_finite());
+    let finite = |o: &hdr::Output| {
+        o.radiance.iter().all(|v| v.is_finite()) && o.response.g.iter().flatten().all(|v| v.is_finite())
+    };
     // Two exposures, four stops apart, over 10³.
     let (_, two) = synthetic(1e3, &[1.0, 1.0 / 16.0]);
     let o = run(&two);
@@ -147,7 +158,12 @@ fn hard_stacks() {
     sorted.frames.sort_by(|a, b| b.time_s.total_cmp(&a.time_s));
     let (a, b) = (run(&shuffled), run(&sorted));
     assert!(finite(&a));
-    let diff = a.radiance.iter().zip(&b.radiance).map(|(x, y)| ((x - y) / y.max(1e-30)).abs()).fold(0.0f32, f32::max);
+    let diff = a
+        .radiance
+        .iter()
+        .zip(&b.radiance)
+        .map(|(x, y)| ((x - y) / y.max(1e-30)).abs())
+        .fold(0.0f32, f32::max);
     assert!(diff < 1e-5, "order changed the radiance by {diff}");
     // An all-black and an all-white frame carry no weight: the same radiance as without them.
     let (_, plain) = synthetic(1e4, &[1.0, 0.25, 1.0 / 16.0, 1.0 / 64.0]);
@@ -157,7 +173,12 @@ fn hard_stacks() {
     extra.frames.push(Frame { name: "white".into(), time_s: 1e3, codes: vec![255; 3 * n] });
     let (with, without) = (run(&extra), run(&plain));
     assert!(finite(&with));
-    let diff = with.radiance.iter().zip(&without.radiance).map(|(x, y)| ((x - y) / y.max(1e-30)).abs()).fold(0.0f32, f32::max);
+    let diff = with
+        .radiance
+        .iter()
+        .zip(&without.radiance)
+        .map(|(x, y)| ((x - y) / y.max(1e-30)).abs())
+        .fold(0.0f32, f32::max);
     assert!(diff < 1e-5, "black and white frames changed the radiance by {diff}");
     // A 10⁶ range over six frames three stops apart; its brightest part clipped even at the
     // shortest exposure, so masked, with the shortest frame's value as a lower bound.
@@ -169,7 +190,10 @@ fn hard_stacks() {
     assert!(finite(&o));
     assert!(o.summary.saturated_pixels > 0, "{:?}", o.summary);
     for i in (0..o.mask.len()).filter(|&i| o.mask[i] == lumen::hdr::merge::SATURATED) {
-        assert!(wide.frames.iter().all(|f| f.codes[3 * i..3 * i + 3].contains(&255)), "pixel {i} is not saturated everywhere");
+        assert!(
+            wide.frames.iter().all(|f| f.codes[3 * i..3 * i + 3].contains(&255)),
+            "pixel {i} is not saturated everywhere"
+        );
     }
     assert!(o.summary.dynamic_range_stops > 10.0, "{:?}", o.summary);
 }
@@ -201,17 +225,26 @@ fn memorial_church() {
     for method in ["debevec", "robertson"] {
         let out = dir.path().join(method).join("radiance.exr");
         let (code, err) = lumen(&[
-            "hdr", "--list", list.to_str().unwrap(), "--exclude-color", "0,0,255", "--response", method, "--out",
+            "hdr",
+            "--list",
+            list.to_str().unwrap(),
+            "--exclude-color",
+            "0,0,255",
+            "--response",
+            method,
+            "--out",
             out.to_str().unwrap(),
         ]);
         assert_eq!(code, 0, "{err}");
         let text = std::fs::read_to_string(out.with_file_name("response.csv")).unwrap();
-        let r = lumen::hdr::response::from_csv(&text).expect("the written response reads back: finite, increasing");
+        let r = lumen::hdr::response::from_csv(&text)
+            .expect("the written response reads back: finite, increasing");
         assert_eq!(r.levels, 256);
         let img = lumen::image::io::read_exr(&out).unwrap();
         assert!(!img.has_non_finite());
         let summary: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.with_file_name("summary.json")).unwrap()).unwrap();
+            serde_json::from_str(&std::fs::read_to_string(out.with_file_name("summary.json")).unwrap())
+                .unwrap();
         let stops = summary["dynamic_range_stops"].as_f64().unwrap();
         assert!(stops > 15.0, "{method}: {stops} stops");
         for f in ["response.svg", "mask.png", "preview.png"] {
@@ -221,11 +254,22 @@ fn memorial_church() {
         let again = dir.path().join(format!("{method}-given")).join("radiance.exr");
         let csv = out.with_file_name("response.csv");
         let (code, err) = lumen(&[
-            "hdr", "--list", list.to_str().unwrap(), "--response", csv.to_str().unwrap(), "--out", again.to_str().unwrap(),
+            "hdr",
+            "--list",
+            list.to_str().unwrap(),
+            "--response",
+            csv.to_str().unwrap(),
+            "--out",
+            again.to_str().unwrap(),
         ]);
         assert_eq!(code, 0, "{err}");
         let b = lumen::image::io::read_exr(&again).unwrap();
-        let worst = img.data.iter().zip(&b.data).map(|(x, y)| ((x - y) / x.abs().max(1e-30)).abs()).fold(0.0f32, f32::max);
+        let worst = img
+            .data
+            .iter()
+            .zip(&b.data)
+            .map(|(x, y)| ((x - y) / x.abs().max(1e-30)).abs())
+            .fold(0.0f32, f32::max);
         assert!(worst < 1e-4, "{method}: given response differs by {worst}");
     }
 }
@@ -257,7 +301,19 @@ fn cli_inputs_and_refusals() {
     let f = |k: usize| d.join(format!("f{k}.png")).to_str().unwrap().to_string();
     let (f0, f1, f2) = (f(0), f(1), f(2));
     let out = d.join("o16/radiance.exr");
-    let (code, err) = lumen(&["hdr", "--images", &f0, &f1, &f2, "--times", "1", "1/4", "6.25e-2", "--out", out.to_str().unwrap()]);
+    let (code, err) = lumen(&[
+        "hdr",
+        "--images",
+        &f0,
+        &f1,
+        &f2,
+        "--times",
+        "1",
+        "1/4",
+        "6.25e-2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert_eq!(code, 0, "{err}");
     assert!(err.contains("65536 levels"), "{err}");
     assert!(!lumen::image::io::read_exr(&out).unwrap().has_non_finite());
@@ -288,7 +344,10 @@ fn cli_inputs_and_refusals() {
         (vec!["--images", &a, "/nonexistent/z.png", "--times", "1", "2"], "/nonexistent/z.png"),
         (vec!["--list", &list], "line 2"),
         (vec!["--images", &a, &b, "--times", "1", "2", "--response", &bad_csv], "does not increase"),
-        (vec!["--images", &a, &b, "--times", "1", "2", "--response", "/nonexistent/r.csv"], "not debevec, robertson"),
+        (
+            vec!["--images", &a, &b, "--times", "1", "2", "--response", "/nonexistent/r.csv"],
+            "not debevec, robertson",
+        ),
         (vec!["--images", &a, &b, "--times", "1", "2", "--weights", "noise"], "--full-well"),
         (vec!["--images", &a, &b, "--times", "1", "2", "--weights", "tent"], "hat or noise"),
         (vec!["--images", &a, &b, "--times", "1", "2", "--lambda", "nan"], "--lambda"),
@@ -302,7 +361,8 @@ fn cli_inputs_and_refusals() {
         assert!(err.contains(want), "{args:?}: {err}");
         assert!(!o.exists() && !o.with_file_name("response.csv").exists(), "{args:?} wrote output");
     }
-    let (code, err) = lumen(&["hdr", "--images", &a, &b, "--times", "1", "2", "--out", d.join("r.png").to_str().unwrap()]);
+    let (code, err) =
+        lumen(&["hdr", "--images", &a, &b, "--times", "1", "2", "--out", d.join("r.png").to_str().unwrap()]);
     assert_eq!(code, 1);
     assert!(err.contains("written as .exr"), "{err}");
 }

@@ -2,9 +2,10 @@
 
 mod common;
 
+use common::lumen;
+
 use glam::DVec3;
 use lumen::photometric::{self, dataset::Dataset, Input, Model, Observations};
-use std::process::Command;
 
 /// DiLiGenT's ball: least squares within 0.1° of the plain recipe's 4.29° (the folder's
 /// README), the robust model and the Blinn-Phong fit ≤ 2.0° (the best non-learning methods
@@ -260,11 +261,6 @@ fn saturated_highlights() {
     let fit = mean_error(&ds, &solve(&ds, Model::BlinnPhong));
     eprintln!("saturated highlights: Blinn-Phong {fit:.4}°, robust {robust:.3}°");
     assert!(fit < 0.1 && fit * 3.0 < robust, "Blinn-Phong {fit}°, robust {robust}°");
-}
-
-fn lumen(args: &[&str]) -> (i32, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_lumen")).args(args).output().unwrap();
-    (o.status.code().unwrap_or(-1), String::from_utf8_lossy(&o.stderr).into_owned())
 }
 
 /// Broken datasets: each error names the file and what was expected; nothing is written.

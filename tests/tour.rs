@@ -16,9 +16,16 @@ fn tour_commands() -> Vec<String> {
     block
         .lines()
         .filter(|l| {
-            ["lumen render ", "lumen calibrate ", "lumen ps ", "lumen undistort ", "lumen color ", "lumen hdr "]
-                .iter()
-                .any(|p| l.starts_with(p))
+            [
+                "lumen render ",
+                "lumen calibrate ",
+                "lumen ps ",
+                "lumen undistort ",
+                "lumen color ",
+                "lumen hdr ",
+            ]
+            .iter()
+            .any(|p| l.starts_with(p))
         })
         .map(str::to_string)
         .collect()
@@ -84,7 +91,13 @@ fn readme_tour_writes_what_it_says() {
         let (ok, err) = run(line, d, &photos);
         assert!(ok, "{err}");
     }
-    for f in ["spectral-d65/rgb.csv", "spectral-d65/xyz.csv", "spectral-d65/white.csv", "ccm.json", "chart-srgb.png"] {
+    for f in [
+        "spectral-d65/rgb.csv",
+        "spectral-d65/xyz.csv",
+        "spectral-d65/white.csv",
+        "ccm.json",
+        "chart-srgb.png",
+    ] {
         assert!(d.join("out").join(f).is_file(), "{f} missing");
     }
     if common::shared_data().is_none() {

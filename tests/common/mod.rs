@@ -23,6 +23,12 @@ pub const PS_OUTPUTS: [&str; 8] = [
     "summary.json",
 ];
 
+/// Runs the lumen binary with `args`: its exit code (−1 when killed) and its stderr.
+pub fn lumen(args: &[&str]) -> (i32, String) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_lumen")).args(args).output().expect("runs");
+    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
 /// The project root.
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
