@@ -21,9 +21,9 @@
 
 pub mod calib;
 pub mod color;
-pub mod hdr;
 #[cfg(feature = "opencv")]
 pub mod cv;
+pub mod hdr;
 pub mod image;
 pub mod math;
 pub mod photometric;

@@ -162,7 +162,12 @@ fn fit(a: &FitArgs) -> Result<()> {
             .iter()
             .zip(&reference)
             .zip(&names)
-            .map(|(((rgb, flag), xyz), name)| PatchInput { name: name.clone(), rgb: *rgb, reference_xyz: *xyz, flag: *flag })
+            .map(|(((rgb, flag), xyz), name)| PatchInput {
+                name: name.clone(),
+                rgb: *rgb,
+                reference_xyz: *xyz,
+                flag: *flag,
+            })
             .collect(),
         white,
     };
@@ -171,7 +176,12 @@ fn fit(a: &FitArgs) -> Result<()> {
     for w in &result.warnings {
         eprintln!("warning: {w}");
     }
-    let file = CcmFile { format: color::CCM_FORMAT.into(), fitted: result.fitted.clone(), white, report: Some(result.clone()) };
+    let file = CcmFile {
+        format: color::CCM_FORMAT.into(),
+        fitted: result.fitted.clone(),
+        white,
+        report: Some(result.clone()),
+    };
     let json = serde_json::to_string_pretty(&file)?;
     image::io::write_atomically(out, |tmp| std::fs::write(tmp, json).map_err(|e| e.to_string()))?;
     let loo = result.loo_mean_de2000.map_or("none".to_string(), |v| format!("{v:.3}"));
@@ -213,8 +223,10 @@ fn apply(ccm: &Path, space: &str, linear: bool, input: &Path, output: &Path) -> 
     let mut out = Image::new(img.width, img.height, 3);
     use rayon::prelude::*;
     let non_finite = std::sync::atomic::AtomicUsize::new(0);
-    out.data.par_chunks_mut(3 * img.width as usize).zip(img.data.par_chunks(c * img.width as usize)).for_each(
-        |(dst, src)| {
+    out.data
+        .par_chunks_mut(3 * img.width as usize)
+        .zip(img.data.par_chunks(c * img.width as usize))
+        .for_each(|(dst, src)| {
             for (d, s) in dst.chunks_exact_mut(3).zip(src.chunks_exact(c)) {
                 let xyz = file.fitted.apply([s[0] as f64, s[1] as f64, s[2] as f64]);
                 let v = match &to_srgb {
@@ -231,8 +243,7 @@ fn apply(ccm: &Path, space: &str, linear: bool, input: &Path, output: &Path) -> 
                     non_finite.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 }
             }
-        },
-    );
+        });
     let apply_s = t.elapsed().as_secs_f64();
     let non_finite = non_finite.into_inner();
     if non_finite > 0 {
@@ -257,19 +268,36 @@ fn apply(ccm: &Path, space: &str, linear: bool, input: &Path, output: &Path) -> 
 }
 
 fn spectral(camera: &str, illuminant: &str, out: &Path) -> Result<()> {
-    let cam = spectra::camera(camera).with_context(|| format!("--camera {camera}: expected one of {}", spectra::CAMERAS.join(", ")))?;
-    let ill = spectra::illuminant(illuminant)
-        .with_context(|| format!("--illuminant {illuminant}: expected one of {}", spectra::ILLUMINANTS.join(", ")))?;
+    let cam = spectra::camera(camera)
+        .with_context(|| format!("--camera {camera}: expected one of {}", spectra::CAMERAS.join(", ")))?;
+    let ill = spectra::illuminant(illuminant).with_context(|| {
+        format!("--illuminant {illuminant}: expected one of {}", spectra::ILLUMINANTS.join(", "))
+    })?;
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     let chart = spectra::chart();
     let rgb: Vec<[f64; 3]> = chart.iter().map(|(_, r)| spectra::camera_rgb(r, &ill, &cam)).collect();
     let xyz: Vec<[f64; 3]> = chart.iter().map(|(_, r)| spectra::xyz(r, &ill)).collect();
     let white = spectra::white(&ill);
     let what = format!("ColorChecker 24 (BabelColor average) under {illuminant}, camera {camera}");
-    color::write_table(&out.join("rgb.csv"), ["R", "G", "B"], &rgb, &format!("{what}: camera RGB, a perfect white's strongest channel = 1"))?;
-    color::write_table(&out.join("xyz.csv"), ["X", "Y", "Z"], &xyz, &format!("{what}: CIE 1931 2° XYZ, Y = 1 for a perfect white"))?;
-    let text = format!("# the white of {illuminant} (CIE 1931 2°)\nX,Y,Z\n{:e},{:e},{:e}\n", white[0], white[1], white[2]);
-    image::io::write_atomically(&out.join("white.csv"), |tmp| std::fs::write(tmp, text).map_err(|e| e.to_string()))?;
+    color::write_table(
+        &out.join("rgb.csv"),
+        ["R", "G", "B"],
+        &rgb,
+        &format!("{what}: camera RGB, a perfect white's strongest channel = 1"),
+    )?;
+    color::write_table(
+        &out.join("xyz.csv"),
+        ["X", "Y", "Z"],
+        &xyz,
+        &format!("{what}: CIE 1931 2° XYZ, Y = 1 for a perfect white"),
+    )?;
+    let text = format!(
+        "# the white of {illuminant} (CIE 1931 2°)\nX,Y,Z\n{:e},{:e},{:e}\n",
+        white[0], white[1], white[2]
+    );
+    image::io::write_atomically(&out.join("white.csv"), |tmp| {
+        std::fs::write(tmp, text).map_err(|e| e.to_string())
+    })?;
     eprintln!(
         "{what}: wrote rgb.csv, xyz.csv and white.csv to {}; white {:.6},{:.6},{:.6}",
         out.display(),

@@ -53,12 +53,19 @@ pub fn parse_time(s: &str) -> Result<f64, String> {
     let v = match s.split_once('/') {
         Some((a, b)) => {
             let (a, b): (f64, f64) = (
-                a.trim().parse().map_err(|_| format!("exposure time `{s}`: expected a number or a fraction such as 1/30"))?,
-                b.trim().parse().map_err(|_| format!("exposure time `{s}`: expected a number or a fraction such as 1/30"))?,
+                a.trim().parse().map_err(|_| {
+                    format!("exposure time `{s}`: expected a number or a fraction such as 1/30")
+                })?,
+                b.trim().parse().map_err(|_| {
+                    format!("exposure time `{s}`: expected a number or a fraction such as 1/30")
+                })?,
             );
             a / b
         }
-        None => s.trim().parse().map_err(|_| format!("exposure time `{s}`: expected a number or a fraction such as 1/30"))?,
+        None => s
+            .trim()
+            .parse()
+            .map_err(|_| format!("exposure time `{s}`: expected a number or a fraction such as 1/30"))?,
     };
     if !(v.is_finite() && v > 0.0) {
         return Err(format!("exposure time `{s}`: expected a positive, finite number of seconds"));
@@ -74,7 +81,8 @@ fn stack(a: &HdrArgs) -> Result<Vec<(PathBuf, f64)>> {
             if !a.images.is_empty() || !a.times.is_empty() {
                 bail!("give --list, or --images with --times, not both");
             }
-            let text = std::fs::read_to_string(list).with_context(|| format!("cannot read --list {}", list.display()))?;
+            let text = std::fs::read_to_string(list)
+                .with_context(|| format!("cannot read --list {}", list.display()))?;
             let dir = list.parent().unwrap_or(Path::new("."));
             let mut out = Vec::new();
             for (n, line) in text.lines().enumerate() {
@@ -84,18 +92,32 @@ fn stack(a: &HdrArgs) -> Result<Vec<(PathBuf, f64)>> {
                 }
                 let mut parts = line.split_whitespace();
                 let (Some(name), Some(time), None) = (parts.next(), parts.next(), parts.next()) else {
-                    bail!("{} line {}: expected a file name and an exposure time in seconds", list.display(), n + 1);
+                    bail!(
+                        "{} line {}: expected a file name and an exposure time in seconds",
+                        list.display(),
+                        n + 1
+                    );
                 };
-                let t = parse_time(time).map_err(|m| anyhow::anyhow!("{} line {}: {m}", list.display(), n + 1))?;
+                let t = parse_time(time)
+                    .map_err(|m| anyhow::anyhow!("{} line {}: {m}", list.display(), n + 1))?;
                 out.push((dir.join(name), t));
             }
             Ok(out)
         }
         None => {
             if a.images.len() != a.times.len() {
-                bail!("{} image(s) but {} exposure time(s): give one time per image, in the same order", a.images.len(), a.times.len());
+                bail!(
+                    "{} image(s) but {} exposure time(s): give one time per image, in the same order",
+                    a.images.len(),
+                    a.times.len()
+                );
             }
-            let times: Vec<f64> = a.times.iter().map(|t| parse_time(t)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
+            let times: Vec<f64> = a
+                .times
+                .iter()
+                .map(|t| parse_time(t))
+                .collect::<Result<_, _>>()
+                .map_err(anyhow::Error::msg)?;
             Ok(a.images.iter().cloned().zip(times).collect())
         }
     }
@@ -110,8 +132,13 @@ fn read_codes(path: &Path) -> Result<(u32, u32, usize, Vec<u16>)> {
         D::ImageLuma8(_) | D::ImageLumaA8(_) | D::ImageRgb8(_) | D::ImageRgba8(_) => {
             (256, img.into_rgb8().into_raw().into_iter().map(u16::from).collect())
         }
-        D::ImageLuma16(_) | D::ImageLumaA16(_) | D::ImageRgb16(_) | D::ImageRgba16(_) => (65536, img.into_rgb16().into_raw()),
-        _ => bail!("{}: expected 8- or 16-bit integer samples (a float image is already radiance)", path.display()),
+        D::ImageLuma16(_) | D::ImageLumaA16(_) | D::ImageRgb16(_) | D::ImageRgba16(_) => {
+            (65536, img.into_rgb16().into_raw())
+        }
+        _ => bail!(
+            "{}: expected 8- or 16-bit integer samples (a float image is already radiance)",
+            path.display()
+        ),
     };
     Ok((w, h, levels, codes))
 }
@@ -126,11 +153,18 @@ pub fn run(a: &HdrArgs) -> Result<()> {
     }
     let weights = match (a.weights.as_str(), a.full_well) {
         ("hat", _) => Weights::Hat,
-        ("noise", Some(fw)) if fw.is_finite() && fw >= 1.0 && a.read_noise.is_finite() && a.read_noise >= 0.0 => {
+        ("noise", Some(fw))
+            if fw.is_finite() && fw >= 1.0 && a.read_noise.is_finite() && a.read_noise >= 0.0 =>
+        {
             Weights::Noise { full_well: fw, read_noise: a.read_noise }
         }
-        ("noise", Some(fw)) => bail!("--full-well {fw} --read-noise {}: expected at least 1 electron and a non-negative read noise", a.read_noise),
-        ("noise", None) => bail!("--weights noise needs --full-well (electrons at full scale) and --read-noise (electrons)"),
+        ("noise", Some(fw)) => bail!(
+            "--full-well {fw} --read-noise {}: expected at least 1 electron and a non-negative read noise",
+            a.read_noise
+        ),
+        ("noise", None) => {
+            bail!("--weights noise needs --full-well (electrons at full scale) and --read-noise (electrons)")
+        }
         (other, _) => bail!("--weights {other}: expected hat or noise"),
     };
     if !(a.lambda.is_finite() && a.lambda >= 0.0) {
@@ -143,7 +177,8 @@ pub fn run(a: &HdrArgs) -> Result<()> {
         .exclude_color
         .as_deref()
         .map(|s| {
-            let v: Vec<u16> = s.split(',').map(|x| x.trim().parse::<u16>()).collect::<Result<_, _>>().map_err(|_| ())?;
+            let v: Vec<u16> =
+                s.split(',').map(|x| x.trim().parse::<u16>()).collect::<Result<_, _>>().map_err(|_| ())?;
             <[u16; 3]>::try_from(v).map_err(|_| ())
         })
         .transpose()
@@ -159,9 +194,15 @@ pub fn run(a: &HdrArgs) -> Result<()> {
                 levels = l;
             }
             Some((w0, h0)) if (w0, h0) != (w, h) => {
-                bail!("{}: {w}×{h}, but {} is {w0}×{h0}: every frame must have the same size", path.display(), frames_in[0].0.display())
+                bail!(
+                    "{}: {w}×{h}, but {} is {w0}×{h0}: every frame must have the same size",
+                    path.display(),
+                    frames_in[0].0.display()
+                )
             }
-            Some(_) if l != levels => bail!("{}: {} levels, but the first frame has {levels}: mixed bit depths", path.display(), l),
+            Some(_) if l != levels => {
+                bail!("{}: {} levels, but the first frame has {levels}: mixed bit depths", path.display(), l)
+            }
             Some(_) => {}
         }
         frames.push(Frame { name: path.display().to_string(), time_s: *time, codes });
@@ -176,7 +217,8 @@ pub fn run(a: &HdrArgs) -> Result<()> {
         "debevec" => Method::Debevec { lambda: a.lambda, samples_per_value: a.samples_per_value },
         "robertson" => Method::Robertson { iterations: 50 },
         file => {
-            let text = std::fs::read_to_string(file).with_context(|| format!("--response {file}: not debevec, robertson or a readable file"))?;
+            let text = std::fs::read_to_string(file)
+                .with_context(|| format!("--response {file}: not debevec, robertson or a readable file"))?;
             Method::Given(response::from_csv(&text).map_err(|m| anyhow::anyhow!("--response {file}: {m}"))?)
         }
     };
@@ -193,7 +235,10 @@ pub fn run(a: &HdrArgs) -> Result<()> {
         Ok(())
     };
     write("response.csv", response::to_csv(&out.response).into_bytes())?;
-    write("response.svg", response::plot_svg(&out.response, &format!("response ({})", out.summary.method)).into_bytes())?;
+    write(
+        "response.svg",
+        response::plot_svg(&out.response, &format!("response ({})", out.summary.method)).into_bytes(),
+    )?;
     let mut mask = Image::new(w, h, 3);
     for (i, m) in out.mask.iter().enumerate() {
         let v: [f32; 3] = match *m {

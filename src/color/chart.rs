@@ -52,7 +52,11 @@ pub struct Sample {
 }
 
 /// Grid corners → image: the homography and its check.
-pub fn grid_homography(corners: [[f64; 2]; 4], width: u32, height: u32) -> Result<crate::calib::zhang::Homography, String> {
+pub fn grid_homography(
+    corners: [[f64; 2]; 4],
+    width: u32,
+    height: u32,
+) -> Result<crate::calib::zhang::Homography, String> {
     if let Some(c) = corners.iter().flatten().find(|v| !v.is_finite()) {
         return Err(format!("corner coordinate {c}: expected finite numbers"));
     }
@@ -82,13 +86,21 @@ pub fn grid_homography(corners: [[f64; 2]; 4], width: u32, height: u32) -> Resul
             );
         }
     }
-    let grid = [DVec2::new(0.0, 0.0), DVec2::new(COLS as f64, 0.0), DVec2::new(COLS as f64, ROWS as f64), DVec2::new(0.0, ROWS as f64)];
+    let grid = [
+        DVec2::new(0.0, 0.0),
+        DVec2::new(COLS as f64, 0.0),
+        DVec2::new(COLS as f64, ROWS as f64),
+        DVec2::new(0.0, ROWS as f64),
+    ];
     crate::calib::zhang::homography(&grid, &p).ok_or_else(|| "the corners define no homography".to_string())
 }
 
 fn map(h: &crate::calib::zhang::Homography, p: DVec2) -> DVec2 {
     let w = h[(2, 0)] * p.x + h[(2, 1)] * p.y + h[(2, 2)];
-    DVec2::new((h[(0, 0)] * p.x + h[(0, 1)] * p.y + h[(0, 2)]) / w, (h[(1, 0)] * p.x + h[(1, 1)] * p.y + h[(1, 2)]) / w)
+    DVec2::new(
+        (h[(0, 0)] * p.x + h[(0, 1)] * p.y + h[(0, 2)]) / w,
+        (h[(1, 0)] * p.x + h[(1, 1)] * p.y + h[(1, 2)]) / w,
+    )
 }
 
 /// Samples the 24 patches. `saturation` is the level at which a channel clips (1 for
@@ -104,7 +116,8 @@ pub fn sample(image: &Image, corners: [[f64; 2]; 4], saturation: f64) -> Result<
     for k in 0..COLS * ROWS {
         let (col, row) = ((k % COLS) as f64, (k / COLS) as f64);
         let (lo, hi) = (0.5 - SAMPLED_FRACTION / 2.0, 0.5 + SAMPLED_FRACTION / 2.0);
-        let square = [(lo, lo), (hi, lo), (hi, hi), (lo, hi)].map(|(u, v)| map(&h, DVec2::new(col + u, row + v)));
+        let square =
+            [(lo, lo), (hi, lo), (hi, hi), (lo, hi)].map(|(u, v)| map(&h, DVec2::new(col + u, row + v)));
         let (min, max) = square.iter().fold((DVec2::MAX, DVec2::MIN), |(a, b), &p| (a.min(p), b.max(p)));
         let x0 = min.x.ceil().max(0.0) as u32;
         let y0 = min.y.ceil().max(0.0) as u32;
@@ -134,7 +147,9 @@ pub fn sample(image: &Image, corners: [[f64; 2]; 4], saturation: f64) -> Result<
         if let Some(v) = values.iter().flatten().find(|v| !v.is_finite()) {
             return Err(format!("patch {} holds a pixel value {v}: expected finite numbers", k + 1));
         }
-        let clipped = values.iter().any(|ch| ch.iter().filter(|&&v| v >= saturation).count() as f64 > 0.5 * TRIM * n as f64);
+        let clipped = values
+            .iter()
+            .any(|ch| ch.iter().filter(|&&v| v >= saturation).count() as f64 > 0.5 * TRIM * n as f64);
         let mut rgb = [0.0; 3];
         let mut sd = [0.0; 3];
         for ch in 0..3 {
@@ -165,7 +180,13 @@ fn trimmed_mean(v: &mut [f64]) -> f64 {
 /// 1.4826 × the median absolute deviation from the median of sorted values: the standard
 /// deviation of Gaussian noise, unmoved by a few specks.
 fn robust_sd(sorted: &[f64]) -> f64 {
-    let median = |v: &[f64]| if v.len() % 2 == 1 { v[v.len() / 2] } else { 0.5 * (v[v.len() / 2 - 1] + v[v.len() / 2]) };
+    let median = |v: &[f64]| {
+        if v.len() % 2 == 1 {
+            v[v.len() / 2]
+        } else {
+            0.5 * (v[v.len() / 2 - 1] + v[v.len() / 2])
+        }
+    };
     let m = median(sorted);
     let mut dev: Vec<f64> = sorted.iter().map(|v| (v - m).abs()).collect();
     dev.sort_by(f64::total_cmp);

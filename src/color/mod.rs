@@ -212,7 +212,8 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
         mean_de2000: mean(&|p| p.de2000),
         max_de2000: used_results.iter().map(|p| p.de2000).fold(0.0, f64::max),
         mean_de76: mean(&|p| p.de76),
-        loo_mean_de2000: (!loo_values.is_empty()).then(|| loo_values.iter().sum::<f64>() / loo_values.len() as f64),
+        loo_mean_de2000: (!loo_values.is_empty())
+            .then(|| loo_values.iter().sum::<f64>() / loo_values.len() as f64),
         loo_max_de2000: loo_values.iter().copied().reduce(f64::max),
         used_patches: used_results.len(),
         fitted,
@@ -239,7 +240,10 @@ fn check_input(input: &Input) -> Result<(), Error> {
         return Err(Error::BadInput("no patches".into()));
     }
     if !input.white.iter().all(|v| v.is_finite() && *v > 0.0 && *v <= MAX_VALUE) {
-        return Err(Error::BadInput(format!("white {:?}: expected three positive numbers up to 1e30 (XYZ)", input.white)));
+        return Err(Error::BadInput(format!(
+            "white {:?}: expected three positive numbers up to 1e30 (XYZ)",
+            input.white
+        )));
     }
     for (i, p) in input.patches.iter().enumerate() {
         // Beyond 1e30 (float32 images end near 3e38) a degree-4 term overflows f64.
@@ -292,9 +296,19 @@ pub fn read_patch_rgb(path: &Path) -> Result<Vec<[f64; 3]>, Error> {
 fn read_table(path: &Path, columns: [&str; 4], negative_ok: bool) -> Result<Vec<[f64; 3]>, Error> {
     let err = |message: String| Error::File { path: path.into(), message };
     let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
-    let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
-    let header: Vec<String> = lines.next().map(|(_, l)| l.split(',').map(|s| s.trim().to_lowercase()).collect()).unwrap_or_default();
-    let shown = format!("{},{},{},{}", columns[0], columns[1].to_uppercase(), columns[2].to_uppercase(), columns[3].to_uppercase());
+    let mut lines =
+        text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
+    let header: Vec<String> = lines
+        .next()
+        .map(|(_, l)| l.split(',').map(|s| s.trim().to_lowercase()).collect())
+        .unwrap_or_default();
+    let shown = format!(
+        "{},{},{},{}",
+        columns[0],
+        columns[1].to_uppercase(),
+        columns[2].to_uppercase(),
+        columns[3].to_uppercase()
+    );
     if header != columns {
         return Err(err(format!("expected the header `{shown}`")));
     }
@@ -305,13 +319,15 @@ fn read_table(path: &Path, columns: [&str; 4], negative_ok: bool) -> Result<Vec<
         if cells.len() != 4 {
             return Err(at(format!("{} fields: expected 4 ({shown})", cells.len())));
         }
-        let patch: usize = cells[0].parse().map_err(|_| at(format!("patch `{}`: expected a number 1 to 24", cells[0])))?;
+        let patch: usize =
+            cells[0].parse().map_err(|_| at(format!("patch `{}`: expected a number 1 to 24", cells[0])))?;
         if !(1..=24).contains(&patch) {
             return Err(at(format!("patch {patch}: expected 1 to 24")));
         }
         let mut v = [0.0; 3];
         for c in 0..3 {
-            let x: f64 = cells[c + 1].parse().map_err(|_| at(format!("`{}`: expected a number", cells[c + 1])))?;
+            let x: f64 =
+                cells[c + 1].parse().map_err(|_| at(format!("`{}`: expected a number", cells[c + 1])))?;
             if !(x.is_finite() && (negative_ok || x >= 0.0)) {
                 let kind = if negative_ok { "finite" } else { "finite, non-negative" };
                 return Err(at(format!("{x}: expected a {kind} number")));
@@ -322,7 +338,8 @@ fn read_table(path: &Path, columns: [&str; 4], negative_ok: bool) -> Result<Vec<
             return Err(at(format!("patch {patch} is given twice")));
         }
     }
-    let missing: Vec<String> = (0..24).filter(|&i| values[i].is_none()).map(|i| (i + 1).to_string()).collect();
+    let missing: Vec<String> =
+        (0..24).filter(|&i| values[i].is_none()).map(|i| (i + 1).to_string()).collect();
     if !missing.is_empty() {
         return Err(err(format!("no values for patch {}", missing.join(", "))));
     }
@@ -345,7 +362,8 @@ pub fn parse_numbers<const N: usize>(s: &str, what: &str) -> Result<[f64; N], St
         .map(|x| x.trim().parse::<f64>())
         .collect::<Result<_, _>>()
         .map_err(|_| format!("{what} `{s}`: expected {N} comma-separated numbers"))?;
-    let arr: [f64; N] = v.try_into().map_err(|v: Vec<f64>| format!("{what} `{s}`: {} numbers, expected {N}", v.len()))?;
+    let arr: [f64; N] =
+        v.try_into().map_err(|v: Vec<f64>| format!("{what} `{s}`: {} numbers, expected {N}", v.len()))?;
     if arr.iter().any(|x| !x.is_finite()) {
         return Err(format!("{what} `{s}`: expected finite numbers"));
     }
@@ -372,7 +390,8 @@ pub fn read_ccm(path: &Path) -> Result<CcmFile, Error> {
     let err = |message: String| Error::File { path: path.into(), message };
     let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
     let de = &mut serde_json::Deserializer::from_str(&text);
-    let file: CcmFile = serde_path_to_error::deserialize(de).map_err(|e| err(format!("{}: {}", e.path(), e.inner())))?;
+    let file: CcmFile =
+        serde_path_to_error::deserialize(de).map_err(|e| err(format!("{}: {}", e.path(), e.inner())))?;
     if file.format != CCM_FORMAT {
         return Err(err(format!("format `{}`: expected `{CCM_FORMAT}`", file.format)));
     }
@@ -387,7 +406,8 @@ pub fn read_ccm(path: &Path) -> Result<CcmFile, Error> {
 /// from `white` to D65 (IEC 61966-2-1's matrix).
 pub fn xyz_to_linear_srgb(white: [f64; 3]) -> [[f64; 3]; 3] {
     use glam::DMat3;
-    let bradford = DMat3::from_cols_array(&[0.8951, -0.7502, 0.0389, 0.2664, 1.7135, -0.0685, -0.1614, 0.0367, 1.0296]);
+    let bradford =
+        DMat3::from_cols_array(&[0.8951, -0.7502, 0.0389, 0.2664, 1.7135, -0.0685, -0.1614, 0.0367, 1.0296]);
     let d65 = glam::DVec3::new(0.95047, 1.0, 1.08883);
     let src = bradford * glam::DVec3::from_array(white);
     let dst = bradford * d65;

@@ -173,7 +173,15 @@ impl Model {
                 let r = Term::root;
                 let mut t = [rgb, vec![r(1, 1, 0), r(0, 1, 1), r(1, 0, 1)]].concat();
                 if d >= 3 {
-                    t.extend([r(1, 2, 0), r(0, 1, 2), r(1, 0, 2), r(2, 1, 0), r(0, 2, 1), r(2, 0, 1), r(1, 1, 1)]);
+                    t.extend([
+                        r(1, 2, 0),
+                        r(0, 1, 2),
+                        r(1, 0, 2),
+                        r(2, 1, 0),
+                        r(0, 2, 1),
+                        r(2, 0, 1),
+                        r(1, 1, 1),
+                    ]);
                 }
                 t
             }
@@ -356,8 +364,10 @@ pub fn fit(
         return Err(FitError::Overflow);
     }
     // Bounded iterations: an SVD that does not converge is a refusal, not a hang.
-    let svd = a.clone().try_svd(true, true, f64::EPSILON, 10_000).ok_or(FitError::RankDeficient { ratio: 0.0 })?;
-    let (smax, smin) = svd.singular_values.iter().fold((0.0f64, f64::INFINITY), |(hi, lo), &s| (hi.max(s), lo.min(s)));
+    let svd =
+        a.clone().try_svd(true, true, f64::EPSILON, 10_000).ok_or(FitError::RankDeficient { ratio: 0.0 })?;
+    let (smax, smin) =
+        svd.singular_values.iter().fold((0.0f64, f64::INFINITY), |(hi, lo), &s| (hi.max(s), lo.min(s)));
     let ratio = if smax > 0.0 { smin / smax } else { 0.0 };
     if !(ratio >= MIN_SINGULAR_RATIO) {
         return Err(FitError::RankDeficient { ratio });
@@ -429,7 +439,11 @@ impl MeanDe2000 {
     fn value(&self, p: &DVector<f64>) -> f64 {
         let sum: f64 = (0..self.terms.len()).map(|i| self.smoothed(self.xyz(p, i), i)).sum();
         // An overflowing candidate is pushed back by the line search.
-        if sum.is_finite() { sum / self.terms.len().max(1) as f64 } else { f64::MAX }
+        if sum.is_finite() {
+            sum / self.terms.len().max(1) as f64
+        } else {
+            f64::MAX
+        }
     }
 }
 
@@ -524,7 +538,16 @@ mod tests {
             assert_eq!(m.terms().len(), n as usize, "cheung-{n}");
             assert_eq!(m.name(), format!("cheung-{n}"));
         }
-        for name in ["linear-3x3", "white-preserving", "affine", "root-poly-2", "root-poly-3", "de2000-opt", "de2000-opt:root-poly-2", "de2000-opt:cheung-7"] {
+        for name in [
+            "linear-3x3",
+            "white-preserving",
+            "affine",
+            "root-poly-2",
+            "root-poly-3",
+            "de2000-opt",
+            "de2000-opt:root-poly-2",
+            "de2000-opt:cheung-7",
+        ] {
             assert_eq!(name.parse::<Model>().unwrap().name(), name);
         }
         assert_eq!(Model::RootPoly(2).terms().len(), 6);
@@ -552,7 +575,11 @@ mod tests {
         let rgb: Vec<[f64; 3]> = (0..24)
             .map(|i| {
                 let f = i as f64;
-                [(0.1 + 0.37 * f).fract() + 0.02, (0.3 + 0.61 * f).fract() + 0.02, (0.7 + 0.23 * f).fract() + 0.02]
+                [
+                    (0.1 + 0.37 * f).fract() + 0.02,
+                    (0.3 + 0.61 * f).fract() + 0.02,
+                    (0.7 + 0.23 * f).fract() + 0.02,
+                ]
             })
             .collect();
         let xyz: Vec<[f64; 3]> =
@@ -563,7 +590,8 @@ mod tests {
                 assert!((f.matrix[c][k] - m[c][k]).abs() < 1e-12);
             }
         }
-        let bent: Vec<[f64; 3]> = xyz.iter().map(|x| [x[0] * 1.02, x[1], x[2] * 0.97 + 0.01 * x[0]]).collect();
+        let bent: Vec<[f64; 3]> =
+            xyz.iter().map(|x| [x[0] * 1.02, x[1], x[2] * 0.97 + 0.01 * x[0]]).collect();
         let w = fit(Model::WhitePreserving, &rgb, &bent, [0.95, 1.0, 1.09], Some(5)).unwrap();
         let mapped = w.apply(rgb[5]);
         assert!((0..3).all(|c| (mapped[c] - bent[5][c]).abs() < 1e-12), "{mapped:?} vs {:?}", bent[5]);
@@ -578,7 +606,13 @@ mod tests {
             fit(Model::RootPoly(3), &rgb, &xyz, [1.0; 3], None),
             Err(FitError::TooFew { patches: 10, needed: 13 })
         );
-        assert!(matches!(fit(Model::Linear3x3, &rgb, &xyz, [1.0; 3], None), Err(FitError::RankDeficient { .. })));
-        assert!(matches!(fit(Model::WhitePreserving, &rgb[..2], &xyz[..2], [1.0; 3], Some(0)), Err(FitError::TooFew { .. })));
+        assert!(matches!(
+            fit(Model::Linear3x3, &rgb, &xyz, [1.0; 3], None),
+            Err(FitError::RankDeficient { .. })
+        ));
+        assert!(matches!(
+            fit(Model::WhitePreserving, &rgb[..2], &xyz[..2], [1.0; 3], Some(0)),
+            Err(FitError::TooFew { .. })
+        ));
     }
 }

@@ -179,6 +179,9 @@ mod tests {
     #[test]
     fn d65_white_point() {
         let w = white(&illuminant("d65").unwrap());
-        assert!((w[0] - 0.9505).abs() < 5e-4 && (w[1] - 1.0).abs() < 1e-12 && (w[2] - 1.089).abs() < 1e-3, "{w:?}");
+        assert!(
+            (w[0] - 0.9505).abs() < 5e-4 && (w[1] - 1.0).abs() < 1e-12 && (w[2] - 1.089).abs() < 1e-3,
+            "{w:?}"
+        );
     }
 }

@@ -26,7 +26,10 @@ use serde::{Deserialize, Serialize};
 pub enum Weights {
     Hat,
     /// The sensor's electrons at full scale and its read noise in electrons.
-    Noise { full_well: f64, read_noise: f64 },
+    Noise {
+        full_well: f64,
+        read_noise: f64,
+    },
 }
 
 /// The mask's values per pixel: 0 well exposed in some frame (every channel), 1 saturated

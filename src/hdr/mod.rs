@@ -55,8 +55,13 @@ pub struct Input {
 #[derive(Clone, Debug)]
 pub enum Method {
     /// `lambda`: smoothness weight; `samples_per_value`: sample pixels per code value.
-    Debevec { lambda: f64, samples_per_value: usize },
-    Robertson { iterations: usize },
+    Debevec {
+        lambda: f64,
+        samples_per_value: usize,
+    },
+    Robertson {
+        iterations: usize,
+    },
     Given(Response),
 }
 
@@ -132,10 +137,18 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
             let fits = (0..3)
                 .into_par_iter()
                 .map(|c| {
-                    let codes: Vec<Vec<u16>> = order.iter().map(|&j| channel(&input.frames[j].codes, c)).collect();
+                    let codes: Vec<Vec<u16>> =
+                        order.iter().map(|&j| channel(&input.frames[j].codes, c)).collect();
                     let ch = response::Channel { codes: &codes, times: &times, levels: input.levels };
-                    let s = response::choose_samples(&ch, input.width, input.height, (*samples_per_value).max(1), &usable);
-                    let g = response::debevec(&ch, &s, *lambda).map_err(|m| Error::Unsolvable(format!("channel {c}: {m}")))?;
+                    let s = response::choose_samples(
+                        &ch,
+                        input.width,
+                        input.height,
+                        (*samples_per_value).max(1),
+                        &usable,
+                    );
+                    let g = response::debevec(&ch, &s, *lambda)
+                        .map_err(|m| Error::Unsolvable(format!("channel {c}: {m}")))?;
                     Ok((g, s.len()))
                 })
                 .collect::<Result<Vec<_>, Error>>()?;
@@ -148,9 +161,11 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
             let g = (0..3)
                 .into_par_iter()
                 .map(|c| {
-                    let codes: Vec<Vec<u16>> = order.iter().map(|&j| channel(&input.frames[j].codes, c)).collect();
+                    let codes: Vec<Vec<u16>> =
+                        order.iter().map(|&j| channel(&input.frames[j].codes, c)).collect();
                     let ch = response::Channel { codes: &codes, times: &times, levels: input.levels };
-                    response::robertson(&ch, &usable, *iterations).map_err(|m| Error::Unsolvable(format!("channel {c}: {m}")))
+                    response::robertson(&ch, &usable, *iterations)
+                        .map_err(|m| Error::Unsolvable(format!("channel {c}: {m}")))
                 })
                 .collect::<Result<Vec<_>, _>>()?;
             (Response { levels: input.levels, g }, "robertson".to_string())
@@ -189,7 +204,10 @@ fn channel(codes: &[u16], c: usize) -> Vec<u16> {
 
 fn check(input: &Input) -> Result<(), Error> {
     if input.frames.len() < 2 {
-        return Err(Error::BadInput(format!("{} frame(s): a stack needs at least 2 exposures", input.frames.len())));
+        return Err(Error::BadInput(format!(
+            "{} frame(s): a stack needs at least 2 exposures",
+            input.frames.len()
+        )));
     }
     if !(2..=65536).contains(&input.levels) {
         return Err(Error::BadInput(format!("{} levels: expected 2 to 65536", input.levels)));
@@ -200,7 +218,10 @@ fn check(input: &Input) -> Result<(), Error> {
     }
     for f in &input.frames {
         if !(f.time_s.is_finite() && f.time_s > 0.0) {
-            return Err(Error::BadInput(format!("{}: exposure time {} s: expected a positive number", f.name, f.time_s)));
+            return Err(Error::BadInput(format!(
+                "{}: exposure time {} s: expected a positive number",
+                f.name, f.time_s
+            )));
         }
         if f.codes.len() != 3 * n {
             return Err(Error::BadInput(format!(
@@ -213,7 +234,10 @@ fn check(input: &Input) -> Result<(), Error> {
             )));
         }
         if let Some(z) = f.codes.iter().find(|&&z| z as usize >= input.levels) {
-            return Err(Error::BadInput(format!("{}: code value {z} is not below {} levels", f.name, input.levels)));
+            return Err(Error::BadInput(format!(
+                "{}: code value {z} is not below {} levels",
+                f.name, input.levels
+            )));
         }
     }
     let mut times: Vec<f64> = input.frames.iter().map(|f| f.time_s).collect();
@@ -226,7 +250,10 @@ fn check(input: &Input) -> Result<(), Error> {
     }
     if let Some(u) = &input.usable {
         if u.len() != n {
-            return Err(Error::BadInput(format!("the usable-pixel mask has {} entries for {n} pixels", u.len())));
+            return Err(Error::BadInput(format!(
+                "the usable-pixel mask has {} entries for {n} pixels",
+                u.len()
+            )));
         }
     }
     Ok(())

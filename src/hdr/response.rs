@@ -95,7 +95,13 @@ fn unbin(g_bins: &[f64], shift: usize, levels: usize) -> Vec<f64> {
 
 /// Pixel indices for Debevec's fit (module docs): per frame, starting at the middle one, for
 /// each binned value not yet covered, the pixel nearest the image centre showing it.
-pub fn choose_samples(ch: &Channel, width: usize, height: usize, per_value: usize, valid: &[bool]) -> Vec<usize> {
+pub fn choose_samples(
+    ch: &Channel,
+    width: usize,
+    height: usize,
+    per_value: usize,
+    valid: &[bool],
+) -> Vec<usize> {
     let (bins, shift) = binning(ch.levels);
     let n = valid.len();
     let frames = ch.codes.len();
@@ -123,7 +129,8 @@ pub fn choose_samples(ch: &Channel, width: usize, height: usize, per_value: usiz
         .collect();
     // Nearest the centre first: squared distance, doubled to stay an integer, then index.
     let key = |i: usize| {
-        let (dx, dy) = (2 * (i % width) as i64 - (width as i64 - 1), 2 * (i / width) as i64 - (height as i64 - 1));
+        let (dx, dy) =
+            (2 * (i % width) as i64 - (width as i64 - 1), 2 * (i / width) as i64 - (height as i64 - 1));
         (dx * dx + dy * dy, i)
     };
     let mut frame_order: Vec<usize> = (0..frames).collect();
@@ -238,7 +245,12 @@ pub fn debevec(ch: &Channel, samples: &[usize], lambda: f64) -> Result<Vec<f64>,
 }
 
 /// Which bins occur with a non-zero weight at the given pixels.
-fn observed(ch: &Channel, shift: usize, bins: usize, pixels: impl Iterator<Item = usize> + Clone) -> Vec<bool> {
+fn observed(
+    ch: &Channel,
+    shift: usize,
+    bins: usize,
+    pixels: impl Iterator<Item = usize> + Clone,
+) -> Vec<bool> {
     let mut seen = vec![false; bins];
     for frame in ch.codes {
         for i in pixels.clone() {
@@ -304,19 +316,28 @@ pub fn robertson(ch: &Channel, valid: &[bool], max_iterations: usize) -> Result<
         smooth_observed(&mut inv, &seen);
         let norm = inv[mid];
         if !(norm.is_finite() && norm > 0.0) {
-            return Err("the middle value never occurs in a well-exposed pixel: no scale for the response".into());
+            return Err(
+                "the middle value never occurs in a well-exposed pixel: no scale for the response".into()
+            );
         }
         inv.iter_mut().for_each(|v| *v /= norm);
         let g: Vec<f64> = inv.iter().map(|&v| if v > 0.0 { v.ln() } else { f64::NAN }).collect();
         if let Some(p) = &previous {
-            let change = g.iter().zip(p).zip(&seen).filter(|&(_, &s)| s).map(|((a, b), _)| (a - b).abs()).fold(0.0, f64::max);
+            let change = g
+                .iter()
+                .zip(p)
+                .zip(&seen)
+                .filter(|&(_, &s)| s)
+                .map(|((a, b), _)| (a - b).abs())
+                .fold(0.0, f64::max);
             if change < CONVERGED {
                 break;
             }
         }
         previous = Some(g);
     }
-    let g: Vec<f64> = inv.iter().zip(&seen).map(|(&v, &s)| if s && v > 0.0 { v.ln() } else { f64::NAN }).collect();
+    let g: Vec<f64> =
+        inv.iter().zip(&seen).map(|(&v, &s)| if s && v > 0.0 { v.ln() } else { f64::NAN }).collect();
     let mut seen = seen;
     for (s, v) in seen.iter_mut().zip(&g) {
         *s &= v.is_finite();
@@ -414,13 +435,19 @@ mod tests {
     fn recovers_a_known_response() {
         let (w, h) = (64usize, 48usize);
         let times = [1.0, 0.25, 1.0 / 16.0, 1.0 / 64.0];
-        let e: Vec<f64> = (0..w * h).map(|i| 1e-3 * 10f64.powf(4.0 * ((i * 7919) % (w * h)) as f64 / (w * h) as f64)).collect();
+        let e: Vec<f64> = (0..w * h)
+            .map(|i| 1e-3 * 10f64.powf(4.0 * ((i * 7919) % (w * h)) as f64 / (w * h) as f64))
+            .collect();
         let response = |x: f64| (255.0 * (x.clamp(0.0, 1.0)).powf(1.0 / 2.2)).round() as u16;
-        let codes: Vec<Vec<u16>> = times.iter().map(|&t| e.iter().map(|&v| response(v * t * 4.0)).collect()).collect();
+        let codes: Vec<Vec<u16>> =
+            times.iter().map(|&t| e.iter().map(|&v| response(v * t * 4.0)).collect()).collect();
         let ch = Channel { codes: &codes, times: &times, levels: 256 };
         let valid = vec![true; w * h];
         let samples = choose_samples(&ch, w, h, 1, &valid);
-        let fits = [("debevec", debevec(&ch, &samples, 10.0).unwrap()), ("robertson", robertson(&ch, &valid, 50).unwrap())];
+        let fits = [
+            ("debevec", debevec(&ch, &samples, 10.0).unwrap()),
+            ("robertson", robertson(&ch, &valid, 50).unwrap()),
+        ];
         for (name, g) in &fits {
             assert!(g.iter().all(|v| v.is_finite()), "{name}");
             assert!(g.windows(2).all(|p| p[1] > p[0]), "{name}");
@@ -450,7 +477,8 @@ pub fn to_csv(r: &Response) -> String {
 /// Reads a table written by `to_csv` (or by hand): one row per value 0, 1, …, levels − 1,
 /// finite and strictly increasing in every channel.
 pub fn from_csv(text: &str) -> Result<Response, String> {
-    let mut rows = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
+    let mut rows =
+        text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
     match rows.next() {
         Some((_, h)) if h.trim().to_lowercase().starts_with("value,") => {}
         _ => return Err("expected the header `value,ln_exposure_r,ln_exposure_g,ln_exposure_b`".into()),
@@ -461,12 +489,15 @@ pub fn from_csv(text: &str) -> Result<Response, String> {
         if cells.len() != 4 {
             return Err(format!("line {}: {} fields, expected 4", n + 1, cells.len()));
         }
-        let z: usize = cells[0].parse().map_err(|_| format!("line {}: value `{}` is not a number", n + 1, cells[0]))?;
+        let z: usize =
+            cells[0].parse().map_err(|_| format!("line {}: value `{}` is not a number", n + 1, cells[0]))?;
         if z != g[0].len() {
             return Err(format!("line {}: value {z}, expected {} (rows in order from 0)", n + 1, g[0].len()));
         }
         for c in 0..3 {
-            let v: f64 = cells[c + 1].parse().map_err(|_| format!("line {}: `{}` is not a number", n + 1, cells[c + 1]))?;
+            let v: f64 = cells[c + 1]
+                .parse()
+                .map_err(|_| format!("line {}: `{}` is not a number", n + 1, cells[c + 1]))?;
             if !v.is_finite() {
                 return Err(format!("line {}: {v} is not finite", n + 1));
             }
@@ -492,7 +523,8 @@ pub fn plot_svg(r: &Response, title: &str) -> String {
     {
         let root = SVGBackend::with_string(&mut svg, (720, 480)).into_drawing_area();
         let _ = root.fill(&WHITE);
-        let (lo, hi) = r.g.iter().flatten().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        let (lo, hi) =
+            r.g.iter().flatten().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
         let (lo, hi) = if lo.is_finite() && hi > lo { (lo, hi) } else { (-1.0, 1.0) };
         let chart = ChartBuilder::on(&root)
             .caption(title, ("sans-serif", 20))

@@ -272,7 +272,11 @@ fn parse_stage(name: &str, own: toml::Table) -> Result<Stage, String> {
         "photometric" => Stage::Photometric(from_table(own)?),
         "color" => Stage::Color(from_table(own)?),
         "hdr" => Stage::Hdr(from_table(own)?),
-        other => return Err(format!("unknown stage `{other}`: expected render, calibrate, photometric, color or hdr")),
+        other => {
+            return Err(format!(
+                "unknown stage `{other}`: expected render, calibrate, photometric, color or hdr"
+            ))
+        }
     })
 }
 

@@ -119,7 +119,14 @@ fn eight() -> u8 {
 
 impl Default for Sensor {
     fn default() -> Self {
-        Sensor { exposure: 1.0, full_well: full_well(), photon_noise: true, read_noise: 0.0, bits: 8, response: Response::Linear }
+        Sensor {
+            exposure: 1.0,
+            full_well: full_well(),
+            photon_noise: true,
+            read_noise: 0.0,
+            bits: 8,
+            response: Response::Linear,
+        }
     }
 }
 
@@ -193,7 +200,14 @@ mod tests {
     /// An absurd exposure saturates every code at once instead of looping in the sampler.
     #[test]
     fn huge_exposure_saturates_without_hanging() {
-        let s = Sensor { exposure: 1e300, full_well: 4e4, read_noise: 2.0, bits: 16, photon_noise: true, response: Response::Linear };
+        let s = Sensor {
+            exposure: 1e300,
+            full_well: 4e4,
+            read_noise: 2.0,
+            bits: 16,
+            photon_noise: true,
+            response: Response::Linear,
+        };
         let img = Image { width: 16, height: 16, channels: 3, data: vec![0.5; 768] };
         let t = std::time::Instant::now();
         let codes = s.expose(&img, 1);
@@ -207,7 +221,14 @@ mod tests {
     fn noise_statistics_and_clipping() {
         let mut img = Image::new(200, 100, 3);
         img.data.iter_mut().for_each(|v| *v = 0.5);
-        let s = Sensor { exposure: 1.0, full_well: 10_000.0, photon_noise: true, read_noise: 30.0, bits: 16, response: Response::Linear };
+        let s = Sensor {
+            exposure: 1.0,
+            full_well: 10_000.0,
+            photon_noise: true,
+            read_noise: 30.0,
+            bits: 16,
+            response: Response::Linear,
+        };
         let codes = s.expose(&img, 3);
         let n = codes.len() as f64;
         let mean = codes.iter().map(|&c| c as f64).sum::<f64>() / n;
@@ -230,7 +251,9 @@ mod tests {
     /// with the sRGB curve writes the codes the curve gives.
     #[test]
     fn responses_and_bit_depths() {
-        for r in [Response::Linear, Response::Gamma { gamma: 2.2 }, Response::Srgb, Response::Film { stops: 2.0 }] {
+        for r in
+            [Response::Linear, Response::Gamma { gamma: 2.2 }, Response::Srgb, Response::Film { stops: 2.0 }]
+        {
             assert!(r.apply(0.0).abs() < 1e-12 && (r.apply(1.0) - 1.0).abs() < 1e-12, "{r:?}");
             let ys: Vec<f64> = (0..=1000).map(|k| r.apply(k as f64 / 1000.0)).collect();
             assert!(ys.windows(2).all(|w| w[1] > w[0]), "{r:?} is not increasing");

@@ -115,8 +115,9 @@ struct BandRecipe<'a> {
 /// The chart's cell grid in the world, from the scene file's patch quads: its top-left
 /// corner and the steps of one cell along a row and down a column.
 fn chart_grid(scene_path: &std::path::Path) -> Result<(DVec3, DVec3, DVec3, DVec3), StageError> {
-    let text = std::fs::read_to_string(scene_path)
-        .map_err(|e| StageError::Render(render::Error::Io { path: scene_path.into(), message: e.to_string() }))?;
+    let text = std::fs::read_to_string(scene_path).map_err(|e| {
+        StageError::Render(render::Error::Io { path: scene_path.into(), message: e.to_string() })
+    })?;
     let file: render::scene::SceneFile = toml::from_str(&text).map_err(|e| {
         StageError::Render(render::Error::Parse { path: scene_path.into(), message: e.to_string() })
     })?;
@@ -129,7 +130,9 @@ fn chart_grid(scene_path: &std::path::Path) -> Result<(DVec3, DVec3, DVec3, DVec
             _ => None,
         })
     };
-    let (Some((c1, n)), Some((c2, _)), Some((c7, _))) = (centre("patch-01"), centre("patch-02"), centre("patch-07")) else {
+    let (Some((c1, n)), Some((c2, _)), Some((c7, _))) =
+        (centre("patch-01"), centre("patch-02"), centre("patch-07"))
+    else {
         return Err(StageError::Config(format!(
             "{}: expected quads with the materials patch-01, patch-02 and patch-07 (the chart's first patches across and down)",
             scene_path.display()
@@ -137,14 +140,21 @@ fn chart_grid(scene_path: &std::path::Path) -> Result<(DVec3, DVec3, DVec3, DVec
     };
     let (step_u, step_v) = (c2 - c1, c7 - c1);
     if step_u.length() == 0.0 || step_v.length() == 0.0 || n.length() == 0.0 {
-        return Err(StageError::Config(format!("{}: the patch quads do not form a grid", scene_path.display())));
+        return Err(StageError::Config(format!(
+            "{}: the patch quads do not form a grid",
+            scene_path.display()
+        )));
     }
     Ok((c1 - 0.5 * (step_u + step_v), step_u, step_v, n.normalize()))
 }
 
 pub fn synthesize(c: &Config, ctx: &Context) -> Result<(color::Input, Truth, Findings), StageError> {
     let cam = spectra::camera(&c.camera).ok_or_else(|| {
-        StageError::Config(format!("camera = \"{}\": expected one of {}", c.camera, spectra::CAMERAS.join(", ")))
+        StageError::Config(format!(
+            "camera = \"{}\": expected one of {}",
+            c.camera,
+            spectra::CAMERAS.join(", ")
+        ))
     })?;
     let ill = spectra::illuminant(&c.illuminant).ok_or_else(|| {
         StageError::Config(format!(
@@ -155,7 +165,10 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(color::Input, Truth, Fin
     })?;
     c.model.parse::<Model>().map_err(StageError::Config)?;
     if !["spectral", "published"].contains(&c.reference.as_str()) {
-        return Err(StageError::Config(format!("reference = \"{}\": expected spectral or published", c.reference)));
+        return Err(StageError::Config(format!(
+            "reference = \"{}\": expected spectral or published",
+            c.reference
+        )));
     }
     let scene_path = ctx.dir.join(&c.scene);
     let mut scene = render::load(&scene_path)?;
@@ -223,7 +236,9 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(color::Input, Truth, Fin
     let bar = render::progress_bar(bands as u64, &format!("{} wavelengths", ctx.case), ctx.progress);
     for b in 0..bands {
         let lambdas: Vec<usize> = (3 * b..(3 * b + 3).min(spectra::SAMPLES)).collect();
-        let pick = |s: &spectra::Spectrum| -> [f32; 3] { std::array::from_fn(|ch| lambdas.get(ch).map_or(0.0, |&l| s[l] as f32)) };
+        let pick = |s: &spectra::Spectrum| -> [f32; 3] {
+            std::array::from_fn(|ch| lambdas.get(ch).map_or(0.0, |&l| s[l] as f32))
+        };
         // E(λ) = π·S(λ)/norm: a white Lambertian facing the light has radiance S(λ)/norm.
         let irradiance = pick(&ill.map(|s| std::f64::consts::PI * s / norm));
         let patches: Vec<[f32; 3]> = chart.iter().map(|(_, r)| pick(r)).collect();
@@ -255,10 +270,20 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(color::Input, Truth, Fin
     }
     bar.finish_and_clear();
 
-    let radiance = Image { width: w as u32, height: h as u32, channels: 3, data: signal.iter().map(|&v| v as f32).collect() };
+    let radiance = Image {
+        width: w as u32,
+        height: h as u32,
+        channels: 3,
+        data: signal.iter().map(|&v| v as f32).collect(),
+    };
     let max = sensor.max_code() as f32;
     let codes = sensor.expose(&radiance, render::sampler::mix64(ctx.seed ^ 0xc0_10e5));
-    let exposed = Image { width: w as u32, height: h as u32, channels: 3, data: codes.iter().map(|&v| v as f32 / max).collect() };
+    let exposed = Image {
+        width: w as u32,
+        height: h as u32,
+        channels: 3,
+        data: codes.iter().map(|&v| v as f32 / max).collect(),
+    };
 
     // Corners of the cell grid in the image (OpenCV pixels).
     let t_cam_world = scene.t_world_cam.inverse();
@@ -271,7 +296,8 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(color::Input, Truth, Fin
         })?;
         corners[k] = [px.x, px.y];
     }
-    let samples = chart::sample(&exposed, corners, 1.0).map_err(|m| StageError::Config(format!("{}: {m}", c.scene)))?;
+    let samples =
+        chart::sample(&exposed, corners, 1.0).map_err(|m| StageError::Config(format!("{}: {m}", c.scene)))?;
 
     let (reference, white) = if c.reference == "spectral" {
         (chart.iter().map(|(_, r)| spectra::xyz(r, &ill)).collect::<Vec<_>>(), spectra::white(&ill))
@@ -284,7 +310,12 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(color::Input, Truth, Fin
             .iter()
             .zip(&reference)
             .zip(&chart)
-            .map(|((s, xyz), (name, _))| PatchInput { name: name.clone(), rgb: s.rgb, reference_xyz: *xyz, flag: s.flag })
+            .map(|((s, xyz), (name, _))| PatchInput {
+                name: name.clone(),
+                rgb: s.rgb,
+                reference_xyz: *xyz,
+                flag: s.flag,
+            })
             .collect(),
         white,
     };
@@ -295,8 +326,10 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(color::Input, Truth, Fin
     let fw = sensor.full_well;
     let q = 1.0 / sensor.max_code() as f64;
     let shot = if sensor.photon_noise { 1.0 } else { 0.0 };
-    let pixel_variance =
-        truth_rgb.iter().map(|t| t.map(|v| (shot * v * fw + sensor.read_noise.powi(2)) / (fw * fw) + q * q / 12.0)).collect();
+    let pixel_variance = truth_rgb
+        .iter()
+        .map(|t| t.map(|v| (shot * v * fw + sensor.read_noise.powi(2)) / (fw * fw) + q * q / 12.0))
+        .collect();
     let pixels = samples.iter().map(|s| s.pixels).collect();
     let corner_text: Vec<String> = corners.iter().map(|p| format!("{:.3},{:.3}", p[0], p[1])).collect();
     let mut notes = vec![format!(
@@ -319,10 +352,17 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(color::Input, Truth, Fin
     let mut files = Vec::new();
     if c.save_image {
         let name = format!("{}.exr", crate::pipeline::report::file_stem(ctx.case));
-        notes.push(format!("The exposed chart is {name}: `lumen color fit --image {name} --corners {}`.", corner_text.join(",")));
+        notes.push(format!(
+            "The exposed chart is {name}: `lumen color fit --image {name} --corners {}`.",
+            corner_text.join(",")
+        ));
         files.push((std::path::PathBuf::from(name), Kept::Image(exposed)));
     }
-    Ok((input, Truth { rgb: truth_rgb, pixel_variance, pixels }, Findings { notes, files, ..Default::default() }))
+    Ok((
+        input,
+        Truth { rgb: truth_rgb, pixel_variance, pixels },
+        Findings { notes, files, ..Default::default() },
+    ))
 }
 
 pub fn solve(c: &Config, input: &color::Input) -> Result<color::Output, StageError> {
@@ -361,7 +401,9 @@ pub fn validate(_c: &Config, out: &color::Output, truth: &Truth) -> Findings {
         .zip(truth.rgb.iter().zip(&truth.pixel_variance).zip(&truth.pixels))
         .filter(|(p, _)| p.used)
         .flat_map(|(p, ((t, v), &n))| {
-            (0..3).map(move |ch| (p.rgb[ch] - t[ch]).powi(2) * TRIMMED_MEAN_EFFICIENCY * n as f64 / v[ch].max(1e-300))
+            (0..3).map(move |ch| {
+                (p.rgb[ch] - t[ch]).powi(2) * TRIMMED_MEAN_EFFICIENCY * n as f64 / v[ch].max(1e-300)
+            })
         })
         .collect();
     let chi2 = (!z2.is_empty()).then(|| z2.iter().sum::<f64>() / z2.len() as f64);

@@ -196,14 +196,20 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(hdr::Input, Truth, Findi
         c.full_well,
         c.read_noise
     )];
-    Ok((input, Truth { radiance, response: c.response, max_code, occurs, well_exposed, luminance_range }, Findings { notes, ..Default::default() }))
+    Ok((
+        input,
+        Truth { radiance, response: c.response, max_code, occurs, well_exposed, luminance_range },
+        Findings { notes, ..Default::default() },
+    ))
 }
 
 fn method(c: &Config) -> Result<(Method, Weights), StageError> {
     let m = match c.method.as_str() {
         "debevec" => Method::Debevec { lambda: c.lambda, samples_per_value: c.samples_per_value.max(1) },
         "robertson" => Method::Robertson { iterations: 200 },
-        other => return Err(StageError::Config(format!("method = \"{other}\": expected debevec or robertson"))),
+        other => {
+            return Err(StageError::Config(format!("method = \"{other}\": expected debevec or robertson")))
+        }
     };
     let w = match c.weights.as_str() {
         "hat" => Weights::Hat,
@@ -229,7 +235,9 @@ pub fn validate(_c: &Config, out: &hdr::Output, truth: &Truth) -> Findings {
     let bin = (levels / hdr::response::MAX_FIT_LEVELS).max(1) as f64;
     for c in 0..3 {
         let zs: Vec<usize> = (1..levels - 1)
-            .filter(|&z| truth.occurs[c][z] && true_g(z as f64 + 0.5 * bin) - true_g(z as f64 - 0.5 * bin) < 0.2)
+            .filter(|&z| {
+                truth.occurs[c][z] && true_g(z as f64 + 0.5 * bin) - true_g(z as f64 - 0.5 * bin) < 0.2
+            })
             .collect();
         if zs.is_empty() {
             continue;
@@ -263,13 +271,24 @@ pub fn validate(_c: &Config, out: &hdr::Output, truth: &Truth) -> Findings {
     let none = "no pixel well exposed in any frame";
     m.push(Metric::maybe("radiance_median_rel_err", pick(0.5), "", Better::Lower, none));
     m.push(Metric::maybe("radiance_p95_rel_err", pick(0.95), "", Better::Lower, none));
-    m.push(Metric::maybe("radiance_median_err_stops", pick(0.5).map(|e| (1.0 + e).log2()), "stops", Better::Lower, none));
+    m.push(Metric::maybe(
+        "radiance_median_err_stops",
+        pick(0.5).map(|e| (1.0 + e).log2()),
+        "stops",
+        Better::Lower,
+        none,
+    ));
     let s = &out.summary;
     m.push(Metric::new("saturated_pixels", s.saturated_pixels as f64, "pixels", Better::Lower));
     m.push(Metric::new("dark_pixels", s.dark_pixels as f64, "pixels", Better::Lower));
     let range = truth.luminance_range.map(|(lo, hi)| hi / lo);
     m.push(Metric::maybe("true_dynamic_range", range, "×", Better::Higher, "no light"));
-    m.push(Metric::new("merge_megapixel_frames_per_s", s.merge_megapixel_frames_per_s, "1/s", Better::Higher));
+    m.push(Metric::new(
+        "merge_megapixel_frames_per_s",
+        s.merge_megapixel_frames_per_s,
+        "1/s",
+        Better::Higher,
+    ));
     m.push(Metric::new("response_s", s.response_s, "s", Better::Lower));
     f
 }
