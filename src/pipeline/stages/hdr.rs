@@ -233,18 +233,18 @@ pub fn validate(_c: &Config, out: &hdr::Output, truth: &Truth) -> Findings {
     let mut worst: Option<f64> = None;
     // The fit's resolution: above 1024 levels it works on bins (`hdr::response`).
     let bin = (levels / hdr::response::MAX_FIT_LEVELS).max(1) as f64;
+    // The truth per value, and whether its bin is narrow enough, once for every channel.
+    let g_true: Vec<f64> = (0..levels).map(|z| true_g(z as f64)).collect();
+    let narrow: Vec<bool> =
+        (0..levels).map(|z| true_g(z as f64 + 0.5 * bin) - true_g(z as f64 - 0.5 * bin) < 0.2).collect();
     for c in 0..3 {
-        let zs: Vec<usize> = (1..levels - 1)
-            .filter(|&z| {
-                truth.occurs[c][z] && true_g(z as f64 + 0.5 * bin) - true_g(z as f64 - 0.5 * bin) < 0.2
-            })
-            .collect();
+        let zs: Vec<usize> = (1..levels - 1).filter(|&z| truth.occurs[c][z] && narrow[z]).collect();
         if zs.is_empty() {
             continue;
         }
         let g = &out.response.g[c];
-        let offset = zs.iter().map(|&z| g[z] - true_g(z as f64)).sum::<f64>() / zs.len() as f64;
-        let w = zs.iter().map(|&z| (g[z] - true_g(z as f64) - offset).abs()).fold(0.0, f64::max);
+        let offset = zs.iter().map(|&z| g[z] - g_true[z]).sum::<f64>() / zs.len() as f64;
+        let w = zs.iter().map(|&z| (g[z] - g_true[z] - offset).abs()).fold(0.0, f64::max);
         worst = Some(worst.map_or(w, |v: f64| v.max(w)));
     }
     let m = &mut f.metrics;
