@@ -6,7 +6,7 @@ mod common;
 
 use common::lumen;
 
-use lumen::hdr::{self, Frame, Input, Method, Weights};
+use lumen::hdr::{self, response::Smoothness, Frame, Input, Method, Weights};
 use std::path::Path;
 
 /// A uniform number in [0, 1) from a key (splitmix64).
@@ -73,8 +73,11 @@ fn merge_errors(truth: &[f64], input: &Input, out: &hdr::Output) -> (f64, f64) {
 }
 
 /// A noise-free 8-bit stack (eight exposures with unequal ratios, 1 s to 10⁻⁴ s, over a 10⁵
-/// range through a shouldered response): Debevec's fit with `lumen hdr`'s defaults recovers
-/// g within 0.02 in ln units up to an offset over the values that occur, and the merge with
+/// range through a shouldered response): Debevec's fit with the paper's even smoothness at
+/// λ = 10 recovers g within 0.02 in ln units up to an offset over the values that occur (the
+/// unequal ratios leave nothing free and there is no noise, so a weak penalty suffices; the
+/// logit default, set for equal ratios with noise, measured 0.021 at this steep shoulder's
+/// brightest values, so only its merge is asserted), and the merge with
 /// noise-optimal weights (here the quantisation's variance alone) is within 1 % (median) and
 /// 5 % (95th percentile) of the true radiance. Robertson's merge meets the same bounds; its
 /// curve does not meet 0.02 per value (0.05–0.06 measured: values few pixels show get noisy
@@ -84,9 +87,11 @@ fn merge_errors(truth: &[f64], input: &Input, out: &hdr::Output) -> (f64, f64) {
 fn synthetic_stack_recovers_response_and_radiance() {
     let times: Vec<f64> = [1.0, 0.3, 0.11, 0.025, 0.009, 0.002, 0.0007, 0.0001].to_vec();
     let (truth, input) = synthetic(1e5, &times);
-    for method in
-        [Method::Debevec { lambda: 10.0, samples_per_value: 1 }, Method::Robertson { iterations: 200 }]
-    {
+    for method in [
+        Method::Debevec { lambda: 10.0, samples_per_value: 1, smoothness: Smoothness::Even },
+        hdr::Config::default().method,
+        Method::Robertson { iterations: 200 },
+    ] {
         let name = format!("{method:?}");
         let config = hdr::Config {
             method: method.clone(),
@@ -127,7 +132,7 @@ fn synthetic_stack_recovers_response_and_radiance() {
             let offset = zs.iter().map(|&z| g[z as usize] - truth_g(z as f64)).sum::<f64>() / zs.len() as f64;
             let worst =
                 zs.iter().map(|&z| (g[z as usize] - truth_g(z as f64) - offset).abs()).fold(0.0, f64::max);
-            if matches!(method, Method::Debevec { .. }) {
+            if matches!(method, Method::Debevec { smoothness: Smoothness::Even, .. }) {
                 assert!(worst < 0.02, "{name}: channel {c}: worst {worst}");
             }
         }
@@ -351,6 +356,7 @@ fn cli_inputs_and_refusals() {
         (vec!["--images", &a, &b, "--times", "1", "2", "--weights", "noise"], "--full-well"),
         (vec!["--images", &a, &b, "--times", "1", "2", "--weights", "tent"], "hat or noise"),
         (vec!["--images", &a, &b, "--times", "1", "2", "--lambda", "nan"], "--lambda"),
+        (vec!["--images", &a, &b, "--times", "1", "2", "--smoothness", "odd"], "--smoothness \"odd\""),
         (vec!["--images", &a, &b, "--times", "1", "2", "--exclude-color", "0,0"], "--exclude-color"),
     ];
     for (args, want) in cases {

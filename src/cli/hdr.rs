@@ -21,13 +21,18 @@ pub struct HdrArgs {
     /// debevec, robertson, or a response.csv to use as it is.
     #[arg(long, default_value = "debevec")]
     pub response: String,
-    /// Debevec's smoothness weight λ.
-    #[arg(long, default_value_t = 10.0)]
+    /// Debevec's smoothness weight λ (10⁴ suits the usual bracket of equal exposure
+    /// ratios; a stack with unequal ratios and little noise fits better with 10 to 100).
+    #[arg(long, default_value_t = lumen::hdr::DEFAULT_LAMBDA)]
     pub lambda: f64,
     /// Debevec's sample pixels per pixel value (chosen to cover every value, nearest the
     /// image centre first).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = lumen::hdr::DEFAULT_SAMPLES_PER_VALUE)]
     pub samples_per_value: usize,
+    /// Debevec's smoothness term: logit (g″ in ln(z/(N − z)), nearly straight for power
+    /// laws, toes and shoulders) or even (g″ in z, as the paper and OpenCV).
+    #[arg(long, default_value = "logit")]
+    pub smoothness: String,
     /// hat (Debevec & Malik) or noise (inverse variance under photon, read and
     /// quantisation noise; needs --full-well).
     #[arg(long, default_value = "hat")]
@@ -167,6 +172,8 @@ pub fn run(a: &HdrArgs) -> Result<()> {
         }
         (other, _) => bail!("--weights {other}: expected hat or noise"),
     };
+    let smoothness: response::Smoothness =
+        a.smoothness.parse().map_err(|e: String| anyhow::anyhow!("--{e}"))?;
     if !(a.lambda.is_finite() && a.lambda >= 0.0) {
         bail!("--lambda {}: expected a non-negative number", a.lambda);
     }
@@ -214,7 +221,7 @@ pub fn run(a: &HdrArgs) -> Result<()> {
         (0..n).map(|i| frames.iter().all(|f| f.codes[3 * i..3 * i + 3] != c)).collect::<Vec<bool>>()
     });
     let method = match a.response.as_str() {
-        "debevec" => Method::Debevec { lambda: a.lambda, samples_per_value: a.samples_per_value },
+        "debevec" => Method::Debevec { lambda: a.lambda, samples_per_value: a.samples_per_value, smoothness },
         "robertson" => Method::Robertson { iterations: 50 },
         file => {
             let text = std::fs::read_to_string(file)

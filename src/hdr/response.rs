@@ -7,8 +7,22 @@
 //!     Σᵢⱼ {w(Zᵢⱼ)·[g(Zᵢⱼ) − ln Eᵢ − ln Δtⱼ]}² + λ Σ_z [w(z)·g″(z)]²,  g(z_mid) = 0,
 //!
 //!   with the hat weight w(z) = min(z − z_min, z_max − z) that is 0 at both ends (so clipped
-//!   and black values carry no data), solved by its normal equations (Cholesky). Samples are
-//!   chosen to cover the whole range of values: for every value z of the middle frame, the
+//!   and black values carry no data). Two departures from the paper:
+//!   - g″ is taken in the logit of the value, u = ln(z/(N − z)) for N levels, not in z
+//!     (`Smoothness::Logit`, the default; `Even` is the paper's).
+//!     Curves are nearly straight in u: a power law or an sRGB toe is g ≈ γ·ln z at the dark
+//!     end, where its second difference in z is −γ/z² and an even-z penalty flattens it;
+//!     a shoulder is g ≈ −(N − z)/(N·f′) at the bright end, whose curvature in u vanishes.
+//!     A strong λ then costs the true curve little while it suppresses the ripples periodic
+//!     in ln exposure that equal exposure ratios leave free (Grossberg & Nayar 2003). At the
+//!     middle value the penalty weighs as the paper's even second difference. Where the
+//!     exposure ratios differ and noise is low, nothing is left free and a weak λ suffices:
+//!     there the paper's even penalty is as good or better near a steep shoulder.
+//!   - The normal equations are reduced to g alone: each ln Eᵢ enters only its own rows, so
+//!     its block is diagonal and its Schur complement leaves a dense system of one row per
+//!     value (Cholesky), whatever the number of samples.
+//!
+//!   Samples are chosen to cover the whole range of values: for every value z of the middle frame, the
 //!   pixel nearest the image's centre of those that show z there, then pixels of the other
 //!   frames for values the middle one lacks, never random pixels; only pixels whose values
 //!   grow with the exposure time are candidates.
@@ -172,72 +186,132 @@ pub fn choose_samples(
     chosen
 }
 
+/// The variable Debevec's g″ is taken in (module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Smoothness {
+    /// In the logit of the value, u = ln(z/(N − z)).
+    #[default]
+    Logit,
+    /// In the value itself, as in the paper (and OpenCV).
+    Even,
+}
+
+impl std::str::FromStr for Smoothness {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Smoothness, String> {
+        match s {
+            "logit" => Ok(Smoothness::Logit),
+            "even" => Ok(Smoothness::Even),
+            other => Err(format!("smoothness \"{other}\": expected logit or even")),
+        }
+    }
+}
+
 /// Debevec & Malik's fit of one channel over the sample pixels (module docs).
-pub fn debevec(ch: &Channel, samples: &[usize], lambda: f64) -> Result<Vec<f64>, String> {
+pub fn debevec(
+    ch: &Channel,
+    samples: &[usize],
+    lambda: f64,
+    smoothness: Smoothness,
+) -> Result<Vec<f64>, String> {
     let (bins, shift) = binning(ch.levels);
-    let ns = samples.len();
-    if ns == 0 {
+    if samples.is_empty() {
         return Err("no sample pixel with a value strictly between black and saturation".into());
     }
-    let unknowns = bins + ns;
-    let mut ata = DMatrix::<f64>::zeros(unknowns, unknowns);
-    let mut atb = DVector::<f64>::zeros(unknowns);
-    // Rows with two entries (+w at g(z), −w at ln Eᵢ) and right side w·ln Δt.
+    // The normal equations [[A, B], [Bᵀ, D]]·[g; ln E] = [r_g; r_E], with D diagonal (each
+    // ln Eᵢ enters only its own rows), reduced to the Schur complement over g:
+    // (A − B D⁻¹ Bᵀ)·g = r_g − B D⁻¹ r_E, a bins × bins system whatever the sample count.
+    let mut s_mat = DMatrix::<f64>::zeros(bins, bins);
+    let mut r = DVector::<f64>::zeros(bins);
     let mut data_rows = 0usize;
-    for (s, &i) in samples.iter().enumerate() {
+    // One sample's rows, merged per value: (z, Σ w², Σ w² ln Δt).
+    let mut rows: Vec<(usize, f64, f64)> = Vec::with_capacity(ch.codes.len());
+    for &i in samples {
+        rows.clear();
         for (j, frame) in ch.codes.iter().enumerate() {
             let z = (frame[i] as usize) >> shift;
-            let w = hat(z, bins);
-            if w == 0.0 {
+            let w2 = hat(z, bins).powi(2);
+            if w2 == 0.0 {
                 continue;
             }
             data_rows += 1;
-            let (a, b) = (z, bins + s);
-            let rhs = w * ch.times[j].ln();
-            ata[(a, a)] += w * w;
-            ata[(b, b)] += w * w;
-            ata[(a, b)] -= w * w;
-            ata[(b, a)] -= w * w;
-            atb[a] += w * rhs;
-            atb[b] -= w * rhs;
+            let lt = ch.times[j].ln();
+            match rows.iter_mut().find(|e| e.0 == z) {
+                Some(e) => {
+                    e.1 += w2;
+                    e.2 += w2 * lt;
+                }
+                None => rows.push((z, w2, w2 * lt)),
+            }
+        }
+        // D_ii = Σ w², r_E = −Σ w² ln Δt; B[z, i] = −Σ_{j: Zᵢⱼ = z} w².
+        let d: f64 = rows.iter().map(|e| e.1).sum();
+        if d == 0.0 {
+            continue;
+        }
+        let r_e: f64 = -rows.iter().map(|e| e.2).sum::<f64>();
+        for &(z, w2, w2lt) in &rows {
+            s_mat[(z, z)] += w2;
+            r[z] += w2lt;
+            // −B D⁻¹ r_E and −B D⁻¹ Bᵀ with B = −w².
+            r[z] += w2 * r_e / d;
+            for &(z2, w2b, _) in &rows {
+                s_mat[(z, z2)] -= w2 * w2b / d;
+            }
         }
     }
     if data_rows == 0 {
         return Err("every sample is black or saturated in every frame".into());
     }
-    // Smoothness: λ·w(z)·(g(z−1) − 2g(z) + g(z+1)), scaled to the bins' count so λ means the
-    // same at any bit depth, and to the data rows per value so it means the same at any
-    // number of samples (Debevec & Malik's λ was set for about 50 samples of 11 frames).
+    // Smoothness: λ·w(z)·d²g/du², u the logit of the value or the value (module docs), scaled to the data
+    // rows per value so λ means the same at any number of samples (Debevec & Malik's λ was
+    // set for about 50 samples of 11 frames) and at any bit depth.
     let per_value = data_rows as f64 / bins as f64 / (50.0 * 11.0 / 256.0);
     let scale = (bins as f64 / 256.0).powi(2) * per_value.sqrt();
+    let width = (1usize << shift) as f64;
+    let mid = bins / 2;
+    let top = bins as f64 * width;
+    let u = |z: usize| {
+        let c = ((z as f64 + 0.5) * width - 0.5).max(0.5);
+        match smoothness {
+            Smoothness::Logit => (c / (top - c)).ln(),
+            Smoothness::Even => c,
+        }
+    };
+    let du_mid = u(mid + 1) - u(mid);
     for z in 1..bins - 1 {
-        let w = lambda.sqrt() * hat(z, bins) * scale;
+        let (h0, h1) = (u(z) - u(z - 1), u(z + 1) - u(z));
+        // The second divided difference on the uneven grid, times √(cell width) so that the
+        // sum of squares is an integral over u, in units of an even grid of step du_mid (at
+        // the middle value λ weighs as in Debevec & Malik's even second difference).
+        let cell = 0.5 * (h0 + h1);
+        let k = lambda.sqrt() * hat(z, bins) * scale * du_mid.powf(1.5) * cell.sqrt();
+        let coef = [k * 2.0 / (h0 * (h0 + h1)), -k * 2.0 / (h0 * h1), k * 2.0 / (h1 * (h0 + h1))];
         let idx = [z - 1, z, z + 1];
-        let coef = [w, -2.0 * w, w];
         for (p, &ip) in idx.iter().enumerate() {
             for (q, &iq) in idx.iter().enumerate() {
-                ata[(ip, iq)] += coef[p] * coef[q];
+                s_mat[(ip, iq)] += coef[p] * coef[q];
             }
         }
     }
     // g(z_mid) = 0, weighted like the strongest data row.
-    let mid = bins / 2;
     let anchor = hat(mid, bins);
-    ata[(mid, mid)] += anchor * anchor;
+    s_mat[(mid, mid)] += anchor * anchor;
     // Values no sample shows carry no data row; the smoothness rows tie them to their
     // neighbours, and a tiny ridge keeps an unseen end from being singular.
-    for k in 0..unknowns {
-        ata[(k, k)] += 1e-12 * anchor * anchor;
+    for k in 0..bins {
+        s_mat[(k, k)] += 1e-12 * anchor * anchor;
     }
-    let sol = ata
+    let sol = s_mat
         .clone()
         .cholesky()
-        .map(|c| c.solve(&atb))
-        .or_else(|| ata.lu().solve(&atb))
+        .map(|c| c.solve(&r))
+        .or_else(|| s_mat.lu().solve(&r))
         .ok_or("the response's normal equations are singular")?;
     // Values the samples show carry data; the others only smoothness (filled: module docs).
     let seen: Vec<bool> = observed(ch, shift, bins, samples.iter().copied());
-    let g: Vec<f64> = sol.iter().take(bins).copied().collect();
+    let g: Vec<f64> = sol.iter().copied().collect();
     if g.iter().any(|v| !v.is_finite()) {
         return Err("the response's least-squares solution is not finite".into());
     }

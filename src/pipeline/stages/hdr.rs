@@ -12,11 +12,18 @@
 //!
 //! Metrics:
 //! - `response_err_ln`: the largest |g − g_true − offset| over the values that occur in the
-//!   stack (offset: the mean difference), channels included, among values whose quantisation
-//!   bin (the fit's: 1 code up to 1024 levels, 2^(bits−10) codes above) spans less than 0.2 in
-//!   ln exposure (below, one bin holds more exposure than a 0.02 bound can resolve);
+//!   stack (offset: the mean difference), channels included, among the values a single
+//!   observation pins down: those whose noise in ln exposure, σ = √(σ_q² + σ_e²), is below
+//!   0.1, with σ_q = (bin width in ln exposure)/√12 for the fit's bins (1 code up to 1024
+//!   levels, 2^(bits−10) codes above) and σ_e = √(e + σ_r²)/e for e electrons of photon noise
+//!   and σ_r of read noise. Below that a fit regresses towards the scene's own distribution
+//!   of exposures (an error of order σ² times the slope of its log density, Fuller 1987's
+//!   errors in variables) rather than towards f⁻¹; the values in the fit's end bins (weight
+//!   0: black and saturated) are left out too. `response_err_ln_all` is the same over every
+//!   value that occurs, for the record;
 //! - `radiance_median_rel_err`, `radiance_p95_rel_err`: against the true radiance over the
-//!   pixel channels well exposed (10 % to 90 % of full scale) in at least one frame, after one
+//!   pixel channels well exposed (a mean signal of 10 % to 90 % of the full well) in at least
+//!   one frame, after one
 //!   scale per channel (the median ratio); `radiance_median_err_stops` the same in stops;
 //! - `saturated_pixels`, `dark_pixels` (masked as bounds), `true_dynamic_range` (brightest
 //!   over darkest positive true luminance), `merge_megapixel_frames_per_s`.
@@ -57,11 +64,15 @@ pub struct Config {
     /// `debevec` or `robertson` (default debevec).
     #[serde(default = "default_method")]
     pub method: String,
-    /// Debevec's λ (default 10) and sample pixels per value (default 1).
+    /// Debevec's λ and sample pixels per value (defaults: `hdr::DEFAULT_LAMBDA`,
+    /// `hdr::DEFAULT_SAMPLES_PER_VALUE`, as `lumen hdr`'s).
     #[serde(default = "default_lambda")]
     pub lambda: f64,
-    #[serde(default = "one_usize")]
+    #[serde(default = "default_samples_per_value")]
     pub samples_per_value: usize,
+    /// Debevec's smoothness term in `logit` of the value (default) or `even` in the value.
+    #[serde(default)]
+    pub smoothness: hdr::response::Smoothness,
     /// `hat` or `noise` (default noise: the sensor's own gain and read noise).
     #[serde(default = "default_weights")]
     pub weights: String,
@@ -78,8 +89,8 @@ fn default_stop_step() -> f64 {
 fn one() -> f64 {
     1.0
 }
-fn one_usize() -> usize {
-    1
+fn default_samples_per_value() -> usize {
+    hdr::DEFAULT_SAMPLES_PER_VALUE
 }
 fn default_response() -> Response {
     Response::Gamma { gamma: 2.2 }
@@ -97,7 +108,7 @@ fn default_method() -> String {
     "debevec".into()
 }
 fn default_lambda() -> f64 {
-    10.0
+    hdr::DEFAULT_LAMBDA
 }
 fn default_weights() -> String {
     "noise".into()
@@ -107,6 +118,9 @@ pub struct Truth {
     radiance: Image,
     response: Response,
     max_code: f64,
+    /// The sensor's electrons at full scale and read noise in electrons.
+    full_well: f64,
+    read_noise: f64,
     /// Per channel: which code values occur in the stack.
     occurs: Vec<Vec<bool>>,
     /// Per channel and pixel: some frame shows it well exposed (10 % to 90 % of full scale).
@@ -163,13 +177,20 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(hdr::Input, Truth, Findi
         .collect();
     let levels = sensor.max_code() as usize + 1;
     let n = (radiance.width * radiance.height) as usize;
-    let (lo_code, hi_code) = ((0.1 * max_code) as u16, (0.9 * max_code) as u16);
     let mut occurs = vec![vec![false; levels]; 3];
-    let mut well_exposed = vec![vec![false; n]; 3];
     for f in &frames {
         for (k, &z) in f.codes.iter().enumerate() {
             occurs[k % 3][z as usize] = true;
-            if (lo_code..=hi_code).contains(&z) {
+        }
+    }
+    // Well exposed: a frame's mean signal is 10 % to 90 % of full scale (of the sensor's
+    // electrons, not of its code values: a gamma curve puts 10 % of the codes at 0.6 % of full
+    // scale, where photon noise alone is 9 %).
+    let mut well_exposed = vec![vec![false; n]; 3];
+    for f in &frames {
+        for (k, &l) in radiance.data.iter().enumerate() {
+            let x = l as f64 * c.exposure * f.time_s;
+            if (0.1..=0.9).contains(&x) {
                 well_exposed[k % 3][k / 3] = true;
             }
         }
@@ -198,14 +219,27 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(hdr::Input, Truth, Findi
     )];
     Ok((
         input,
-        Truth { radiance, response: c.response, max_code, occurs, well_exposed, luminance_range },
+        Truth {
+            radiance,
+            response: c.response,
+            max_code,
+            full_well: c.full_well,
+            read_noise: c.read_noise,
+            occurs,
+            well_exposed,
+            luminance_range,
+        },
         Findings { notes, ..Default::default() },
     ))
 }
 
 fn method(c: &Config) -> Result<(Method, Weights), StageError> {
     let m = match c.method.as_str() {
-        "debevec" => Method::Debevec { lambda: c.lambda, samples_per_value: c.samples_per_value.max(1) },
+        "debevec" => Method::Debevec {
+            lambda: c.lambda,
+            samples_per_value: c.samples_per_value.max(1),
+            smoothness: c.smoothness,
+        },
         "robertson" => Method::Robertson { iterations: 200 },
         other => {
             return Err(StageError::Config(format!("method = \"{other}\": expected debevec or robertson")))
@@ -228,27 +262,41 @@ pub fn solve(c: &Config, input: &hdr::Input) -> Result<hdr::Output, StageError> 
 pub fn validate(_c: &Config, out: &hdr::Output, truth: &Truth) -> Findings {
     let mut f = Findings::default();
     let levels = out.response.levels;
-    // The response against the truth, over values that occur with a bin narrower than 0.2.
+    // The response against the truth, over the values a single observation pins down
+    // (module docs), and over every value that occurs.
     let true_g = |z: f64| truth.response.inverse((z / truth.max_code).clamp(0.0, 1.0)).max(1e-300).ln();
-    let mut worst: Option<f64> = None;
     // The fit's resolution: above 1024 levels it works on bins (`hdr::response`).
-    let bin = (levels / hdr::response::MAX_FIT_LEVELS).max(1) as f64;
-    // The truth per value, and whether its bin is narrow enough, once for every channel.
+    let bin = (levels / hdr::response::MAX_FIT_LEVELS).max(1);
+    // The truth per value, and whether it is pinned down, once for every channel.
     let g_true: Vec<f64> = (0..levels).map(|z| true_g(z as f64)).collect();
-    let narrow: Vec<bool> =
-        (0..levels).map(|z| true_g(z as f64 + 0.5 * bin) - true_g(z as f64 - 0.5 * bin) < 0.2).collect();
-    for c in 0..3 {
-        let zs: Vec<usize> = (1..levels - 1).filter(|&z| truth.occurs[c][z] && narrow[z]).collect();
-        if zs.is_empty() {
-            continue;
+    let pinned: Vec<bool> = (0..levels)
+        .map(|z| {
+            let half = 0.5 * bin as f64;
+            let sigma_q = (true_g(z as f64 + half) - true_g(z as f64 - half)) / 12f64.sqrt();
+            let e = g_true[z].exp() * truth.full_well;
+            let sigma_e = (e + truth.read_noise.powi(2)).sqrt() / e;
+            z >= bin && z + bin < levels && (sigma_q.powi(2) + sigma_e.powi(2)).sqrt() < 0.1
+        })
+        .collect();
+    let worst_over = |keep: &dyn Fn(usize) -> bool| {
+        let mut worst: Option<f64> = None;
+        for c in 0..3 {
+            let zs: Vec<usize> = (1..levels - 1).filter(|&z| truth.occurs[c][z] && keep(z)).collect();
+            if zs.is_empty() {
+                continue;
+            }
+            let g = &out.response.g[c];
+            let offset = zs.iter().map(|&z| g[z] - g_true[z]).sum::<f64>() / zs.len() as f64;
+            let w = zs.iter().map(|&z| (g[z] - g_true[z] - offset).abs()).fold(0.0, f64::max);
+            worst = Some(worst.map_or(w, |v: f64| v.max(w)));
         }
-        let g = &out.response.g[c];
-        let offset = zs.iter().map(|&z| g[z] - g_true[z]).sum::<f64>() / zs.len() as f64;
-        let w = zs.iter().map(|&z| (g[z] - g_true[z] - offset).abs()).fold(0.0, f64::max);
-        worst = Some(worst.map_or(w, |v: f64| v.max(w)));
-    }
+        worst
+    };
+    let worst = worst_over(&|z| pinned[z]);
+    let worst_all = worst_over(&|_| true);
     let m = &mut f.metrics;
     m.push(Metric::maybe("response_err_ln", worst, "ln", Better::Lower, "no value inside the range occurs"));
+    m.push(Metric::maybe("response_err_ln_all", worst_all, "ln", Better::Lower, "no value occurs"));
     // The radiance against the truth.
     let n = out.mask.len();
     let mut errs = Vec::new();
