@@ -219,7 +219,7 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
 }
 
 fn channel(codes: &[u16], c: usize) -> Vec<u16> {
-    codes.iter().skip(c).step_by(3).copied().collect()
+    codes.chunks_exact(3).map(|p| p[c]).collect()
 }
 
 fn check(input: &Input) -> Result<(), Error> {

@@ -124,29 +124,23 @@ pub fn choose_samples(
     // non-decreasing in time (to one bin) and inside the range in two frames are sampled.
     let mut by_time: Vec<usize> = (0..frames).collect();
     by_time.sort_by(|&a, &b| ch.times[a].total_cmp(&ch.times[b]));
-    let usable: Vec<bool> = (0..n)
-        .map(|i| {
-            if !valid[i] {
-                return false;
-            }
-            let (mut previous, mut inside) = (0usize, 0usize);
-            for &j in &by_time {
-                let z = (ch.codes[j][i] as usize) >> shift;
-                if z + 1 < previous {
-                    return false;
-                }
-                previous = z;
-                inside += usize::from(z > 0 && z + 1 < bins);
-            }
-            inside >= 2
-        })
-        .collect();
+    // Frame by frame in time order (each a sequential pass), per pixel: the last bin, how
+    // many frames show it inside the range, and whether it has grown so far.
+    let mut previous = vec![0u16; n];
+    let mut inside = vec![0u8; n];
+    let mut usable = valid.to_vec();
+    for &j in &by_time {
+        for (i, &code) in ch.codes[j].iter().enumerate() {
+            let z = code >> shift;
+            usable[i] &= z as usize + 1 >= previous[i] as usize;
+            previous[i] = z;
+            inside[i] = inside[i].saturating_add(u8::from(z > 0 && (z as usize) + 1 < bins));
+        }
+    }
+    for (u, &k) in usable.iter_mut().zip(&inside) {
+        *u &= k >= 2;
+    }
     // Nearest the centre first: squared distance, doubled to stay an integer, then index.
-    let key = |i: usize| {
-        let (dx, dy) =
-            (2 * (i % width) as i64 - (width as i64 - 1), 2 * (i / width) as i64 - (height as i64 - 1));
-        (dx * dx + dy * dy, i)
-    };
     let mut frame_order: Vec<usize> = (0..frames).collect();
     let mid = frames / 2;
     frame_order.sort_by_key(|&j| (j as i64 - mid as i64).abs());
@@ -155,23 +149,40 @@ pub fn choose_samples(
     let mut chosen = Vec::new();
     for &j in &frame_order {
         // Per value, the nearest pixels still wanted, in one pass over the frame in memory
-        // order.
+        // order; `worst` caches each full list's farthest key, so most pixels cost one
+        // comparison.
         let mut best: Vec<Vec<((i64, usize), usize)>> = vec![Vec::new(); bins];
-        for i in 0..n {
-            if !usable[i] || taken[i] {
-                continue;
-            }
-            let b = (ch.codes[j][i] as usize) >> shift;
-            let want = per_value.saturating_sub(count[b]);
-            if b == 0 || b + 1 >= bins || want == 0 {
-                continue;
-            }
-            let k = key(i);
-            let list = &mut best[b];
-            if list.len() < want {
-                list.push((k, i));
-            } else if let Some(worst) = list.iter_mut().max_by_key(|e| e.0).filter(|e| k < e.0) {
-                *worst = (k, i);
+        let mut worst = vec![(i64::MAX, usize::MAX); bins];
+        let codes = &ch.codes[j];
+        // A frame showing no value still wanted needs no pass.
+        let mut shows = vec![false; bins];
+        codes.iter().for_each(|&z| shows[(z as usize) >> shift] = true);
+        if !(1..bins - 1).any(|b| shows[b] && count[b] < per_value) {
+            continue;
+        }
+        for y in 0..height {
+            let dy = 2 * y as i64 - (height as i64 - 1);
+            for x in 0..width {
+                let i = y * width + x;
+                let b = (codes[i] as usize) >> shift;
+                let want = per_value.saturating_sub(count[b]);
+                if want == 0 || b == 0 || b + 1 >= bins || !usable[i] || taken[i] {
+                    continue;
+                }
+                let dx = 2 * x as i64 - (width as i64 - 1);
+                let k = (dx * dx + dy * dy, i);
+                if k >= worst[b] {
+                    continue;
+                }
+                let list = &mut best[b];
+                if list.len() < want {
+                    list.push((k, i));
+                } else if let Some(far) = list.iter_mut().max_by_key(|e| e.0) {
+                    *far = (k, i);
+                }
+                if list.len() == want {
+                    worst[b] = list.iter().map(|e| e.0).max().unwrap_or((i64::MAX, usize::MAX));
+                }
             }
         }
         for (b, list) in best.into_iter().enumerate() {
