@@ -25,6 +25,9 @@
 //!   pixel channels well exposed (a mean signal of 10 % to 90 % of the full well) in at least
 //!   one frame, after one
 //!   scale per channel (the median ratio); `radiance_median_err_stops` the same in stops;
+//! - `floor_median_rel_err`, `floor_p95_rel_err`: the same for the stack merged through the
+//!   true curve with the same weights, the noise floor no response recovery can beat, and
+//!   `radiance_median_over_floor`, `radiance_p95_over_floor` the ratios to it;
 //! - `saturated_pixels`, `dark_pixels` (masked as bounds), `true_dynamic_range` (brightest
 //!   over darkest positive true luminance), `merge_megapixel_frames_per_s`.
 
@@ -127,6 +130,8 @@ pub struct Truth {
     well_exposed: Vec<Vec<bool>>,
     /// The radiance's darkest and brightest positive luminance.
     luminance_range: Option<(f64, f64)>,
+    /// The median and 95th-percentile errors of the frames merged through the true curve.
+    floor: Option<(f64, f64)>,
 }
 
 #[derive(Serialize)]
@@ -203,6 +208,14 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(hdr::Input, Truth, Findi
         usable: None,
     };
     let luminance_range = crate::image::luminance_range(radiance.data.chunks_exact(3));
+    // The noise floor: the stack merged through the true curve with the stage's weights.
+    let g_true: Vec<f64> =
+        (0..levels).map(|z| c.response.inverse(z as f64 / max_code).max(1e-300).ln()).collect();
+    let true_curve = hdr::Response { levels, g: vec![g_true; 3] };
+    let (_, weights) = method(c)?;
+    let codes: Vec<&[u16]> = input.frames.iter().map(|f| f.codes.as_slice()).collect();
+    let times: Vec<f64> = input.frames.iter().map(|f| f.time_s).collect();
+    let (floor_radiance, _) = hdr::merge::merge(&codes, &times, &true_curve, weights);
     let (lo, hi) = luminance_range.unwrap_or((0.0, 0.0));
     let notes = vec![format!(
         "{}: {}×{} px, {} spp, luminance from {lo:.3e} to {hi:.3e}; {} exposures {} stops apart from 1 s, sensor {} bits, response {:?}, full well {} e⁻, read noise {} e⁻.",
@@ -217,20 +230,20 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(hdr::Input, Truth, Findi
         c.full_well,
         c.read_noise
     )];
-    Ok((
-        input,
-        Truth {
-            radiance,
-            response: c.response,
-            max_code,
-            full_well: c.full_well,
-            read_noise: c.read_noise,
-            occurs,
-            well_exposed,
-            luminance_range,
-        },
-        Findings { notes, ..Default::default() },
-    ))
+    let mut truth = Truth {
+        radiance,
+        response: c.response,
+        max_code,
+        full_well: c.full_well,
+        read_noise: c.read_noise,
+        occurs,
+        well_exposed,
+        luminance_range,
+        floor: None,
+    };
+    let floor = radiance_errors(&truth, &floor_radiance);
+    truth.floor = quantile(&floor, 0.5).zip(quantile(&floor, 0.95));
+    Ok((input, truth, Findings { notes, ..Default::default() }))
 }
 
 fn method(c: &Config) -> Result<(Method, Weights), StageError> {
@@ -257,6 +270,34 @@ fn method(c: &Config) -> Result<(Method, Weights), StageError> {
 pub fn solve(c: &Config, input: &hdr::Input) -> Result<hdr::Output, StageError> {
     let (method, weights) = method(c)?;
     Ok(hdr::run(input, &hdr::Config { method, weights })?)
+}
+
+/// Relative errors of a merged radiance against the truth over the well-exposed pixel
+/// channels, after one scale per channel (the median ratio), sorted.
+fn radiance_errors(truth: &Truth, radiance: &[f32]) -> Vec<f64> {
+    let n = truth.well_exposed[0].len();
+    let mut errs = Vec::new();
+    for c in 0..3 {
+        let pairs: Vec<(f64, f64)> = (0..n)
+            .filter(|&i| truth.well_exposed[c][i])
+            .map(|i| (truth.radiance.data[3 * i + c] as f64, radiance[3 * i + c] as f64))
+            .filter(|(t, _)| *t > 0.0)
+            .collect();
+        if pairs.is_empty() {
+            continue;
+        }
+        let mut ratios: Vec<f64> = pairs.iter().map(|(t, e)| e / t).collect();
+        ratios.sort_by(f64::total_cmp);
+        let k = ratios[ratios.len() / 2];
+        errs.extend(pairs.iter().map(|(t, e)| (e / k - t).abs() / t));
+    }
+    errs.sort_by(f64::total_cmp);
+    errs
+}
+
+/// The value at quantile `q` of sorted values.
+fn quantile(sorted: &[f64], q: f64) -> Option<f64> {
+    (!sorted.is_empty()).then(|| sorted[((sorted.len() - 1) as f64 * q) as usize])
 }
 
 pub fn validate(_c: &Config, out: &hdr::Output, truth: &Truth) -> Findings {
@@ -298,27 +339,24 @@ pub fn validate(_c: &Config, out: &hdr::Output, truth: &Truth) -> Findings {
     m.push(Metric::maybe("response_err_ln", worst, "ln", Better::Lower, "no value inside the range occurs"));
     m.push(Metric::maybe("response_err_ln_all", worst_all, "ln", Better::Lower, "no value occurs"));
     // The radiance against the truth.
-    let n = out.mask.len();
-    let mut errs = Vec::new();
-    for c in 0..3 {
-        let pairs: Vec<(f64, f64)> = (0..n)
-            .filter(|&i| truth.well_exposed[c][i])
-            .map(|i| (truth.radiance.data[3 * i + c] as f64, out.radiance[3 * i + c] as f64))
-            .filter(|(t, _)| *t > 0.0)
-            .collect();
-        if pairs.is_empty() {
-            continue;
-        }
-        let mut ratios: Vec<f64> = pairs.iter().map(|(t, e)| e / t).collect();
-        ratios.sort_by(f64::total_cmp);
-        let k = ratios[ratios.len() / 2];
-        errs.extend(pairs.iter().map(|(t, e)| (e / k - t).abs() / t));
-    }
-    errs.sort_by(f64::total_cmp);
-    let pick = |q: f64| (!errs.is_empty()).then(|| errs[((errs.len() - 1) as f64 * q) as usize]);
+    let errs = radiance_errors(truth, &out.radiance);
+    let pick = |q: f64| quantile(&errs, q);
     let none = "no pixel well exposed in any frame";
     m.push(Metric::maybe("radiance_median_rel_err", pick(0.5), "", Better::Lower, none));
     m.push(Metric::maybe("radiance_p95_rel_err", pick(0.95), "", Better::Lower, none));
+    // The noise floor: the same frames merged through the true curve.
+    let (floor_median, floor_p95) = truth.floor.unzip();
+    m.push(Metric::maybe("floor_median_rel_err", floor_median, "", Better::Lower, none));
+    m.push(Metric::maybe("floor_p95_rel_err", floor_p95, "", Better::Lower, none));
+    let over = |e: Option<f64>, f: Option<f64>| e.zip(f).filter(|(_, f)| *f > 0.0).map(|(e, f)| e / f);
+    m.push(Metric::maybe(
+        "radiance_median_over_floor",
+        over(pick(0.5), floor_median),
+        "×",
+        Better::Lower,
+        none,
+    ));
+    m.push(Metric::maybe("radiance_p95_over_floor", over(pick(0.95), floor_p95), "×", Better::Lower, none));
     m.push(Metric::maybe(
         "radiance_median_err_stops",
         pick(0.5).map(|e| (1.0 + e).log2()),
