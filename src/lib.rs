@@ -29,6 +29,7 @@ pub mod math;
 pub mod photometric;
 pub mod pipeline;
 pub mod render;
+pub mod sfm;
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {

@@ -59,31 +59,35 @@ impl Grey {
         let norm: f32 = k.iter().sum();
         let k: Vec<f32> = k.iter().map(|v| v / norm).collect();
         let (w, h) = (self.width, self.height);
-        // Rows: each padded by repeating its end pixels, then shifted copies scaled and added.
+        // Rows: each padded by repeating its end pixels, then shifted copies scaled and added;
+        // rows in parallel (each row's sums are the same whatever the thread count).
+        use rayon::prelude::*;
         let mut tmp = vec![0.0f32; w * h];
-        let mut padded = vec![0.0f32; w + 2 * r as usize];
-        for (src, dst) in self.data.chunks_exact(w).zip(tmp.chunks_exact_mut(w)) {
-            let r = r as usize;
-            padded[..r].fill(src[0]);
-            padded[r..r + w].copy_from_slice(src);
-            padded[r + w..].fill(src[w - 1]);
-            for (t, &kv) in k.iter().enumerate() {
-                for (d, s) in dst.iter_mut().zip(&padded[t..t + w]) {
-                    *d += kv * s;
+        tmp.par_chunks_exact_mut(w).zip(self.data.par_chunks_exact(w)).for_each_init(
+            || vec![0.0f32; w + 2 * r as usize],
+            |padded, (dst, src)| {
+                let r = r as usize;
+                padded[..r].fill(src[0]);
+                padded[r..r + w].copy_from_slice(src);
+                padded[r + w..].fill(src[w - 1]);
+                for (t, &kv) in k.iter().enumerate() {
+                    for (d, s) in dst.iter_mut().zip(&padded[t..t + w]) {
+                        *d += kv * s;
+                    }
                 }
-            }
-        }
+            },
+        );
         // Columns: whole rows scaled and added (clamped at the top and bottom), which the
         // compiler vectorises.
         let mut out = vec![0.0f32; w * h];
-        for (y, dst) in out.chunks_exact_mut(w).enumerate() {
+        out.par_chunks_exact_mut(w).enumerate().for_each(|(y, dst)| {
             for (t, &kv) in k.iter().enumerate() {
                 let sy = (y as isize + t as isize - r).clamp(0, h as isize - 1) as usize;
                 for (d, s) in dst.iter_mut().zip(&tmp[sy * w..(sy + 1) * w]) {
                     *d += kv * s;
                 }
             }
-        }
+        });
         Grey { width: w, height: h, data: out }
     }
 }
