@@ -1,6 +1,7 @@
-//! Structure from motion: keypoints and descriptors (`features`), matching (`matching`) and
-//! two-view geometry (`two_view`).
+//! Structure from motion: keypoints and descriptors (`features`), matching (`matching`),
+//! two-view geometry (`two_view`) and bundle adjustment (`bundle`).
 
+pub mod bundle;
 pub mod features;
 pub mod matching;
 pub mod two_view;
