@@ -82,7 +82,7 @@ pub struct Report {
 
 /// Residual (projection − observation) and its Jacobians with respect to the pose update
 /// (ω, δt) and the point, or None behind the camera.
-fn linearise(
+pub(crate) fn linearise(
     k: &Matrix3<f64>,
     pose: &Pose,
     x: &Vector3<f64>,

@@ -4,4 +4,6 @@
 pub mod bundle;
 pub mod features;
 pub mod matching;
+pub mod pnp;
+pub mod tracks;
 pub mod two_view;
