@@ -2,7 +2,9 @@
 //! two-view geometry (`two_view`) and bundle adjustment (`bundle`).
 
 pub mod bundle;
+pub mod eval;
 pub mod features;
+pub mod mapper;
 pub mod matching;
 pub mod pnp;
 pub mod tracks;

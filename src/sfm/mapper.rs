@@ -1,0 +1,374 @@
+//! Incremental reconstruction (as COLMAP's mapper, Schönberger & Frahm, "Structure-from-
+//! motion revisited", CVPR 2016), from per-image features and known intrinsics:
+//!
+//! 1. every pair is matched (`matching`) and verified by its two-view geometry
+//!    (`two_view`); the inliers of E (general pairs) or of H (planar or rotation pairs) are
+//!    the verified matches, joined into tracks (`tracks`);
+//! 2. the first pair: among general pairs whose median triangulation angle is at least
+//!    `init_min_angle_deg`, the one with the most inliers; its tracks are triangulated;
+//! 3. then, repeatedly, the unregistered image that sees the most triangulated tracks is
+//!    registered by PnP (`pnp`), the tracks it completes are triangulated, and the whole
+//!    bundle is adjusted (`bundle`), dropping observations that reproject farther than the
+//!    threshold;
+//! 4. images that cannot be registered (too few 2D–3D matches, PnP without enough inliers)
+//!    are reported with the reason; what was reconstructed is kept.
+//!
+//! Frames: poses map world to camera (X_c = R X + t); the world is the first camera's frame
+//! at the scale of a unit baseline between the first pair.
+
+use super::bundle::{self, Observation, Pose, Problem};
+use super::features::Features;
+use super::tracks::{self, Node, PairMatches};
+use super::{matching, pnp, two_view};
+use nalgebra::{Matrix3, Vector3};
+
+#[derive(Clone, Copy, Debug)]
+pub struct Options {
+    pub matching: matching::Options,
+    /// Sampson threshold of the two-view geometry, pixels (COLMAP: 4).
+    pub two_view_px: f64,
+    /// Reprojection threshold of PnP, triangulation and the bundle's filtering, pixels (4).
+    pub reprojection_px: f64,
+    /// Smallest median triangulation angle of the first pair (degrees).
+    pub init_min_angle_deg: f64,
+    /// Smallest angle between two rays of a triangulated point (degrees; COLMAP 1.5).
+    pub min_angle_deg: f64,
+    /// Fewest verified matches for a pair to count, and fewest 2D–3D matches and PnP
+    /// inliers to register an image (COLMAP: 15 and 30... here one number, 30).
+    pub min_matches: usize,
+    pub bundle: bundle::Options,
+    pub seed: u64,
+}
+
+impl Default for Options {
+    fn default() -> Options {
+        Options {
+            matching: matching::Options::default(),
+            two_view_px: 4.0,
+            reprojection_px: 4.0,
+            init_min_angle_deg: 2.0,
+            min_angle_deg: 1.5,
+            min_matches: 30,
+            bundle: bundle::Options::default(),
+            seed: 1,
+        }
+    }
+}
+
+/// A triangulated point: its position and the keypoints that see it.
+#[derive(Clone, Debug)]
+pub struct Point {
+    pub xyz: Vector3<f64>,
+    pub track: Vec<Node>,
+}
+
+/// What one pair's verification found.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct PairReport {
+    pub a: usize,
+    pub b: usize,
+    pub matches: usize,
+    pub inliers: usize,
+    pub configuration: Option<two_view::Configuration>,
+}
+
+/// The reconstruction.
+#[derive(Clone, Debug, Default)]
+pub struct Reconstruction {
+    /// Per image: its pose, or None when it was not registered.
+    pub poses: Vec<Option<Pose>>,
+    pub points: Vec<Point>,
+    /// Per image not registered: why.
+    pub unregistered: Vec<(usize, String)>,
+    pub pairs: Vec<PairReport>,
+    /// Seconds spent matching, verifying, and mapping (registration, triangulation,
+    /// bundle adjustment).
+    pub matching_s: f64,
+    pub verification_s: f64,
+    pub mapping_s: f64,
+    pub bundle_s: f64,
+    pub rms_px: f64,
+}
+
+fn pixel(f: &Features, k: u32) -> [f64; 2] {
+    let p = f.keypoints[k as usize];
+    [p.x as f64, p.y as f64]
+}
+
+/// The multi-view DLT point of a track over its registered views, if it is in front of all,
+/// reprojects within the threshold in all, and has two rays at least `min_angle` apart.
+fn triangulate(
+    track: &[Node],
+    poses: &[Option<Pose>],
+    k: &[Matrix3<f64>],
+    k_inv: &[Matrix3<f64>],
+    features: &[Features],
+    opts: &Options,
+) -> Option<Vector3<f64>> {
+    let views: Vec<(usize, [f64; 2], Pose)> = track
+        .iter()
+        .filter_map(|n| {
+            poses[n.image as usize]
+                .map(|p| (n.image as usize, pixel(&features[n.image as usize], n.keypoint), p))
+        })
+        .collect();
+    if views.len() < 2 {
+        return None;
+    }
+    let mut ata = nalgebra::Matrix4::<f64>::zeros();
+    for (i, px, pose) in &views {
+        let r = k_inv[*i] * Vector3::new(px[0], px[1], 1.0);
+        let (u, v) = (r[0] / r[2], r[1] / r[2]);
+        let mut p = nalgebra::Matrix3x4::<f64>::zeros();
+        p.fixed_view_mut::<3, 3>(0, 0).copy_from(&pose.r);
+        p.set_column(3, &pose.t);
+        for row in [p.row(0) - u * p.row(2), p.row(1) - v * p.row(2)] {
+            let a = row.transpose();
+            ata += a * a.transpose();
+        }
+    }
+    let eig = nalgebra::SymmetricEigen::try_new(ata, 1e-14, 500)?;
+    let j = eig.eigenvalues.iter().enumerate().min_by(|p, q| p.1.total_cmp(q.1))?.0;
+    let h = eig.eigenvectors.column(j);
+    if h[3].abs() < 1e-12 {
+        return None;
+    }
+    let x = Vector3::new(h[0] / h[3], h[1] / h[3], h[2] / h[3]);
+    if !x.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    for (i, px, pose) in &views {
+        if pnp::reprojection_error(&k[*i], pose, &x, *px) > opts.reprojection_px {
+            return None;
+        }
+    }
+    let rays: Vec<Vector3<f64>> = views.iter().map(|(_, _, p)| (x - p.centre()).normalize()).collect();
+    let cos_min = opts.min_angle_deg.to_radians().cos();
+    let wide = (0..rays.len()).any(|a| (a + 1..rays.len()).any(|b| rays[a].dot(&rays[b]) < cos_min));
+    wide.then_some(x)
+}
+
+/// Reconstructs cameras and points from `features` of images with intrinsics `k`.
+pub fn reconstruct(features: &[Features], k: &[Matrix3<f64>], opts: &Options) -> Reconstruction {
+    let n = features.len();
+    let mut out = Reconstruction { poses: vec![None; n], ..Default::default() };
+    let k_inv: Vec<Matrix3<f64>> = k.iter().map(|m| m.try_inverse().unwrap_or_else(Matrix3::zeros)).collect();
+    // 1. Match and verify every pair.
+    let mut verified: Vec<PairMatches> = Vec::new();
+    let mut geometry: Vec<(usize, usize, two_view::TwoView)> = Vec::new();
+    for a in 0..n {
+        for b in a + 1..n {
+            let t = std::time::Instant::now();
+            let m = matching::match_descriptors(
+                &features[a].descriptors,
+                &features[b].descriptors,
+                &opts.matching,
+            );
+            out.matching_s += t.elapsed().as_secs_f64();
+            let t = std::time::Instant::now();
+            let p1: Vec<[f64; 2]> = m.iter().map(|x| pixel(&features[a], x.a)).collect();
+            let p2: Vec<[f64; 2]> = m.iter().map(|x| pixel(&features[b], x.b)).collect();
+            let tv = if m.len() >= opts.min_matches {
+                two_view::estimate(&p1, &p2, &k[a], &k[b], opts.two_view_px, opts.seed ^ (a * n + b) as u64)
+            } else {
+                None
+            };
+            out.verification_s += t.elapsed().as_secs_f64();
+            out.pairs.push(PairReport {
+                a,
+                b,
+                matches: m.len(),
+                inliers: tv.as_ref().map_or(0, |t| t.inliers.len()),
+                configuration: tv.as_ref().map(|t| t.configuration),
+            });
+            if let Some(tv) = tv {
+                if tv.inliers.len() >= opts.min_matches {
+                    let matches = tv.inliers.iter().map(|&i| (m[i].a, m[i].b)).collect();
+                    verified.push(PairMatches { a: a as u32, b: b as u32, matches });
+                    geometry.push((a, b, tv));
+                }
+            }
+        }
+    }
+    let t_map = std::time::Instant::now();
+    let counts: Vec<usize> = features.iter().map(|f| f.keypoints.len()).collect();
+    let tracks = tracks::build(&counts, &verified);
+    // 2. The first pair.
+    let first = geometry
+        .iter()
+        .filter(|(_, _, tv)| {
+            tv.configuration == two_view::Configuration::General
+                && tv.median_triangulation_angle_deg >= opts.init_min_angle_deg
+        })
+        .max_by_key(|(_, _, tv)| tv.inliers.len());
+    let Some((a, b, tv)) = first else {
+        out.unregistered = (0..n).map(|i| (i, "no pair of images with a baseline: every verified pair is planar, a pure rotation, too narrow or has too few matches".to_string())).collect();
+        return out;
+    };
+    out.poses[*a] = Some(Pose { r: Matrix3::identity(), t: Vector3::zeros() });
+    out.poses[*b] = Some(Pose { r: tv.pose.r, t: tv.pose.t });
+    // Track index → point index.
+    let mut point_of: Vec<Option<usize>> = vec![None; tracks.len()];
+    // Per image: (keypoint → track).
+    let mut track_of: Vec<std::collections::HashMap<u32, usize>> = vec![Default::default(); n];
+    for (t, track) in tracks.iter().enumerate() {
+        for node in track {
+            track_of[node.image as usize].insert(node.keypoint, t);
+        }
+    }
+    let triangulate_new = |out: &mut Reconstruction, point_of: &mut Vec<Option<usize>>| {
+        for (t, track) in tracks.iter().enumerate() {
+            if point_of[t].is_some() {
+                continue;
+            }
+            if let Some(x) = triangulate(track, &out.poses, k, &k_inv, features, opts) {
+                point_of[t] = Some(out.points.len());
+                out.points.push(Point { xyz: x, track: track.clone() });
+            }
+        }
+    };
+    triangulate_new(&mut out, &mut point_of);
+    let mut bundle_s = 0.0;
+    let mut adjust = |out: &mut Reconstruction, first: usize| {
+        let t = std::time::Instant::now();
+        adjust_all(out, k, features, first, opts);
+        bundle_s += t.elapsed().as_secs_f64();
+    };
+    adjust(&mut out, *a);
+    // 3. Register the others, most 2D–3D matches first.
+    loop {
+        let mut best: Option<(usize, Vec<(Vector3<f64>, [f64; 2])>)> = None;
+        for i in 0..n {
+            if out.poses[i].is_some() || out.unregistered.iter().any(|u| u.0 == i) {
+                continue;
+            }
+            let corr: Vec<(Vector3<f64>, [f64; 2])> = track_of[i]
+                .iter()
+                .filter_map(|(&kp, &t)| point_of[t].map(|p| (out.points[p].xyz, pixel(&features[i], kp))))
+                .collect();
+            if best.as_ref().is_none_or(|b| corr.len() > b.1.len()) {
+                best = Some((i, corr));
+            }
+        }
+        let Some((i, mut corr)) = best else { break };
+        // A deterministic order for RANSAC.
+        corr.sort_by(|p, q| p.1[0].total_cmp(&q.1[0]).then(p.1[1].total_cmp(&q.1[1])));
+        if corr.len() < opts.min_matches {
+            out.unregistered.push((
+                i,
+                format!("{} matches to reconstructed points, fewer than {}", corr.len(), opts.min_matches),
+            ));
+            continue;
+        }
+        let pts: Vec<Vector3<f64>> = corr.iter().map(|c| c.0).collect();
+        let pxs: Vec<[f64; 2]> = corr.iter().map(|c| c.1).collect();
+        match pnp::estimate(&k[i], &pts, &pxs, opts.reprojection_px, opts.seed ^ i as u64) {
+            Some(reg) if reg.inliers.len() >= opts.min_matches => {
+                out.poses[i] = Some(reg.pose);
+                triangulate_new(&mut out, &mut point_of);
+                adjust(&mut out, *a);
+            }
+            Some(reg) => out.unregistered.push((
+                i,
+                format!(
+                    "PnP kept {} of {} matches to reconstructed points, fewer than {}",
+                    reg.inliers.len(),
+                    corr.len(),
+                    opts.min_matches
+                ),
+            )),
+            None => out
+                .unregistered
+                .push((i, format!("PnP found no pose from {} matches to reconstructed points", corr.len()))),
+        }
+    }
+    out.unregistered.sort_by_key(|u| u.0);
+    out.bundle_s = bundle_s;
+    out.mapping_s = t_map.elapsed().as_secs_f64() - bundle_s;
+    out.rms_px = rms(&out, k, features);
+    out
+}
+
+/// RMS reprojection error over every observation of every point, pixels.
+fn rms(out: &Reconstruction, k: &[Matrix3<f64>], features: &[Features]) -> f64 {
+    let (mut s, mut m) = (0.0, 0usize);
+    for p in &out.points {
+        for node in &p.track {
+            if let Some(pose) = &out.poses[node.image as usize] {
+                let e = pnp::reprojection_error(
+                    &k[node.image as usize],
+                    pose,
+                    &p.xyz,
+                    pixel(&features[node.image as usize], node.keypoint),
+                );
+                s += e * e;
+                m += 1;
+            }
+        }
+    }
+    if m == 0 {
+        0.0
+    } else {
+        (s / m as f64).sqrt()
+    }
+}
+
+/// Adjusts every registered pose (the first fixed; the scale held by the damping) and every
+/// point two registered cameras see, then drops the observations that reproject beyond the
+/// threshold.
+fn adjust_all(
+    out: &mut Reconstruction,
+    k: &[Matrix3<f64>],
+    features: &[Features],
+    first: usize,
+    opts: &Options,
+) {
+    let cams: Vec<usize> = (0..out.poses.len()).filter(|&i| out.poses[i].is_some()).collect();
+    let slot: std::collections::HashMap<usize, usize> =
+        cams.iter().enumerate().map(|(s, &c)| (c, s)).collect();
+    // Points seen by two registered cameras at least.
+    let seen = |point: &Point| point.track.iter().filter(|n| slot.contains_key(&(n.image as usize))).count();
+    let included: Vec<usize> = (0..out.points.len()).filter(|&p| seen(&out.points[p]) >= 2).collect();
+    let mut observations = Vec::new();
+    for (q, &p) in included.iter().enumerate() {
+        for node in &out.points[p].track {
+            if let Some(&c) = slot.get(&(node.image as usize)) {
+                observations.push(Observation {
+                    camera: c,
+                    point: q,
+                    xy: pixel(&features[node.image as usize], node.keypoint),
+                });
+            }
+        }
+    }
+    let mut problem = Problem {
+        intrinsics: cams.iter().map(|&c| k[c]).collect(),
+        poses: cams.iter().filter_map(|&c| out.poses[c]).collect(),
+        fixed: cams.iter().map(|&c| c == first).collect(),
+        points: included.iter().map(|&p| out.points[p].xyz).collect(),
+        observations,
+    };
+    bundle::adjust(&mut problem, &opts.bundle);
+    for (s, &c) in cams.iter().enumerate() {
+        out.poses[c] = Some(problem.poses[s]);
+    }
+    for (q, &p) in included.iter().enumerate() {
+        out.points[p].xyz = problem.points[q];
+    }
+    // Observations beyond the threshold leave their tracks (a track keeps its unregistered
+    // nodes for later images).
+    for point in out.points.iter_mut() {
+        let x = point.xyz;
+        point.track.retain(|node| match &out.poses[node.image as usize] {
+            Some(pose) => {
+                pnp::reprojection_error(
+                    &k[node.image as usize],
+                    pose,
+                    &x,
+                    pixel(&features[node.image as usize], node.keypoint),
+                ) <= opts.reprojection_px
+            }
+            None => true,
+        });
+    }
+}
