@@ -47,4 +47,6 @@ pub enum Error {
     Color(#[from] color::Error),
     #[error(transparent)]
     Hdr(#[from] hdr::Error),
+    #[error(transparent)]
+    Sfm(#[from] sfm::Error),
 }

@@ -4,6 +4,7 @@
 mod bench;
 mod color;
 mod hdr;
+mod sfm;
 
 use bench::{bench_calibrate, bench_convergence, bench_render, BenchRender};
 
@@ -140,6 +141,9 @@ enum Command {
     /// HDR fusion of an exposure stack: the camera's response (Debevec & Malik or Robertson)
     /// and the merged radiance.
     Hdr(hdr::HdrArgs),
+    /// Structure from motion: cameras and sparse points from overlapping photographs (a
+    /// COLMAP text model, a PLY point cloud and a summary).
+    Sfm(sfm::SfmArgs),
     /// Benchmarks.
     Bench {
         #[command(subcommand)]
@@ -240,6 +244,7 @@ pub fn main() -> i32 {
         }
         Command::Color { what } => color::run(what).map(|_| 0),
         Command::Hdr(args) => hdr::run(&args).map(|_| 0),
+        Command::Sfm(args) => sfm::run(&args).map(|_| 0),
         Command::Bench {
             what: Bench::Render { scene, spp, max_depth, threads, repeat, sampler, one_path },
         } => {
