@@ -131,3 +131,71 @@ fn herz_jesu_reconstruction() {
     assert!(worst_centre <= 0.01, "{centres:?}");
     assert!(rec.rms_px <= 1.0, "{}", rec.rms_px);
 }
+
+fn png(path: &Path, w: u32, h: u32, f: impl Fn(u32, u32) -> [u8; 3]) {
+    let mut img = image::RgbImage::new(w, h);
+    for (x, y, p) in img.enumerate_pixels_mut() {
+        *p = image::Rgb(f(x, y));
+    }
+    img.save(path).unwrap();
+}
+
+/// `lumen sfm` refuses malformed folders, cameras and settings with a message naming the
+/// problem, writing nothing; two unrelated images give an empty model that says why, with
+/// every file written.
+#[test]
+fn cli_refusals_and_an_unreconstructable_pair() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let noise = |seed: u64| {
+        move |x: u32, y: u32| {
+            let v = lumen::render::sampler::mix64(seed ^ (x as u64 * 7919 + y as u64 * 104729));
+            [(v >> 56) as u8, (v >> 48) as u8, (v >> 40) as u8]
+        }
+    };
+    let (one, two, junk) = (d.join("one"), d.join("two"), d.join("junk"));
+    for p in [&one, &two, &junk] {
+        std::fs::create_dir(p).unwrap();
+    }
+    png(&one.join("a.png"), 160, 120, noise(1));
+    png(&two.join("a.png"), 160, 120, noise(1));
+    png(&two.join("b.png"), 160, 120, noise(2));
+    png(&junk.join("a.png"), 160, 120, noise(1));
+    std::fs::write(junk.join("b.jpg"), b"not a picture").unwrap();
+    std::fs::write(d.join("k8.txt"), "1 0 1 0 1 1 0 0").unwrap();
+    std::fs::write(d.join("kneg.txt"), "-100 0 80 0 100 60 0 0 1").unwrap();
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let out = d.join("model");
+    let (two_s, out_s) = (s(&two), s(&out));
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (vec!["--images".into(), "/nonexistent/photos".into()], "/nonexistent/photos"),
+        (vec!["--images".into(), s(&one)], "at least 2"),
+        (vec!["--images".into(), s(&junk)], "b.jpg"),
+        (vec!["--images".into(), two_s.clone(), "--camera".into(), s(&d.join("k8.txt"))], "9 numbers"),
+        (vec!["--images".into(), two_s.clone(), "--camera".into(), s(&d.join("kneg.txt"))], "positive"),
+        (
+            vec!["--images".into(), two_s.clone(), "--camera".into(), "/nonexistent/cam.yaml".into()],
+            "cam.yaml",
+        ),
+        (vec!["--images".into(), two_s.clone(), "--max-features".into(), "3".into()], "--max-features 3"),
+    ];
+    for (args, want) in cases {
+        let mut all: Vec<&str> = vec!["sfm", "--out", &out_s];
+        all.extend(args.iter().map(String::as_str));
+        let (code, err) = common::lumen(&all);
+        assert!(code == 1 || code == 2, "{args:?}: exit {code}: {err}");
+        assert!(err.contains(want), "{args:?}: {err}");
+        assert!(!out.exists(), "{args:?} wrote output");
+    }
+    // Two unrelated noise images: nothing to reconstruct, said plainly, the files written.
+    let (code, err) = common::lumen(&["sfm", "--images", &two_s, "--out", &out_s]);
+    assert_eq!(code, 0, "{err}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["registered_images"], 0);
+    let why = summary["unregistered"][0]["reason"].as_str().unwrap_or("");
+    assert!(why.contains("no pair of images"), "{summary}");
+    for f in ["cameras.txt", "images.txt", "points3D.txt", "points.ply"] {
+        assert!(out.join(f).exists(), "{f}");
+    }
+}

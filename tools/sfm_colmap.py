@@ -1,0 +1,72 @@
+"""COLMAP (pycolmap) on a folder of photographs with a known pinhole K, timed per phase, and
+its cameras compared with Strecha-format ground truth, for comparison with `lumen sfm`.
+
+Usage (the peers' virtual environment, ../shared/tools/peers-venv.sh):
+    $PEERS_PY tools/sfm_colmap.py ../shared/data/sfm/herz-jesu-p8 [threads]
+
+Prints extraction, matching and mapping times, registered images, points, and the pairwise
+relative rotation errors (median, max) against gt_dense_cameras/.
+"""
+import os
+import sys
+import tempfile
+import time
+
+import numpy as np
+import pycolmap
+
+
+def gt(path):
+    v = [float(x) for x in open(path).read().split()]
+    return np.array(v[12:21]).reshape(3, 3).T  # world-to-camera rotation
+
+
+def main(root, threads="2"):
+    images = os.path.join(root, "images")
+    k = [float(x) for x in open(os.path.join(images, "K.txt")).read().split()]
+    work = tempfile.mkdtemp()
+    db = os.path.join(work, "database.db")
+    opts = pycolmap.FeatureExtractionOptions()
+    opts.num_threads = int(threads)
+    reader = pycolmap.ImageReaderOptions()
+    reader.camera_model = "PINHOLE"
+    # COLMAP's pixel centres are at +0.5.
+    reader.camera_params = f"{k[0]},{k[4]},{k[2] + 0.5},{k[5] + 0.5}"
+    t = time.time()
+    pycolmap.extract_features(db, images, camera_mode=pycolmap.CameraMode.SINGLE, reader_options=reader, extraction_options=opts, device=pycolmap.Device.cpu)
+    t_ext = time.time() - t
+    t = time.time()
+    mopts = pycolmap.FeatureMatchingOptions()
+    mopts.num_threads = int(threads)
+    pycolmap.match_exhaustive(db, matching_options=mopts, device=pycolmap.Device.cpu)
+    t_match = time.time() - t
+    t = time.time()
+    popts = pycolmap.IncrementalPipelineOptions()
+    popts.num_threads = int(threads)
+    popts.ba_refine_focal_length = False
+    popts.ba_refine_principal_point = False
+    popts.ba_refine_extra_params = False
+    maps = pycolmap.incremental_mapping(db, images, work, options=popts)
+    t_map = time.time() - t
+    rec = max(maps.values(), key=lambda r: r.num_reg_images())
+    rots = {}
+    for img in rec.images.values():
+        if img.has_pose:
+            rots[img.name] = img.cam_from_world().rotation.matrix()
+    names = sorted(rots)
+    errs = []
+    for a in range(len(names)):
+        for b in range(a + 1, len(names)):
+            ra, rb = rots[names[a]], rots[names[b]]
+            ta = gt(os.path.join(root, "gt_dense_cameras", names[a] + ".camera"))
+            tb = gt(os.path.join(root, "gt_dense_cameras", names[b] + ".camera"))
+            e = (rb @ ra.T) @ (tb @ ta.T).T
+            errs.append(np.degrees(np.arccos(np.clip((np.trace(e) - 1) / 2, -1, 1))))
+    errs = np.sort(errs)
+    print(f"COLMAP {pycolmap.__version__}: extraction {t_ext:.2f} s, matching {t_match:.2f} s, mapping {t_map:.2f} s; "
+          f"registered {rec.num_reg_images()}, points {rec.num_points3D()}; "
+          f"rotation error median {np.median(errs):.4f}°, max {errs[-1]:.4f}°")
+
+
+if __name__ == "__main__":
+    main(*sys.argv[1:])
