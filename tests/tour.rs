@@ -7,7 +7,7 @@ mod common;
 use std::path::Path;
 use std::process::Command;
 
-/// The tour's `lumen render|calibrate|ps|undistort|color|hdr` lines, from the README's tour block.
+/// The tour's `lumen render|calibrate|ps|undistort|color|hdr|sfm` lines, from the README's tour block.
 fn tour_commands() -> Vec<String> {
     let readme = std::fs::read_to_string(common::root().join("README.md")).unwrap();
     let tour = readme.split("## A tour of the command line").nth(1).expect("the README has a tour");
@@ -23,6 +23,7 @@ fn tour_commands() -> Vec<String> {
                 "lumen undistort ",
                 "lumen color ",
                 "lumen hdr ",
+                "lumen sfm ",
             ]
             .iter()
             .any(|p| l.starts_with(p))
@@ -54,7 +55,7 @@ fn run(line: &str, dir: &Path, photos: &Path) -> (bool, String) {
 #[test]
 fn readme_tour_writes_what_it_says() {
     let lines = tour_commands();
-    assert_eq!(lines.len(), 8, "the tour's commands: {lines:?}");
+    assert_eq!(lines.len(), 9, "the tour's commands: {lines:?}");
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let shared = common::root().join("../shared/data");
@@ -116,6 +117,11 @@ fn readme_tour_writes_what_it_says() {
     assert!(ok, "{err}");
     for f in ["radiance.exr", "response.csv", "response.svg", "mask.png", "preview.png", "summary.json"] {
         assert!(d.join("out/memorial").join(f).is_file(), "memorial/{f} missing");
+    }
+    let (ok, err) = run(&lines[8], d, &photos);
+    assert!(ok, "{err}");
+    for f in ["cameras.txt", "images.txt", "points3D.txt", "points.ply", "summary.json"] {
+        assert!(d.join("out/herz-jesu").join(f).is_file(), "herz-jesu/{f} missing");
     }
     // Nothing outside out/.
     let top: Vec<_> = std::fs::read_dir(d).unwrap().map(|e| e.unwrap().file_name()).collect();
