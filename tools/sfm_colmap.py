@@ -18,7 +18,15 @@ import pycolmap
 
 def gt(path):
     v = [float(x) for x in open(path).read().split()]
-    return np.array(v[12:21]).reshape(3, 3).T  # world-to-camera rotation
+    # The file's six digits projected onto the nearest rotation, then world-to-camera.
+    u, _, vt = np.linalg.svd(np.array(v[12:21]).reshape(3, 3))
+    return (u @ vt).T
+
+
+def angle_deg(r):
+    """atan2(|axial vector|, trace - 1): precise at small angles, where arccos is not."""
+    v = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+    return np.degrees(np.arctan2(np.linalg.norm(v), np.trace(r) - 1))
 
 
 def main(root, threads="2"):
@@ -61,7 +69,7 @@ def main(root, threads="2"):
             ta = gt(os.path.join(root, "gt_dense_cameras", names[a] + ".camera"))
             tb = gt(os.path.join(root, "gt_dense_cameras", names[b] + ".camera"))
             e = (rb @ ra.T) @ (tb @ ta.T).T
-            errs.append(np.degrees(np.arccos(np.clip((np.trace(e) - 1) / 2, -1, 1))))
+            errs.append(angle_deg(e))
     errs = np.sort(errs)
     print(f"COLMAP {pycolmap.__version__}: extraction {t_ext:.2f} s, matching {t_match:.2f} s, mapping {t_map:.2f} s; "
           f"registered {rec.num_reg_images()}, points {rec.num_points3D()}; "

@@ -11,8 +11,8 @@
 //!   Zisserman, 2nd ed., §9.6.2); the one of the four that puts the most inliers in front of
 //!   both cameras (cheirality) is kept.
 //! - **Refinement.** The pose (3 rotation + 2 direction parameters, updated on their
-//!   manifolds: R ← exp([ω]×)·R, t on the unit sphere) minimising the inliers' squared Sampson
-//!   distances by Levenberg–Marquardt (`math::lm`, forward-difference Jacobian); inliers
+//!   manifolds: R ← exp([ω]×)·R, t on the unit sphere) minimising the inliers' Sampson
+//!   distances under Huber's loss (δ = 1 px) by Levenberg–Marquardt (`math::lm`, forward-difference Jacobian); inliers
 //!   and the cheirality check are then taken again under the refined E.
 //! - **Triangulation.** The linear (DLT) solution of x̂ × (P X) = 0 for both views.
 //! - **Model selection.** A homography is fitted as well (normalised 4-point DLT in RANSAC,
@@ -174,9 +174,18 @@ pub fn refine(
     idx: &[usize],
 ) -> RelativePose {
     use nalgebra::{DMatrix, DVector};
+    // Huber's loss with δ = 1 px, as the residual sign(e)·√ρ(e²): an inlier within the RANSAC
+    // threshold but far from the rest (a wrong match near its epipolar line) pulls linearly,
+    // not quadratically.
+    const DELTA: f64 = 1.0;
+    let robust = |e: f64| {
+        let a = e.abs();
+        let rho = if a <= DELTA { a * a } else { 2.0 * DELTA * a - DELTA * DELTA };
+        rho.sqrt().copysign(e)
+    };
     let residuals_at = |q: &RelativePose| -> DVector<f64> {
         let f = k2i.transpose() * essential_of(q) * k1i;
-        DVector::from_iterator(idx.len(), idx.iter().map(|&i| sampson_signed(&f, p1[i], p2[i])))
+        DVector::from_iterator(idx.len(), idx.iter().map(|&i| robust(sampson_signed(&f, p1[i], p2[i]))))
     };
     let update = |q: &RelativePose, d: &DVector<f64>| -> RelativePose {
         let rot = nalgebra::Rotation3::new(Vector3::new(d[0], d[1], d[2])).into_inner();
@@ -390,9 +399,12 @@ pub fn estimate(
     })
 }
 
-/// The angle of a rotation matrix, in degrees.
+/// The angle of a rotation matrix, in degrees: atan2(‖v‖, tr R − 1) with v the axial vector
+/// of R − Rᵀ (2 sin θ and 2 cos θ), which keeps its precision for small angles where
+/// acos((tr R − 1)/2) loses it (a 10⁻⁶ error in the trace is 0.06° there).
 pub fn rotation_angle_deg(r: &Matrix3<f64>) -> f64 {
-    (((r.trace() - 1.0) / 2.0).clamp(-1.0, 1.0)).acos().to_degrees()
+    let v = Vector3::new(r[(2, 1)] - r[(1, 2)], r[(0, 2)] - r[(2, 0)], r[(1, 0)] - r[(0, 1)]);
+    v.norm().atan2(r.trace() - 1.0).to_degrees()
 }
 
 #[cfg(test)]
