@@ -23,8 +23,8 @@
 //!   value that occurs, for the record;
 //! - `radiance_median_rel_err`, `radiance_p95_rel_err`: against the true radiance over the
 //!   pixel channels well exposed (a mean signal of 10 % to 90 % of the full well) in at least
-//!   one frame, after one
-//!   scale per channel (the median ratio); `radiance_median_err_stops` the same in stops;
+//!   one frame, after one scale per channel (the median ratio); `radiance_median_err_stops`
+//!   the same in stops;
 //! - `floor_median_rel_err`, `floor_p95_rel_err`: the same for the stack merged through the
 //!   true curve with the same weights, the noise floor no response recovery can beat, and
 //!   `radiance_median_over_floor`, `radiance_p95_over_floor` the ratios to it;
@@ -126,7 +126,7 @@ pub struct Truth {
     read_noise: f64,
     /// Per channel: which code values occur in the stack.
     occurs: Vec<Vec<bool>>,
-    /// Per channel and pixel: some frame shows it well exposed (10 % to 90 % of full scale).
+    /// Per channel and pixel: some frame holds it well exposed (10 % to 90 % of the full well).
     well_exposed: Vec<Vec<bool>>,
     /// The radiance's darkest and brightest positive luminance.
     luminance_range: Option<(f64, f64)>,
