@@ -133,18 +133,8 @@ pub fn run(a: &SfmArgs) -> Result<()> {
     let rec = &out.reconstruction;
     std::fs::create_dir_all(&a.out).with_context(|| format!("--out {}: cannot create", a.out.display()))?;
     let (cameras, images_txt, points) = colmap::text_model(&input, &out);
-    let registered = rec.poses.iter().filter(|p| p.is_some()).count();
-    let observations: usize = rec
-        .points
-        .iter()
-        .map(|p| p.track.iter().filter(|n| rec.poses[n.image as usize].is_some()).count())
-        .filter(|&k| k >= 2)
-        .sum();
-    let kept = rec
-        .points
-        .iter()
-        .filter(|p| p.track.iter().filter(|n| rec.poses[n.image as usize].is_some()).count() >= 2)
-        .count();
+    let registered = rec.registered_count();
+    let (kept, observations) = rec.seen_points().fold((0, 0), |(k, o), (_, _, obs)| (k + 1, o + obs.len()));
     let summary = serde_json::json!({
         "images": input.images.len(),
         "registered_images": registered,

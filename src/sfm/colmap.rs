@@ -58,19 +58,14 @@ pub fn text_model(input: &Input, out: &Output) -> (String, String, String) {
     let mut point_id: Vec<Vec<i64>> = out.features.iter().map(|f| vec![-1; f.keypoints.len()]).collect();
     let mut track_len = 0usize;
     let mut kept_points = 0usize;
-    for (p, point) in rec.points.iter().enumerate() {
-        let registered: Vec<_> =
-            point.track.iter().filter(|n| rec.poses[n.image as usize].is_some()).collect();
-        if registered.len() < 2 {
-            continue;
-        }
+    for (p, _, obs) in rec.seen_points() {
         kept_points += 1;
-        track_len += registered.len();
-        for n in registered {
+        track_len += obs.len();
+        for n in obs {
             point_id[n.image as usize][n.keypoint as usize] = p as i64 + 1;
         }
     }
-    let registered = rec.poses.iter().filter(|p| p.is_some()).count();
+    let registered = rec.registered_count();
     let mut images = String::from("# Image list with two lines of data per image:\n#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME\n#   POINTS2D[] as (X, Y, POINT3D_ID)\n");
     let _ = writeln!(
         images,
@@ -109,11 +104,7 @@ pub fn text_model(input: &Input, out: &Output) -> (String, String, String) {
         "# Number of points: {kept_points}, mean track length: {}",
         if kept_points > 0 { track_len as f64 / kept_points as f64 } else { 0.0 }
     );
-    for (p, point) in rec.points.iter().enumerate() {
-        let obs: Vec<_> = point.track.iter().filter(|n| rec.poses[n.image as usize].is_some()).collect();
-        if obs.len() < 2 {
-            continue;
-        }
+    for (p, point, obs) in rec.seen_points() {
         let c = out.colours[obs[0].image as usize][obs[0].keypoint as usize];
         let err = point_error(input, out, p);
         let track: Vec<String> = obs.iter().map(|n| format!("{} {}", n.image + 1, n.keypoint)).collect();
@@ -162,12 +153,8 @@ fn point_error(input: &Input, out: &Output, p: usize) -> f64 {
 pub fn ply(out: &Output) -> String {
     let rec = &out.reconstruction;
     let pts: Vec<(nalgebra::Vector3<f64>, [u8; 3])> = rec
-        .points
-        .iter()
-        .filter_map(|p| {
-            let obs: Vec<_> = p.track.iter().filter(|n| rec.poses[n.image as usize].is_some()).collect();
-            (obs.len() >= 2).then(|| (p.xyz, out.colours[obs[0].image as usize][obs[0].keypoint as usize]))
-        })
+        .seen_points()
+        .map(|(_, p, obs)| (p.xyz, out.colours[obs[0].image as usize][obs[0].keypoint as usize]))
         .collect();
     let mut s = format!("ply\nformat ascii 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n", pts.len());
     for (x, c) in pts {

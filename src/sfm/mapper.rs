@@ -90,6 +90,23 @@ pub struct Reconstruction {
     pub rms_px: f64,
 }
 
+impl Reconstruction {
+    /// How many images have a pose.
+    pub fn registered_count(&self) -> usize {
+        self.poses.iter().filter(|p| p.is_some()).count()
+    }
+
+    /// The points two registered images see at least: (index, point, its observations in
+    /// registered images), the points a model writes.
+    pub fn seen_points(&self) -> impl Iterator<Item = (usize, &Point, Vec<Node>)> + '_ {
+        self.points.iter().enumerate().filter_map(|(p, point)| {
+            let obs: Vec<Node> =
+                point.track.iter().copied().filter(|n| self.poses[n.image as usize].is_some()).collect();
+            (obs.len() >= 2).then_some((p, point, obs))
+        })
+    }
+}
+
 fn pixel(f: &Features, k: u32) -> [f64; 2] {
     let p = f.keypoints[k as usize];
     [p.x as f64, p.y as f64]
@@ -127,9 +144,8 @@ fn triangulate(
             ata += a * a.transpose();
         }
     }
-    let eig = nalgebra::SymmetricEigen::try_new(ata, 1e-14, 500)?;
-    let j = eig.eigenvalues.iter().enumerate().min_by(|p, q| p.1.total_cmp(q.1))?.0;
-    let h = eig.eigenvectors.column(j);
+    let h =
+        crate::math::linear::least_eigenvector(nalgebra::DMatrix::from_column_slice(4, 4, ata.as_slice()))?;
     if h[3].abs() < 1e-12 {
         return None;
     }

@@ -50,9 +50,7 @@ pub fn dlt(
             ata += a * a.transpose();
         }
     }
-    let eig = nalgebra::SymmetricEigen::try_new(ata, 1e-14, 1000)?;
-    let k = eig.eigenvalues.iter().enumerate().min_by(|p, q| p.1.total_cmp(q.1))?.0;
-    let p = eig.eigenvectors.column(k);
+    let p = crate::math::linear::least_eigenvector(DMatrix::from_column_slice(12, 12, ata.as_slice()))?;
     let m = Matrix3::new(p[0], p[1], p[2], p[4], p[5], p[6], p[8], p[9], p[10]);
     let tv = Vector3::new(p[3], p[7], p[11]);
     let svd = nalgebra::SVD::try_new(m, true, true, 1e-12, 200)?;

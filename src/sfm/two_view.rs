@@ -27,6 +27,7 @@
 //! Frames: a pose (R, t) maps view-1 camera coordinates to view 2's, X₂ = R X₁ + t, with
 //! |t| = 1 (two views fix the baseline only up to scale).
 
+use crate::math::linear::least_eigenvector;
 use crate::math::ransac::{self, Found};
 use nalgebra::{DMatrix, Matrix3, Vector3, SVD};
 
@@ -83,9 +84,7 @@ pub fn homography_dlt(p1: &[[f64; 2]], p2: &[[f64; 2]], idx: &[usize]) -> Option
             ata += v * v.transpose();
         }
     }
-    let eig = nalgebra::SymmetricEigen::try_new(ata, 1e-14, 500)?;
-    let k = eig.eigenvalues.iter().enumerate().min_by(|p, q| p.1.total_cmp(q.1))?.0;
-    let v = eig.eigenvectors.column(k);
+    let v = least_eigenvector(DMatrix::from_column_slice(9, 9, ata.as_slice()))?;
     let hn = Matrix3::new(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8]);
     let h = t2.try_inverse()? * hn * t1;
     let norm = h.norm();
@@ -135,10 +134,7 @@ pub fn essential_8pt(x1: &[[f64; 2]], x2: &[[f64; 2]], idx: &[usize]) -> Option<
     }
     // The right singular vector of the smallest singular value, from AᵀA's eigenvectors
     // (9 × 9, cheap at any number of points).
-    let ata = a.tr_mul(&a);
-    let eig = nalgebra::SymmetricEigen::try_new(ata, 1e-14, 500)?;
-    let k = eig.eigenvalues.iter().enumerate().min_by(|p, q| p.1.total_cmp(q.1))?.0;
-    let v = eig.eigenvectors.column(k);
+    let v = least_eigenvector(a.tr_mul(&a))?;
     let en = Matrix3::new(v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8]);
     let e = t2.transpose() * en * t1;
     let e = to_essential(&e)?;
