@@ -299,6 +299,17 @@ fn gradient(g: &Grey, x: usize, y: usize) -> (f32, f32) {
     (0.5 * (g.data[i + 1] - g.data[i - 1]), 0.5 * (g.data[i + w] - g.data[i - w]))
 }
 
+/// Calls `f(x, y)` for every pixel of the square of `radius` around (cx, cy) whose central
+/// differences stay inside the image.
+fn inside_window(g: &Grey, cx: i64, cy: i64, radius: i64, mut f: impl FnMut(usize, usize)) {
+    let (w, h) = (g.width as i64, g.height as i64);
+    for yy in (cy - radius).max(1)..=(cy + radius).min(h - 2) {
+        for xx in (cx - radius).max(1)..=(cx + radius).min(w - 2) {
+            f(xx as usize, yy as usize);
+        }
+    }
+}
+
 /// The keypoint's dominant orientations (module docs).
 fn orientations(g: &Grey, x: f32, y: f32, sigma: f32) -> Vec<f32> {
     let s = 1.5 * sigma;
@@ -306,24 +317,15 @@ fn orientations(g: &Grey, x: f32, y: f32, sigma: f32) -> Vec<f32> {
     let (cx, cy) = (x.round() as i64, y.round() as i64);
     let mut hist = [0f32; ORI_BINS];
     let denom = -1.0 / (2.0 * s * s);
-    for dy in -radius..=radius {
-        let yy = cy + dy;
-        if yy < 1 || yy >= g.height as i64 - 1 {
-            continue;
-        }
-        for dx in -radius..=radius {
-            let xx = cx + dx;
-            if xx < 1 || xx >= g.width as i64 - 1 {
-                continue;
-            }
-            let (gx, gy) = gradient(g, xx as usize, yy as usize);
-            let weight = (((dx * dx + dy * dy) as f32) * denom).exp();
-            let angle = gy.atan2(gx);
-            let bin = ((angle / std::f32::consts::TAU * ORI_BINS as f32).round() as i64)
-                .rem_euclid(ORI_BINS as i64) as usize;
-            hist[bin] += weight * (gx * gx + gy * gy).sqrt();
-        }
-    }
+    inside_window(g, cx, cy, radius, |xx, yy| {
+        let (dx, dy) = (xx as i64 - cx, yy as i64 - cy);
+        let (gx, gy) = gradient(g, xx, yy);
+        let weight = (((dx * dx + dy * dy) as f32) * denom).exp();
+        let angle = gy.atan2(gx);
+        let bin = ((angle / std::f32::consts::TAU * ORI_BINS as f32).round() as i64)
+            .rem_euclid(ORI_BINS as i64) as usize;
+        hist[bin] += weight * (gx * gx + gy * gy).sqrt();
+    });
     // Smoothed with [1 4 6 4 1]/16 (circular), as OpenCV does.
     let mut smooth = [0f32; ORI_BINS];
     for i in 0..ORI_BINS {
@@ -366,47 +368,36 @@ fn descriptor(g: &Grey, x: f32, y: f32, sigma: f32, angle: f32) -> [u8; 128] {
     let (cx, cy) = (x.round() as i64, y.round() as i64);
     let mut hist = [0f32; (DESC_CELLS + 2) * (DESC_CELLS + 2) * (DESC_BINS + 2)];
     let weight_denom = -1.0 / (d * d * 0.5);
-    for dy in -radius..=radius {
-        let yy = cy + dy;
-        if yy < 1 || yy >= g.height as i64 - 1 {
-            continue;
+    inside_window(g, cx, cy, radius, |xx, yy| {
+        // Offsets from the keypoint itself (not its rounded pixel), rotated into its frame.
+        let (ox, oy) = (xx as f32 - x, yy as f32 - y);
+        let c_rot = ox * cos + oy * sin;
+        let r_rot = -ox * sin + oy * cos;
+        let rbin = r_rot + d / 2.0 - 0.5;
+        let cbin = c_rot + d / 2.0 - 0.5;
+        if rbin <= -1.0 || rbin >= d || cbin <= -1.0 || cbin >= d {
+            return;
         }
-        for dx in -radius..=radius {
-            let xx = cx + dx;
-            if xx < 1 || xx >= g.width as i64 - 1 {
-                continue;
-            }
-            // Offsets from the keypoint itself (not its rounded pixel), rotated into its frame.
-            let (ox, oy) = (xx as f32 - x, yy as f32 - y);
-            let c_rot = ox * cos + oy * sin;
-            let r_rot = -ox * sin + oy * cos;
-            let rbin = r_rot + d / 2.0 - 0.5;
-            let cbin = c_rot + d / 2.0 - 0.5;
-            if rbin <= -1.0 || rbin >= d || cbin <= -1.0 || cbin >= d {
-                continue;
-            }
-            let (gx, gy) = gradient(g, xx as usize, yy as usize);
-            let mag = (gx * gx + gy * gy).sqrt() * ((c_rot * c_rot + r_rot * r_rot) * weight_denom).exp();
-            let mut ori = gy.atan2(gx) - angle;
-            ori = ori.rem_euclid(std::f32::consts::TAU);
-            let obin = ori / std::f32::consts::TAU * n;
-            // Trilinear spreading into the padded histogram.
-            let (r0, c0, o0) = (rbin.floor(), cbin.floor(), obin.floor());
-            let (fr, fc, fo) = (rbin - r0, cbin - c0, obin - o0);
-            let (r0, c0, o0) = (r0 as i64 + 1, c0 as i64 + 1, o0 as i64);
-            for (ri, wr) in [(0, 1.0 - fr), (1, fr)] {
-                for (ci, wc) in [(0, 1.0 - fc), (1, fc)] {
-                    for (oi, wo) in [(0, 1.0 - fo), (1, fo)] {
-                        let o = ((o0 + oi) as usize) % DESC_BINS;
-                        let idx = (((r0 + ri) as usize) * (DESC_CELLS + 2) + (c0 + ci) as usize)
-                            * (DESC_BINS + 2)
-                            + o;
-                        hist[idx] += mag * wr * wc * wo;
-                    }
+        let (gx, gy) = gradient(g, xx, yy);
+        let mag = (gx * gx + gy * gy).sqrt() * ((c_rot * c_rot + r_rot * r_rot) * weight_denom).exp();
+        let mut ori = gy.atan2(gx) - angle;
+        ori = ori.rem_euclid(std::f32::consts::TAU);
+        let obin = ori / std::f32::consts::TAU * n;
+        // Trilinear spreading into the padded histogram.
+        let (r0, c0, o0) = (rbin.floor(), cbin.floor(), obin.floor());
+        let (fr, fc, fo) = (rbin - r0, cbin - c0, obin - o0);
+        let (r0, c0, o0) = (r0 as i64 + 1, c0 as i64 + 1, o0 as i64);
+        for (ri, wr) in [(0, 1.0 - fr), (1, fr)] {
+            for (ci, wc) in [(0, 1.0 - fc), (1, fc)] {
+                for (oi, wo) in [(0, 1.0 - fo), (1, fo)] {
+                    let o = ((o0 + oi) as usize) % DESC_BINS;
+                    let idx =
+                        (((r0 + ri) as usize) * (DESC_CELLS + 2) + (c0 + ci) as usize) * (DESC_BINS + 2) + o;
+                    hist[idx] += mag * wr * wc * wo;
                 }
             }
         }
-    }
+    });
     let mut v = [0f32; 128];
     for r in 0..DESC_CELLS {
         for c in 0..DESC_CELLS {
