@@ -157,7 +157,8 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(hdr::Input, Truth, Findi
         response: c.response,
     };
     sensor.validate().map_err(StageError::Config)?;
-    method(c)?;
+    // Settings checked before the render; the weights also serve the noise floor below.
+    let (_, weights) = method(c)?;
     let scene_path = ctx.dir.join(&c.scene);
     let scene = render::load(&scene_path)?;
     let digest = scene_digest(&scene_path)?;
@@ -212,7 +213,6 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(hdr::Input, Truth, Findi
     let g_true: Vec<f64> =
         (0..levels).map(|z| c.response.inverse(z as f64 / max_code).max(1e-300).ln()).collect();
     let true_curve = hdr::Response { levels, g: vec![g_true; 3] };
-    let (_, weights) = method(c)?;
     let codes: Vec<&[u16]> = input.frames.iter().map(|f| f.codes.as_slice()).collect();
     let times: Vec<f64> = input.frames.iter().map(|f| f.time_s).collect();
     let (floor_radiance, _) = hdr::merge::merge(&codes, &times, &true_curve, weights);
