@@ -4,10 +4,9 @@
 
 mod common;
 
-use common::lumen;
+use common::{lumen, png};
 
 use lumen::hdr::{self, response::Smoothness, Frame, Input, Method, Weights};
-use std::path::Path;
 
 /// A uniform number in [0, 1) from a key (splitmix64).
 fn hash(k: u64) -> f64 {
@@ -277,14 +276,6 @@ fn memorial_church() {
             .fold(0.0f32, f32::max);
         assert!(worst < 1e-4, "{method}: given response differs by {worst}");
     }
-}
-
-fn png(path: &Path, w: u32, h: u32, f: impl Fn(u32, u32) -> [u8; 3]) {
-    let mut img = image::RgbImage::new(w, h);
-    for (x, y, p) in img.enumerate_pixels_mut() {
-        *p = image::Rgb(f(x, y));
-    }
-    img.save(path).unwrap();
 }
 
 /// `lumen hdr` on files: 16-bit input works; malformed stacks and settings are refused with a

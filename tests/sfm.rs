@@ -2,6 +2,7 @@
 
 mod common;
 
+use common::png;
 use lumen::image::filter::Grey;
 use lumen::sfm::{bundle::Pose, eval, features, mapper, matching, two_view};
 use nalgebra::{Matrix3, Vector3};
@@ -130,14 +131,6 @@ fn herz_jesu_reconstruction() {
     assert!(rot[rot.len() / 2] <= 0.1 && rot[rot.len() - 1] <= 0.3, "{rot:?}");
     assert!(worst_centre <= 0.01, "{centres:?}");
     assert!(rec.rms_px <= 1.0, "{}", rec.rms_px);
-}
-
-fn png(path: &Path, w: u32, h: u32, f: impl Fn(u32, u32) -> [u8; 3]) {
-    let mut img = image::RgbImage::new(w, h);
-    for (x, y, p) in img.enumerate_pixels_mut() {
-        *p = image::Rgb(f(x, y));
-    }
-    img.save(path).unwrap();
 }
 
 /// `lumen sfm` refuses malformed folders, cameras and settings with a message naming the

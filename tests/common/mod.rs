@@ -88,3 +88,12 @@ pub fn settings(scene: &Scene, spp: u32, max_depth: u32) -> render::Settings {
     s.max_depth = max_depth;
     s
 }
+
+/// Writes an 8-bit RGB PNG of `w × h` whose pixel (x, y) is `f(x, y)`.
+pub fn png(path: &Path, w: u32, h: u32, f: impl Fn(u32, u32) -> [u8; 3]) {
+    let mut img = image::RgbImage::new(w, h);
+    for (x, y, p) in img.enumerate_pixels_mut() {
+        *p = image::Rgb(f(x, y));
+    }
+    img.save(path).unwrap();
+}
