@@ -132,6 +132,7 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     let mut order: Vec<usize> = (0..input.frames.len()).collect();
     order.sort_by(|&a, &b| input.frames[b].time_s.total_cmp(&input.frames[a].time_s));
     let times: Vec<f64> = order.iter().map(|&j| input.frames[j].time_s).collect();
+    let frames: Vec<&[u16]> = order.iter().map(|&j| input.frames[j].codes.as_slice()).collect();
     let t = std::time::Instant::now();
     let mut samples = 0;
     let (response, method) = match &config.method {
@@ -154,9 +155,13 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
             let fits = (0..3)
                 .into_par_iter()
                 .map(|c| {
-                    let codes: Vec<Vec<u16>> =
-                        order.iter().map(|&j| channel(&input.frames[j].codes, c)).collect();
-                    let ch = response::Channel { codes: &codes, times: &times, levels: input.levels };
+                    let ch = response::Channel {
+                        frames: &frames,
+                        stride: 3,
+                        offset: c,
+                        times: &times,
+                        levels: input.levels,
+                    };
                     let s = response::choose_samples(
                         &ch,
                         input.width,
@@ -181,9 +186,13 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
             let g = (0..3)
                 .into_par_iter()
                 .map(|c| {
-                    let codes: Vec<Vec<u16>> =
-                        order.iter().map(|&j| channel(&input.frames[j].codes, c)).collect();
-                    let ch = response::Channel { codes: &codes, times: &times, levels: input.levels };
+                    let ch = response::Channel {
+                        frames: &frames,
+                        stride: 3,
+                        offset: c,
+                        times: &times,
+                        levels: input.levels,
+                    };
                     response::robertson(&ch, &usable, *iterations)
                         .map_err(|m| Error::Unsolvable(format!("channel {c}: {m}")))
                 })
@@ -193,7 +202,6 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     };
     let response_s = t.elapsed().as_secs_f64();
     let t = std::time::Instant::now();
-    let frames: Vec<&[u16]> = order.iter().map(|&j| input.frames[j].codes.as_slice()).collect();
     let (radiance, mask) = merge::merge(&frames, &times, &response, config.weights);
     let merge_s = t.elapsed().as_secs_f64();
     if radiance.iter().any(|v| !v.is_finite()) {
@@ -216,10 +224,6 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
         merge_megapixel_frames_per_s: (n * input.frames.len()) as f64 / 1e6 / merge_s.max(1e-9),
     };
     Ok(Output { response, radiance, mask, summary })
-}
-
-fn channel(codes: &[u16], c: usize) -> Vec<u16> {
-    codes.chunks_exact(3).map(|p| p[c]).collect()
 }
 
 fn check(input: &Input) -> Result<(), Error> {

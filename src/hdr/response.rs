@@ -75,11 +75,25 @@ pub fn hat(z: usize, levels: usize) -> f64 {
     z.min(top - z).max(0.0)
 }
 
-/// One channel's codes per frame (frames × pixels) and the frames' exposure times.
+/// One channel of a stack, read in place: per frame, codes interleaved with `stride` samples
+/// per pixel (this channel's at `offset`), and the frames' exposure times.
 pub struct Channel<'a> {
-    pub codes: &'a [Vec<u16>],
+    pub frames: &'a [&'a [u16]],
+    pub stride: usize,
+    pub offset: usize,
     pub times: &'a [f64],
     pub levels: usize,
+}
+
+impl Channel<'_> {
+    /// Frame `j`'s codes in pixel order.
+    fn frame(&self, j: usize) -> impl Iterator<Item = u16> + '_ {
+        self.frames[j][self.offset..].iter().step_by(self.stride).copied()
+    }
+
+    fn code(&self, j: usize, i: usize) -> u16 {
+        self.frames[j][i * self.stride + self.offset]
+    }
 }
 
 /// Bins codes of `levels` values to at most `MAX_FIT_LEVELS`.
@@ -118,26 +132,33 @@ pub fn choose_samples(
 ) -> Vec<usize> {
     let (bins, shift) = binning(ch.levels);
     let n = valid.len();
-    let frames = ch.codes.len();
+    let frames = ch.frames.len();
     // A pixel whose value does not grow with the exposure time (registration borders,
     // moving objects, specks) would teach the fit a wrong curve: only pixels whose values are
     // non-decreasing in time (to one bin) and inside the range in two frames are sampled.
     let mut by_time: Vec<usize> = (0..frames).collect();
     by_time.sort_by(|&a, &b| ch.times[a].total_cmp(&ch.times[b]));
     // Frame by frame in time order (each a sequential pass), per pixel: the last bin, how
-    // many frames show it inside the range, and whether it has grown so far.
+    // many frames show it inside the range, and whether it has grown so far; per frame, which
+    // bins it shows.
     let mut previous = vec![0u16; n];
     let mut inside = vec![0u8; n];
     let mut usable = valid.to_vec();
+    let mut shows = vec![vec![false; bins]; frames];
     for &j in &by_time {
-        for (i, &code) in ch.codes[j].iter().enumerate() {
+        let show = &mut shows[j];
+        let per_pixel = usable.iter_mut().zip(previous.iter_mut()).zip(inside.iter_mut());
+        for (code, ((u, p), k)) in ch.frame(j).zip(per_pixel) {
             let z = code >> shift;
-            usable[i] &= z as usize + 1 >= previous[i] as usize;
-            previous[i] = z;
-            inside[i] = inside[i].saturating_add(u8::from(z > 0 && (z as usize) + 1 < bins));
+            *u &= z + 1 >= *p;
+            *p = z;
+            *k = k.saturating_add(u8::from(z > 0 && (z as usize) + 1 < bins));
+            show[z as usize] = true;
         }
     }
-    for (u, &k) in usable.iter_mut().zip(&inside) {
+    // Pixels still free to be chosen: usable and not yet taken.
+    let mut free = usable;
+    for (u, &k) in free.iter_mut().zip(&inside) {
         *u &= k >= 2;
     }
     // Nearest the centre first: squared distance, doubled to stay an integer, then index.
@@ -145,7 +166,6 @@ pub fn choose_samples(
     let mid = frames / 2;
     frame_order.sort_by_key(|&j| (j as i64 - mid as i64).abs());
     let mut count = vec![0usize; bins];
-    let mut taken = vec![false; n];
     let mut chosen = Vec::new();
     for &j in &frame_order {
         // Per value, the nearest pixels still wanted, in one pass over the frame in memory
@@ -153,20 +173,22 @@ pub fn choose_samples(
         // comparison.
         let mut best: Vec<Vec<((i64, usize), usize)>> = vec![Vec::new(); bins];
         let mut worst = vec![(i64::MAX, usize::MAX); bins];
-        let codes = &ch.codes[j];
         // A frame showing no value still wanted needs no pass.
-        let mut shows = vec![false; bins];
-        codes.iter().for_each(|&z| shows[(z as usize) >> shift] = true);
-        if !(1..bins - 1).any(|b| shows[b] && count[b] < per_value) {
+        if !(1..bins - 1).any(|b| shows[j][b] && count[b] < per_value) {
             continue;
         }
+        // Per bin, how many pixels this frame may still give (none at black or saturation).
+        let wanted: Vec<usize> = (0..bins)
+            .map(|b| if b == 0 || b + 1 == bins { 0 } else { per_value.saturating_sub(count[b]) })
+            .collect();
+        let mut codes = ch.frame(j);
         for y in 0..height {
             let dy = 2 * y as i64 - (height as i64 - 1);
             for x in 0..width {
                 let i = y * width + x;
-                let b = (codes[i] as usize) >> shift;
-                let want = per_value.saturating_sub(count[b]);
-                if want == 0 || b == 0 || b + 1 >= bins || !usable[i] || taken[i] {
+                let b = (codes.next().unwrap_or(0) as usize) >> shift;
+                let want = wanted[b];
+                if want == 0 || !free[i] {
                     continue;
                 }
                 let dx = 2 * x as i64 - (width as i64 - 1);
@@ -188,7 +210,7 @@ pub fn choose_samples(
         for (b, list) in best.into_iter().enumerate() {
             for (_, i) in list {
                 count[b] += 1;
-                taken[i] = true;
+                free[i] = false;
                 chosen.push(i);
             }
         }
@@ -237,11 +259,11 @@ pub fn debevec(
     let mut r = DVector::<f64>::zeros(bins);
     let mut data_rows = 0usize;
     // One sample's rows, merged per value: (z, Σ w², Σ w² ln Δt).
-    let mut rows: Vec<(usize, f64, f64)> = Vec::with_capacity(ch.codes.len());
+    let mut rows: Vec<(usize, f64, f64)> = Vec::with_capacity(ch.frames.len());
     for &i in samples {
         rows.clear();
-        for (j, frame) in ch.codes.iter().enumerate() {
-            let z = (frame[i] as usize) >> shift;
+        for j in 0..ch.frames.len() {
+            let z = (ch.code(j, i) as usize) >> shift;
             let w2 = hat(z, bins).powi(2);
             if w2 == 0.0 {
                 continue;
@@ -337,9 +359,9 @@ fn observed(
     pixels: impl Iterator<Item = usize> + Clone,
 ) -> Vec<bool> {
     let mut seen = vec![false; bins];
-    for frame in ch.codes {
+    for j in 0..ch.frames.len() {
         for i in pixels.clone() {
-            seen[(frame[i] as usize) >> shift] = true;
+            seen[(ch.code(j, i) as usize) >> shift] = true;
         }
     }
     seen[0] = false;
@@ -361,6 +383,9 @@ pub fn robertson(ch: &Channel, valid: &[bool], max_iterations: usize) -> Result<
     if !seen.iter().any(|&s| s) {
         return Err("every pixel is black or saturated in every frame".into());
     }
+    // Every pixel is read once per iteration: the channel is copied out of the interleaved
+    // frames once, so each pass reads contiguous codes.
+    let codes: Vec<Vec<u16>> = (0..ch.frames.len()).map(|j| ch.frame(j).collect()).collect();
     let mut e = vec![0.0f64; n];
     let mut previous: Option<Vec<f64>> = None;
     for _ in 0..max_iterations {
@@ -369,7 +394,7 @@ pub fn robertson(ch: &Channel, valid: &[bool], max_iterations: usize) -> Result<
                 continue;
             }
             let (mut num, mut den) = (0.0, 0.0);
-            for (j, frame) in ch.codes.iter().enumerate() {
+            for (j, frame) in codes.iter().enumerate() {
                 let z = (frame[i] as usize) >> shift;
                 let w = hat(z, bins);
                 num += w * ch.times[j] * inv[z];
@@ -379,7 +404,7 @@ pub fn robertson(ch: &Channel, valid: &[bool], max_iterations: usize) -> Result<
         }
         let mut sum = vec![0.0f64; bins];
         let mut count = vec![0usize; bins];
-        for (j, frame) in ch.codes.iter().enumerate() {
+        for (j, frame) in codes.iter().enumerate() {
             for i in 0..n {
                 if valid[i] && e[i] > 0.0 {
                     let z = (frame[i] as usize) >> shift;
@@ -526,7 +551,8 @@ mod tests {
         let response = |x: f64| (255.0 * (x.clamp(0.0, 1.0)).powf(1.0 / 2.2)).round() as u16;
         let codes: Vec<Vec<u16>> =
             times.iter().map(|&t| e.iter().map(|&v| response(v * t * 4.0)).collect()).collect();
-        let ch = Channel { codes: &codes, times: &times, levels: 256 };
+        let frames: Vec<&[u16]> = codes.iter().map(|f| f.as_slice()).collect();
+        let ch = Channel { frames: &frames, stride: 1, offset: 0, times: &times, levels: 256 };
         let valid = vec![true; w * h];
         let samples = choose_samples(&ch, w, h, 1, &valid);
         let fits = [
