@@ -8,6 +8,8 @@
 //! - `calibrate`: `calibrateCamera` with k1, k2, p1, p2, k3 free and the stopping criteria
 //!   given, returning what lumen's calibration returns.
 //!
+//! - `hdr_stack`: `CalibrateDebevec`, `MergeDebevec` and `MergeMertens` on an exposure stack.
+//!
 //! Corners cross the boundary as f32 (`Point2f`), which is what `calibrateCamera` takes.
 
 use crate::math::{CameraModel, Distortion, Intrinsics};
@@ -104,4 +106,91 @@ pub fn calibrate(
             distortion: Distortion { k1: dist[0], k2: dist[1], p1: dist[2], p2: dist[3], k3: dist[4] },
         },
     })
+}
+
+/// What OpenCV's photo module makes of an exposure stack, as its users call it: frames read
+/// by `imread` (8-bit BGR), times as f32 seconds. Channels are returned in RGB order.
+pub struct CvHdr {
+    /// `CalibrateDebevec` with its defaults (70 random samples, λ = 10): ln of its exposure
+    /// per value and channel (NaN where OpenCV's value is not positive).
+    pub response_ln: [Vec<f64>; 3],
+    /// `MergeDebevec` of the stack through `merge_response` (ln exposure per channel and
+    /// value), or through OpenCV's own curve: interleaved RGB.
+    pub radiance: Vec<f32>,
+    /// `MergeMertens` with Mertens et al.'s exponents (1, 1, 1; OpenCV's default exposure
+    /// exponent is 0): interleaved RGB, not clipped.
+    pub fusion: Vec<f32>,
+    pub width: usize,
+    pub height: usize,
+}
+
+/// Interleaved 3-channel f32 values of a CV_32FC3 image, BGR swapped to RGB.
+fn rgb_f32(m: &Mat) -> Result<Vec<f32>, String> {
+    let data = m.data_typed::<opencv::core::Vec3f>().map_err(err)?;
+    Ok(data.iter().flat_map(|p| [p[2], p[1], p[0]]).collect())
+}
+
+/// OpenCV's Debevec calibration, Debevec merge and Mertens fusion of the frames (`CvHdr`).
+pub fn hdr_stack(
+    frames: &[std::path::PathBuf],
+    times: &[f64],
+    merge_response: Option<&[Vec<f64>]>,
+) -> Result<CvHdr, String> {
+    use opencv::photo::{CalibrateCRFTrait, MergeDebevecTrait, MergeMertensTrait};
+    let mut images = Vector::<Mat>::new();
+    for p in frames {
+        let m =
+            opencv::imgcodecs::imread(&p.to_string_lossy(), opencv::imgcodecs::IMREAD_COLOR).map_err(err)?;
+        if m.empty() {
+            return Err(format!("{}: OpenCV cannot read it", p.display()));
+        }
+        images.push(m);
+    }
+    let (width, height) = {
+        let s = images.get(0).map_err(err)?.size().map_err(err)?;
+        (s.width as usize, s.height as usize)
+    };
+    let t: Vec<f32> = times.iter().map(|&t| t as f32).collect();
+    let times = Mat::from_slice(&t).map_err(err)?;
+    let mut response = Mat::default();
+    opencv::photo::create_calibrate_debevec(70, 10.0, false)
+        .map_err(err)?
+        .process(&images, &mut response, &times)
+        .map_err(err)?;
+    let curve = response.data_typed::<opencv::core::Vec3f>().map_err(err)?.to_vec();
+    let ln = |c: usize| -> Vec<f64> {
+        curve.iter().map(|p| if p[2 - c] > 0.0 { (p[2 - c] as f64).ln() } else { f64::NAN }).collect()
+    };
+    let response_ln = [ln(0), ln(1), ln(2)];
+    let given;
+    let merge_with = match merge_response {
+        Some(g) => {
+            let values: Vec<opencv::core::Vec3f> = (0..256)
+                .map(|z| {
+                    opencv::core::Vec3f::from([
+                        g[2][z].exp() as f32,
+                        g[1][z].exp() as f32,
+                        g[0][z].exp() as f32,
+                    ])
+                })
+                .collect();
+            given = Mat::from_slice(&values)
+                .map_err(err)?
+                .reshape(3, 256)
+                .map_err(err)?
+                .try_clone()
+                .map_err(err)?;
+            &given
+        }
+        None => &response,
+    };
+    let mut radiance = Mat::default();
+    opencv::photo::create_merge_debevec()
+        .map_err(err)?
+        .process_with_response(&images, &mut radiance, &times, merge_with)
+        .map_err(err)?;
+    let mut fusion = Mat::default();
+    let mut mertens = opencv::photo::create_merge_mertens(1.0, 1.0, 1.0).map_err(err)?;
+    MergeMertensTrait::process(&mut mertens, &images, &mut fusion).map_err(err)?;
+    Ok(CvHdr { response_ln, radiance: rgb_f32(&radiance)?, fusion: rgb_f32(&fusion)?, width, height })
 }

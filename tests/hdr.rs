@@ -95,6 +95,7 @@ fn synthetic_stack_recovers_response_and_radiance() {
         let config = hdr::Config {
             method: method.clone(),
             weights: Weights::Noise { full_well: 1e12, read_noise: 0.0 },
+            fusion: None,
         };
         let out = hdr::run(&input, &config).unwrap();
         for c in 0..3 {
@@ -221,6 +222,48 @@ fn refusals() {
 /// The Memorial Church stack (16 real photographs, `../shared/data/hdr/memorial`): both
 /// methods give a finite, strictly increasing response on every channel, the merged radiance
 /// is finite and spans the stack's 15 stops of exposure time plus the film's own range.
+/// Mertens et al.'s fusion: a stack of identical frames fuses to that frame (the weights sum
+/// to one at every pyramid level and the Laplacian pyramid collapses exactly, so only f32
+/// rounding remains); a real bracket fuses to finite values in [0, 1] that use the range.
+#[test]
+fn exposure_fusion() {
+    let (radiance, input) = synthetic(1e5, &[1.0, 0.1, 0.01, 0.001]);
+    let same = Input {
+        frames: (0..3)
+            .map(|k| Frame {
+                name: format!("{k}"),
+                time_s: 1.0 / (k + 1) as f64,
+                codes: input.frames[1].codes.clone(),
+            })
+            .collect(),
+        ..input.clone()
+    };
+    let mertens = hdr::fusion::Mertens::default();
+    let fused = hdr::fusion::mertens(&same, &mertens);
+    let worst = fused
+        .iter()
+        .zip(&same.frames[0].codes)
+        .map(|(f, &z)| (f - z as f32 / 255.0).abs())
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-5, "identical frames: worst difference {worst}");
+    let fused = hdr::fusion::mertens(&input, &mertens);
+    assert_eq!(fused.len(), 3 * input.width * input.height);
+    assert!(fused.iter().all(|v| v.is_finite() && (0.0..=1.0).contains(v)));
+    // Brighter scene, brighter picture: the mean fused green of each fifth of the pixels by
+    // true radiance rises from fifth to fifth.
+    let mut order: Vec<usize> = (0..input.width * input.height).collect();
+    order.sort_by(|&a, &b| radiance[3 * a + 1].total_cmp(&radiance[3 * b + 1]));
+    let fifths: Vec<f32> = order
+        .chunks(order.len() / 5)
+        .map(|c| c.iter().map(|&i| fused[3 * i + 1]).sum::<f32>() / c.len() as f32)
+        .collect();
+    assert!(fifths.windows(2).all(|p| p[1] > p[0] + 0.02), "mean fused green per fifth: {fifths:?}");
+    let bad = hdr::fusion::Mertens { contrast: f64::NAN, ..mertens };
+    let config = hdr::Config { fusion: Some(bad), ..hdr::Config::default() };
+    let err = hdr::run(&input, &config).unwrap_err().to_string();
+    assert!(err.contains("contrast"), "{err}");
+}
+
 #[test]
 fn memorial_church() {
     let Some(shared) = common::shared_data() else { return };
@@ -236,10 +279,13 @@ fn memorial_church() {
             "0,0,255",
             "--response",
             method,
+            "--fusion",
             "--out",
             out.to_str().unwrap(),
         ]);
         assert_eq!(code, 0, "{err}");
+        let fusion = image::open(out.with_file_name("fusion.png")).unwrap();
+        assert_eq!((fusion.width(), fusion.height()), (512, 768));
         let text = std::fs::read_to_string(out.with_file_name("response.csv")).unwrap();
         let r = lumen::hdr::response::from_csv(&text)
             .expect("the written response reads back: finite, increasing");

@@ -47,8 +47,12 @@ pub struct HdrArgs {
     /// fit, e.g. 0,0,255 for registration borders.
     #[arg(long)]
     pub exclude_color: Option<String>,
+    /// Also write fusion.png: Mertens et al.'s exposure fusion, an LDR picture blended from
+    /// the frames (no response, no radiance), in the frames' own encoding.
+    #[arg(long)]
+    pub fusion: bool,
     /// Output radiance (.exr); response.csv, response.svg, mask.png, preview.png and
-    /// summary.json go beside it.
+    /// summary.json (and fusion.png with --fusion) go beside it.
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -230,7 +234,8 @@ pub fn run(a: &HdrArgs) -> Result<()> {
         }
     };
     let input = Input { width: w as usize, height: h as usize, levels, frames, usable };
-    let out = hdr::run(&input, &hdr::Config { method, weights })?;
+    let fusion = a.fusion.then(hdr::fusion::Mertens::default);
+    let out = hdr::run(&input, &hdr::Config { method, weights, fusion })?;
 
     let dir = a.out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
@@ -257,10 +262,15 @@ pub fn run(a: &HdrArgs) -> Result<()> {
     }
     image::io::write_png_srgb(&dir.join("mask.png"), &mask)?;
     image::io::write_png_srgb(&dir.join("preview.png"), &hdr::tonemap::reinhard(&radiance))?;
+    if let Some(f) = &out.fusion {
+        // Already in the frames' encoding: written as it is, not sRGB-encoded again.
+        let codes: Vec<u16> = f.iter().map(|v| (v * 255.0 + 0.5) as u16).collect();
+        image::io::write_png_raw(&dir.join("fusion.png"), w, h, 3, &codes, 8)?;
+    }
     write("summary.json", serde_json::to_string_pretty(&out.summary)?.into_bytes())?;
     let s = &out.summary;
     eprintln!(
-        "{} frames {w}×{h} ({} levels): response by {} in {:.3} s ({} samples), merged in {:.3} s ({:.0} Mpixel-frames/s); {:.1} stops well exposed; {} pixels saturated in every frame (lower bounds), {} dark in every frame (upper bounds); read {read_s:.2} s; wrote {} and response.csv, response.svg, mask.png (red: saturated, blue: dark), preview.png, summary.json beside it",
+        "{} frames {w}×{h} ({} levels): response by {} in {:.3} s ({} samples), merged in {:.3} s ({:.0} Mpixel-frames/s); {:.1} stops well exposed; {} pixels saturated in every frame (lower bounds), {} dark in every frame (upper bounds); read {read_s:.2} s; wrote {} and response.csv, response.svg, mask.png (red: saturated, blue: dark), preview.png, summary.json{} beside it",
         s.frames,
         s.levels,
         s.method,
@@ -271,7 +281,8 @@ pub fn run(a: &HdrArgs) -> Result<()> {
         s.dynamic_range_stops,
         s.saturated_pixels,
         s.dark_pixels,
-        a.out.display()
+        a.out.display(),
+        if out.fusion.is_some() { format!(", fusion.png (in {:.2} s)", s.fusion_s) } else { String::new() }
     );
     Ok(())
 }

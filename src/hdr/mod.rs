@@ -7,8 +7,10 @@
 //! radiance has the response's arbitrary scale per channel (g(z_mid) = 0): exposure × time
 //! is known only up to that factor.
 //!
-//! `tonemap` holds Reinhard et al.'s global operator for PNG previews.
+//! `tonemap` holds Reinhard et al.'s global operator for PNG previews; `fusion` Mertens et
+//! al.'s exposure fusion, an LDR picture blended from the frames without a response.
 
+pub mod fusion;
 pub mod merge;
 pub mod response;
 pub mod tonemap;
@@ -79,6 +81,8 @@ pub const DEFAULT_SAMPLES_PER_VALUE: usize = 4;
 pub struct Config {
     pub method: Method,
     pub weights: Weights,
+    /// Also blend an LDR picture by Mertens et al.'s exposure fusion (`fusion`), if given.
+    pub fusion: Option<fusion::Mertens>,
 }
 
 impl Default for Config {
@@ -90,6 +94,7 @@ impl Default for Config {
                 smoothness: response::Smoothness::Logit,
             },
             weights: Weights::Hat,
+            fusion: None,
         }
     }
 }
@@ -101,6 +106,8 @@ pub struct Output {
     pub radiance: Vec<f32>,
     /// Per pixel: `merge::WELL_EXPOSED`, `SATURATED` (a lower bound) or `DARK` (an upper bound).
     pub mask: Vec<u8>,
+    /// Mertens et al.'s fusion, interleaved RGB in [0, 1] in the frames' encoding, when asked.
+    pub fusion: Option<Vec<f32>>,
     pub summary: Summary,
 }
 
@@ -122,6 +129,8 @@ pub struct Summary {
     pub merge_s: f64,
     /// Megapixels × frames merged per second.
     pub merge_megapixel_frames_per_s: f64,
+    /// Seconds for the exposure fusion (0 without it).
+    pub fusion_s: f64,
 }
 
 pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
@@ -207,6 +216,15 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     if radiance.iter().any(|v| !v.is_finite()) {
         return Err(Error::Unsolvable("the merge gave a radiance that is not a finite float32".into()));
     }
+    let t = std::time::Instant::now();
+    let fusion = match &config.fusion {
+        Some(p) => {
+            p.validate().map_err(Error::BadInput)?;
+            Some(fusion::mertens(input, p))
+        }
+        None => None,
+    };
+    let fusion_s = t.elapsed().as_secs_f64();
     let well = radiance.chunks_exact(3).zip(&mask).filter(|(_, &m)| m == merge::WELL_EXPOSED);
     let range = crate::image::luminance_range(well.map(|(p, _)| p));
     let summary = Summary {
@@ -222,8 +240,9 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
         response_s,
         merge_s,
         merge_megapixel_frames_per_s: (n * input.frames.len()) as f64 / 1e6 / merge_s.max(1e-9),
+        fusion_s,
     };
-    Ok(Output { response, radiance, mask, summary })
+    Ok(Output { response, radiance, mask, fusion, summary })
 }
 
 fn check(input: &Input) -> Result<(), Error> {

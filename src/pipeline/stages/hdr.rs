@@ -269,7 +269,7 @@ fn method(c: &Config) -> Result<(Method, Weights), StageError> {
 
 pub fn solve(c: &Config, input: &hdr::Input) -> Result<hdr::Output, StageError> {
     let (method, weights) = method(c)?;
-    Ok(hdr::run(input, &hdr::Config { method, weights })?)
+    Ok(hdr::run(input, &hdr::Config { method, weights, fusion: None })?)
 }
 
 /// Relative errors of a merged radiance against the truth over the well-exposed pixel

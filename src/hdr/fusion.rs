@@ -1,0 +1,433 @@
+//! Exposure fusion: Mertens, Kautz & Van Reeth, "Exposure Fusion", Pacific Graphics 2007.
+//!
+//! An LDR picture blended straight from the frames, with no response and no radiance: each
+//! frame's pixels are weighed by
+//!
+//!   W = C^ω_c · S^ω_s · E^ω_e + 10⁻¹²
+//!
+//! with C the absolute Laplacian of the frame's grey values (contrast), S the standard
+//! deviation of R, G and B (saturation) and E = Π_c exp(−(I_c − ½)²/(2·0.2²)) (well-exposedness),
+//! values I in [0, 1] as the codes over the top code. The weights are normalised over the
+//! frames per pixel and the frames blended level by level: the Laplacian pyramid of each
+//! frame times the Gaussian pyramid of its weights, summed, then collapsed. The pyramid uses
+//! the 5-tap binomial kernel [1 4 6 4 1]/16 with mirrored borders (reflect-101), as OpenCV's
+//! `pyrDown`/`pyrUp` and `MergeMertens` do, over ⌊log₂ min(width, height)⌋ levels. The result
+//! is in the frames' own encoding (display-referred, not linear) and clamped to [0, 1].
+//!
+//! Hand-written: the image crates offer no pyramid, and the blend needs f32 pyramids of
+//! weights and signed differences.
+
+use super::Input;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// The exponents of the three measures (Mertens et al.'s defaults: 1, 1, 1).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Mertens {
+    #[serde(default = "one")]
+    pub contrast: f64,
+    #[serde(default = "one")]
+    pub saturation: f64,
+    #[serde(default = "one")]
+    pub exposedness: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+impl Default for Mertens {
+    fn default() -> Mertens {
+        Mertens { contrast: 1.0, saturation: 1.0, exposedness: 1.0 }
+    }
+}
+
+impl Mertens {
+    pub fn validate(&self) -> Result<(), String> {
+        for (name, v) in
+            [("contrast", self.contrast), ("saturation", self.saturation), ("exposedness", self.exposedness)]
+        {
+            if !(v.is_finite() && (0.0..=10.0).contains(&v)) {
+                return Err(format!("fusion {name} exponent = {v}: expected 0 to 10"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A planar f32 image of `c` channels.
+#[derive(Clone, Debug)]
+struct Plane {
+    w: usize,
+    h: usize,
+    c: usize,
+    data: Vec<f32>,
+}
+
+impl Plane {
+    fn zeros(w: usize, h: usize, c: usize) -> Plane {
+        Plane { w, h, c, data: vec![0.0; w * h * c] }
+    }
+}
+
+/// Mirrors an index into 0..n without repeating the edge (reflect-101: −1 → 1, n → n − 2).
+fn mirror(i: isize, n: usize) -> usize {
+    let n = n as isize;
+    if n == 1 {
+        return 0;
+    }
+    let period = 2 * (n - 1);
+    let mut k = i.rem_euclid(period);
+    if k >= n {
+        k = period - k;
+    }
+    k as usize
+}
+
+const TAPS: [f32; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
+
+/// Blurs with the 5-tap kernel and keeps every second sample: ⌈w/2⌉ × ⌈h/2⌉. The vertical
+/// pass runs first, over whole rows (which vectorises), the horizontal one on its output.
+fn pyr_down(src: &Plane) -> Plane {
+    let (w, h, c) = (src.w, src.h, src.c);
+    let (dw, dh) = (w.div_ceil(2), h.div_ceil(2));
+    let row = |y: isize| {
+        let sy = mirror(y, h);
+        &src.data[sy * w * c..(sy + 1) * w * c]
+    };
+    let mut dst = Plane::zeros(dw, dh, c);
+    let mut tmp = vec![0.0f32; w * c];
+    for (y, out) in dst.data.chunks_exact_mut(dw * c).enumerate() {
+        let y = 2 * y as isize;
+        let (a, b, m, d, e) = (row(y - 2), row(y - 1), row(y), row(y + 1), row(y + 2));
+        let outer = a.iter().zip(e).zip(b.iter().zip(d));
+        for ((t, m), ((a, e), (b, d))) in tmp.iter_mut().zip(m).zip(outer) {
+            *t = (a + e + 4.0 * (b + d) + 6.0 * m) * (1.0 / 16.0);
+        }
+        match c {
+            1 => down_row::<1>(&tmp, out, w),
+            3 => down_row::<3>(&tmp, out, w),
+            _ => down_row_any(&tmp, out, w, c),
+        }
+    }
+    dst
+}
+
+/// The horizontal pass of `pyr_down` on one row of `C` interleaved channels; `C` fixed at
+/// compile time so the inner loops unroll.
+fn down_row<const C: usize>(line: &[f32], out: &mut [f32], w: usize) {
+    let dw = out.len() / C;
+    // Inside: outputs 1 .. while 2x + 2 < w.
+    let inside_end = if w >= 3 { ((w - 3) / 2 + 1).min(dw) } else { 0 };
+    for x in 1..inside_end {
+        let a = &line[(2 * x - 2) * C..(2 * x + 3) * C];
+        let o = &mut out[x * C..(x + 1) * C];
+        for ch in 0..C {
+            o[ch] = (a[ch] + a[4 * C + ch] + 4.0 * (a[C + ch] + a[3 * C + ch]) + 6.0 * a[2 * C + ch])
+                * (1.0 / 16.0);
+        }
+    }
+    for x in std::iter::once(0).chain(inside_end.max(1)..dw) {
+        down_edge(line, &mut out[x * C..(x + 1) * C], x, w, C);
+    }
+}
+
+fn down_row_any(line: &[f32], out: &mut [f32], w: usize, c: usize) {
+    for x in 0..out.len() / c {
+        down_edge(line, &mut out[x * c..(x + 1) * c], x, w, c);
+    }
+}
+
+/// One output of `pyr_down`'s horizontal pass with mirrored taps.
+fn down_edge(line: &[f32], o: &mut [f32], x: usize, w: usize, c: usize) {
+    o.fill(0.0);
+    for (k, t) in TAPS.iter().enumerate() {
+        let at = mirror(2 * x as isize + k as isize - 2, w) * c;
+        o.iter_mut().zip(&line[at..at + c]).for_each(|(o, v)| *o += t * v);
+    }
+}
+
+/// The source samples and weights output sample `x` of an expand to `n_dst` draws on: the
+/// even p = x + k − 2, mirrored on the output's grid (which keeps the weights' sum at 1 at
+/// both ends, for an even or odd length), give source p/2 with twice the tap.
+fn up_taps(x: usize, n_src: usize, n_dst: usize) -> Vec<(usize, f32)> {
+    if n_dst == 1 {
+        return vec![(0, 1.0)];
+    }
+    let mut taps: Vec<(usize, f32)> = Vec::with_capacity(3);
+    for (k, t) in TAPS.iter().enumerate() {
+        let p = mirror(x as isize + k as isize - 2, n_dst);
+        if p.is_multiple_of(2) && p / 2 < n_src {
+            match taps.iter_mut().find(|e| e.0 == p / 2) {
+                Some(e) => e.1 += 2.0 * t,
+                None => taps.push((p / 2, 2.0 * t)),
+            }
+        }
+    }
+    taps
+}
+
+/// The expand of `src` to `w` × `h` (each 2·src or 2·src − 1), handed to `each` row by row
+/// (row index, values): zeros inserted between the samples, then the 5-tap kernel times 4, so
+/// a constant stays constant. Inside, even x = 2s gets (src[s−1] + 6 src[s] + src[s+1])/8 and
+/// odd x = 2s + 1 the mean of src[s] and src[s+1]; rows likewise. Row by row, so a caller
+/// adds or subtracts the expand without a full-size copy of it.
+fn pyr_up_rows(src: &Plane, w: usize, h: usize, mut each: impl FnMut(usize, &[f32])) {
+    let c = src.c;
+    let (sw, sh) = (src.w, src.h);
+    // The horizontal pass over the source's rows (half the output's height).
+    let mut rows = vec![0.0f32; w * sh * c];
+    for (line, out) in src.data.chunks_exact(sw * c).zip(rows.chunks_exact_mut(w * c)) {
+        match c {
+            1 => up_row::<1>(line, out, w),
+            3 => up_row::<3>(line, out, w),
+            _ => (0..w).for_each(|x| up_edge(line, &mut out[x * c..(x + 1) * c], x, w, c)),
+        }
+    }
+    let row = |s: usize| &rows[s * w * c..(s + 1) * w * c];
+    let mut out = vec![0.0f32; w * c];
+    for y in 0..h {
+        let s = y / 2;
+        if s >= 1 && s + 1 < sh {
+            let (a, b, d) = (row(s - 1), row(s), row(s + 1));
+            if y % 2 == 0 {
+                for (o, (a, (b, d))) in out.iter_mut().zip(a.iter().zip(b.iter().zip(d))) {
+                    *o = (a + 6.0 * b + d) * 0.125;
+                }
+            } else {
+                for (o, (b, d)) in out.iter_mut().zip(b.iter().zip(d)) {
+                    *o = 0.5 * (b + d);
+                }
+            }
+        } else {
+            out.fill(0.0);
+            for (sy, t) in up_taps(y, sh, h) {
+                out.iter_mut().zip(row(sy)).for_each(|(o, v)| *o += t * v);
+            }
+        }
+        each(y, &out);
+    }
+}
+
+/// The horizontal pass of `pyr_up_rows` on one row of `C` interleaved channels: outputs 2s
+/// and 2s + 1 together for each source sample s inside, the ends with mirrored taps.
+fn up_row<const C: usize>(line: &[f32], out: &mut [f32], w: usize) {
+    let sw = line.len() / C;
+    let mut done_to = 2.min(w);
+    for s in 1..sw.saturating_sub(1) {
+        if 2 * s + 1 >= w {
+            break;
+        }
+        let a = &line[(s - 1) * C..(s + 2) * C];
+        let o = &mut out[2 * s * C..(2 * s + 2) * C];
+        for ch in 0..C {
+            o[ch] = (a[ch] + 6.0 * a[C + ch] + a[2 * C + ch]) * 0.125;
+            o[C + ch] = 0.5 * (a[C + ch] + a[2 * C + ch]);
+        }
+        done_to = 2 * s + 2;
+    }
+    for x in (0..2.min(w)).chain(done_to..w) {
+        up_edge(line, &mut out[x * C..(x + 1) * C], x, w, C);
+    }
+}
+
+/// One output of the expand's horizontal pass with mirrored taps (`up_taps`).
+fn up_edge(line: &[f32], o: &mut [f32], x: usize, w: usize, c: usize) {
+    o.fill(0.0);
+    for (sx, t) in up_taps(x, line.len() / c, w) {
+        o.iter_mut().zip(&line[sx * c..(sx + 1) * c]).for_each(|(o, v)| *o += t * v);
+    }
+}
+
+/// `pyr_up_rows` gathered into a plane.
+#[cfg(test)]
+fn pyr_up(src: &Plane, w: usize, h: usize) -> Plane {
+    let mut dst = Plane::zeros(w, h, src.c);
+    let n = w * src.c;
+    pyr_up_rows(src, w, h, |y, row| dst.data[y * n..(y + 1) * n].copy_from_slice(row));
+    dst
+}
+
+/// Levels below the full image: ⌊log₂ min(w, h)⌋ (OpenCV's choice), at least 0.
+fn levels(w: usize, h: usize) -> usize {
+    (w.min(h).max(1) as f64).log2().floor() as usize
+}
+
+/// Frame `j`'s values in [0, 1], interleaved RGB.
+fn values(input: &Input, j: usize) -> Plane {
+    let top = (input.levels - 1) as f32;
+    let data = input.frames[j].codes.iter().map(|&z| z as f32 / top).collect();
+    Plane { w: input.width, h: input.height, c: 3, data }
+}
+
+/// The unnormalised weight of every pixel of one frame (module docs).
+fn weights(img: &Plane, codes: &[u16], exposedness: &[f32], p: &Mertens) -> Vec<f32> {
+    // The paper's exponents (all 1) get a loop without `powf`: a branch on the exponent
+    // inside the loop is compiled to a select that calls `powf` anyway.
+    if *p == Mertens::default() {
+        weights_with::<true>(img, codes, exposedness, p)
+    } else {
+        weights_with::<false>(img, codes, exposedness, p)
+    }
+}
+
+fn weights_with<const ONES: bool>(img: &Plane, codes: &[u16], exposedness: &[f32], p: &Mertens) -> Vec<f32> {
+    let (w, h) = (img.w, img.h);
+    let grey: Vec<f32> =
+        img.data.chunks_exact(3).map(|q| 0.299 * q[0] + 0.587 * q[1] + 0.114 * q[2]).collect();
+    let (ec, es, ee) = (p.contrast as f32, p.saturation as f32, p.exposedness as f32);
+    let mut out = vec![0.0f32; w * h];
+    for (y, row) in out.chunks_exact_mut(w).enumerate() {
+        let line = |dy: isize| {
+            let sy = mirror(y as isize + dy, h);
+            &grey[sy * w..(sy + 1) * w]
+        };
+        let (up, mid, down) = (line(-1), line(0), line(1));
+        let pixels = img.data[y * w * 3..(y + 1) * w * 3].chunks_exact(3);
+        let z = codes[y * w * 3..(y + 1) * w * 3].chunks_exact(3);
+        for (x, (o, (q, z))) in row.iter_mut().zip(pixels.zip(z)).enumerate() {
+            // Mirrored neighbours (reflect-101) without a division per pixel.
+            let left = if x > 0 { x - 1 } else { 1.min(w - 1) };
+            let right = if x + 1 < w { x + 1 } else { x.saturating_sub(1) };
+            let lap = up[x] + down[x] + mid[left] + mid[right] - 4.0 * mid[x];
+            let mean = (q[0] + q[1] + q[2]) * (1.0 / 3.0);
+            let sat = (((q[0] - mean).powi(2) + (q[1] - mean).powi(2) + (q[2] - mean).powi(2)) / 3.0).sqrt();
+            let expo = exposedness[z[0] as usize] * exposedness[z[1] as usize] * exposedness[z[2] as usize];
+            *o =
+                if ONES { lap.abs() * sat * expo } else { lap.abs().powf(ec) * sat.powf(es) * expo.powf(ee) }
+                    + 1e-12;
+        }
+    }
+    out
+}
+
+/// One frame's share of the result: its Laplacian pyramid times its weights' Gaussian
+/// pyramid, added into `acc` (one plane per level).
+fn blend_into(acc: &mut [Plane], img: Plane, weights: Plane, depth: usize) {
+    let mut gauss = vec![img];
+    let mut wpyr = vec![weights];
+    for l in 0..depth {
+        let next = pyr_down(&gauss[l]);
+        gauss.push(next);
+        let next = pyr_down(&wpyr[l]);
+        wpyr.push(next);
+    }
+    // acc += (G_l − expand(G_{l+1}))·W_l, a row at a time; the coarsest level adds G·W.
+    let mac = |acc: &mut [f32], g: &[f32], up: Option<&[f32]>, wt: &[f32]| {
+        let (acc, g) = (acc.chunks_exact_mut(3), g.chunks_exact(3));
+        match up {
+            Some(up) => {
+                for (((o, g), u), wt) in acc.zip(g).zip(up.chunks_exact(3)).zip(wt) {
+                    o[0] += (g[0] - u[0]) * wt;
+                    o[1] += (g[1] - u[1]) * wt;
+                    o[2] += (g[2] - u[2]) * wt;
+                }
+            }
+            None => {
+                for ((o, g), wt) in acc.zip(g).zip(wt) {
+                    o[0] += g[0] * wt;
+                    o[1] += g[1] * wt;
+                    o[2] += g[2] * wt;
+                }
+            }
+        }
+    };
+    for l in 0..=depth {
+        let (w, h) = (gauss[l].w, gauss[l].h);
+        let (g, wt, a) = (&gauss[l].data, &wpyr[l].data, &mut acc[l].data);
+        if l < depth {
+            pyr_up_rows(&gauss[l + 1], w, h, |y, up| {
+                let (r, p) = (y * w * 3..(y + 1) * w * 3, y * w..(y + 1) * w);
+                mac(&mut a[r.clone()], &g[r], Some(up), &wt[p]);
+            });
+        } else {
+            mac(a, g, None, wt);
+        }
+    }
+}
+
+/// Mertens et al.'s fusion of the stack (module docs): interleaved RGB in [0, 1].
+pub fn mertens(input: &Input, p: &Mertens) -> Vec<f32> {
+    let (w, h) = (input.width, input.height);
+    let depth = levels(w, h);
+    let frames = input.frames.len();
+    // exp(−(v − ½)²/(2·0.2²)) per code value, so the weights need no exp per pixel.
+    let top = (input.levels - 1) as f32;
+    let exposedness: Vec<f32> =
+        (0..input.levels).map(|z| (-(z as f32 / top - 0.5).powi(2) / (2.0 * 0.2 * 0.2)).exp()).collect();
+    // Every frame's weights first (one f32 per pixel and frame, as OpenCV keeps), for their
+    // sum; then the frames blended in parallel, each thread into its own pyramid.
+    let all: Vec<Vec<f32>> = (0..frames)
+        .into_par_iter()
+        .map(|j| weights(&values(input, j), &input.frames[j].codes, &exposedness, p))
+        .collect();
+    let mut total = vec![0.0f32; w * h];
+    for wj in &all {
+        total.iter_mut().zip(wj).for_each(|(t, v)| *t += v);
+    }
+    let sizes: Vec<(usize, usize)> =
+        std::iter::successors(Some((w, h)), |&(a, b)| Some((a.div_ceil(2), b.div_ceil(2))))
+            .take(depth + 1)
+            .collect();
+    let zeros = || sizes.iter().map(|&(a, b)| Plane::zeros(a, b, 3)).collect::<Vec<Plane>>();
+    let mut acc = all
+        .into_par_iter()
+        .enumerate()
+        .fold(zeros, |mut acc, (j, mut wj)| {
+            wj.iter_mut().zip(&total).for_each(|(v, t)| *v /= t);
+            blend_into(&mut acc, values(input, j), Plane { w, h, c: 1, data: wj }, depth);
+            acc
+        })
+        .reduce(zeros, |mut a, b| {
+            for (x, y) in a.iter_mut().zip(&b) {
+                x.data.iter_mut().zip(&y.data).for_each(|(u, v)| *u += v);
+            }
+            a
+        });
+    for l in (1..acc.len()).rev() {
+        let (finer, coarser) = acc.split_at_mut(l);
+        let fine = &mut finer[l - 1];
+        let n = fine.w * 3;
+        pyr_up_rows(&coarser[0], fine.w, fine.h, |y, up| {
+            fine.data[y * n..(y + 1) * n].iter_mut().zip(up).for_each(|(a, b)| *a += b);
+        });
+    }
+    let Some(top) = acc.into_iter().next() else { return Vec::new() };
+    top.data.into_iter().map(|v| if v.is_finite() { v.clamp(0.0, 1.0) } else { 0.0 }).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plane(w: usize, h: usize, f: impl Fn(usize, usize) -> f32) -> Plane {
+        let data = (0..w * h).map(|i| f(i % w, i / w)).collect();
+        Plane { w, h, c: 1, data }
+    }
+
+    /// A constant survives both pyramid steps at any size, odd or even; the expand of the
+    /// reduce of a smooth ramp is the ramp away from the borders (the kernel keeps linear functions).
+    #[test]
+    fn pyramid_steps_keep_constants() {
+        for (w, h) in [(1, 1), (2, 3), (7, 5), (16, 9)] {
+            let p = plane(w, h, |_, _| 0.25);
+            let d = pyr_down(&p);
+            assert_eq!((d.w, d.h), (w.div_ceil(2), h.div_ceil(2)));
+            assert!(d.data.iter().all(|v| (v - 0.25).abs() < 1e-6), "{w}×{h} down");
+            let u = pyr_up(&d, w, h);
+            assert!(u.data.iter().all(|v| (v - 0.25).abs() < 1e-6), "{w}×{h} up: {:?}", u.data);
+        }
+        let ramp = plane(32, 32, |x, _| x as f32);
+        let back = pyr_up(&pyr_down(&ramp), 32, 32);
+        for x in 4..28 {
+            assert!((back.data[16 * 32 + x] - x as f32).abs() < 1e-4, "x {x}: {}", back.data[16 * 32 + x]);
+        }
+    }
+
+    #[test]
+    fn mirror_reflects_without_repeating_the_edge() {
+        assert_eq!([-2, -1, 0, 4, 5, 6].map(|i| mirror(i, 5)), [2, 1, 0, 4, 3, 2]);
+        assert_eq!(mirror(-3, 1), 0);
+    }
+}
