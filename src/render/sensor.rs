@@ -5,7 +5,8 @@
 //! code value  = clamp(round(f(clamp(e / full_well, 0, 1)) · (2^bits − 1)), 0, 2^bits − 1)
 //!
 //! so a radiance of 1/exposure reaches full scale. f is the response (`Response`): linear
-//! by default, or a gamma, the sRGB curve, or a film-like S-curve, each increasing from
+//! by default, or a gamma, the sRGB curve, a film-like S-curve or a measured film curve
+//! (`Memorial`), each increasing from
 //! f(0) = 0 to f(1) = 1; `Response::inverse` gives the truth a response recovery is judged
 //! against. Noise is drawn from a generator seeded by (seed, pixel), so it does not depend on
 //! the thread count.
@@ -52,6 +53,23 @@ pub enum Response {
     /// x(2.51x + 0.03)/(x(2.43x + 0.59) + 0.14), on exposures scaled by `stops` stops above full
     /// scale (so full scale maps to f(1) = 1, more stops put more of the range in the toe).
     Film { stops: f64 },
+    /// A measured curve: the green channel of the response recovered from the Memorial
+    /// Church photographs (`data/responses/memorial-green.csv`: film scanned to 8 bits, with a
+    /// long toe and a soft shoulder), f linear in ln x between its 256 values, 0 below the
+    /// first.
+    Memorial,
+}
+
+/// `data/responses/memorial-green.csv`: ln exposure (full scale 0) of each of 256 values.
+fn memorial() -> &'static [f64] {
+    static TABLE: std::sync::OnceLock<Vec<f64>> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        include_str!("../../data/responses/memorial-green.csv")
+            .lines()
+            .filter(|l| l.starts_with(|c: char| c.is_ascii_digit()))
+            .filter_map(|l| l.split(',').nth(1)?.trim().parse().ok())
+            .collect()
+    })
 }
 
 impl Response {
@@ -84,6 +102,18 @@ impl Response {
                 let aces = |v: f64| v * (2.51 * v + 0.03) / (v * (2.43 * v + 0.59) + 0.14);
                 let k = 2f64.powf(stops);
                 aces(k * x) / aces(k)
+            }
+            Response::Memorial => {
+                let table = memorial();
+                let top = (table.len() - 1) as f64;
+                let l = x.ln();
+                if l <= table[0] {
+                    return 0.0;
+                }
+                // The last value whose ln exposure is at most ln x, then linear in ln x.
+                let k = table.partition_point(|&v| v <= l).clamp(1, table.len() - 1) - 1;
+                let f = ((l - table[k]) / (table[k + 1] - table[k])).clamp(0.0, 1.0);
+                (k as f64 + f) / top
             }
         }
     }
@@ -251,9 +281,13 @@ mod tests {
     /// with the sRGB curve writes the codes the curve gives.
     #[test]
     fn responses_and_bit_depths() {
-        for r in
-            [Response::Linear, Response::Gamma { gamma: 2.2 }, Response::Srgb, Response::Film { stops: 2.0 }]
-        {
+        for r in [
+            Response::Linear,
+            Response::Gamma { gamma: 2.2 },
+            Response::Srgb,
+            Response::Film { stops: 2.0 },
+            Response::Memorial,
+        ] {
             assert!(r.apply(0.0).abs() < 1e-12 && (r.apply(1.0) - 1.0).abs() < 1e-12, "{r:?}");
             let ys: Vec<f64> = (0..=1000).map(|k| r.apply(k as f64 / 1000.0)).collect();
             assert!(ys.windows(2).all(|w| w[1] > w[0]), "{r:?} is not increasing");
@@ -262,6 +296,9 @@ mod tests {
                 assert!((r.inverse(r.apply(x)) - x).abs() < 1e-9, "{r:?} at {x}");
             }
         }
+        let table = memorial();
+        assert_eq!(table.len(), 256);
+        assert!(table.windows(2).all(|w| w[1] > w[0]) && table[255] == 0.0);
         assert!(Response::Gamma { gamma: 0.0 }.validate().is_err());
         let img = Image { width: 4, height: 1, channels: 3, data: vec![0.25; 12] };
         let s = Sensor { bits: 10, photon_noise: false, response: Response::Srgb, ..Sensor::default() };
