@@ -7,8 +7,9 @@
 //! with v the direction towards the camera. In the renderer's terms ρ = kd/π and σ = ks/π, so
 //! ρ is the same quantity the Lambertian models call albedo.
 //!
-//! Method: Gauss-Newton with a backtracking (Armijo, step halving) line search, argmin's
-//! `GaussNewtonLS`, with analytic Jacobians. Parameters: two offsets (a, b) of the normal in
+//! Method: Gauss-Newton with a backtracking (Armijo, step halving) line search, as argmin's
+//! `GaussNewtonLS`, with analytic Jacobians, hand-written on the 7×7 normal equations
+//! (`gauss_newton`). Parameters: two offsets (a, b) of the normal in
 //! the tangent plane of the robust Lambertian normal n₀ (n = (n₀ + a·t + b·s)/|…|, so the
 //! normal stays a unit vector without a constraint), ρ_r, ρ_g, ρ_b, σ and ln e (clamped to
 //! [0, ln 10⁴]). Seven tiny prior residuals √μ·(p − p₀), μ = 10⁻¹⁰, keep JᵀJ invertible where
@@ -33,14 +34,8 @@
 //! nothing about them (the normal and ρ still come from the fit).
 
 use super::lambertian;
-use argmin::core::observers::{Observe, ObserverMode};
-use argmin::core::{Error as ArgminError, Executor, IterState, Jacobian, Operator, State, KV};
-use argmin::solver::gaussnewton::GaussNewtonLS;
-use argmin::solver::linesearch::{condition::ArmijoCondition, BacktrackingLineSearch};
 use glam::DVec3;
-use nalgebra::{DMatrix, DVector, Matrix4, Vector4};
-use std::cell::RefCell;
-use std::sync::{Arc, Mutex};
+use nalgebra::{Matrix4, SMatrix, SVector, Vector4};
 
 /// Gauss-Newton iterations per round, and rounds of observation selection.
 pub const MAX_ITERATIONS: u64 = 15;
@@ -52,6 +47,11 @@ const START_ITERATIONS: u64 = 8;
 const PRIOR: f64 = 1e-5; // √μ
 const TOLERANCE: f64 = 1e-6;
 const LN_E_MAX: f64 = 9.210_340_371_976_184; // ln 10⁴
+/// Step halvings of the line search before it gives up.
+const MAX_HALVINGS: usize = 40;
+
+/// [a, b, ρ_r, ρ_g, ρ_b, σ, ln e] (module docs).
+type Param = SVector<f64, 7>;
 
 /// One pixel's Blinn-Phong solution.
 #[derive(Clone, Debug)]
@@ -69,7 +69,7 @@ pub struct Pixel {
     pub history: Vec<DVec3>,
 }
 
-/// The residuals of one pixel over the used observations, for argmin.
+/// The residuals of one pixel over the used observations.
 struct Fit<'a> {
     lights: &'a [DVec3],
     halves: &'a [DVec3],
@@ -78,79 +78,58 @@ struct Fit<'a> {
     n0: DVec3,
     t: DVec3,
     s: DVec3,
-    p0: [f64; 7],
-    /// (ln d, dᵉ) per used observation at the last parameters evaluated: Gauss-Newton asks
-    /// for the residuals and then the Jacobian at the same point, and exp and ln are most of
-    /// the cost.
-    powers: RefCell<(Option<DVector<f64>>, Vec<[f64; 2]>)>,
+    p0: Param,
 }
 
 impl<'a> Fit<'a> {
-    #[allow(clippy::too_many_arguments)]
     fn new(
         lights: &'a [DVec3],
         halves: &'a [DVec3],
         obs: &'a [[f32; 3]],
         used: &'a [usize],
         (n0, t, s): (DVec3, DVec3, DVec3),
-        p0: &DVector<f64>,
+        p0: &Param,
     ) -> Fit<'a> {
-        let p0 = std::array::from_fn(|i| p0[i]);
-        Fit { lights, halves, obs, used, n0, t, s, p0, powers: RefCell::new((None, Vec::new())) }
+        Fit { lights, halves, obs, used, n0, t, s, p0: *p0 }
     }
 
-    /// (ln d, dᵉ) for every used observation, d = max(0, n·h), (0, 0) where unlit or d = 0.
-    fn powers(&self, p: &DVector<f64>, n: DVec3, e: f64) -> std::cell::Ref<'_, Vec<[f64; 2]>> {
-        if self.powers.borrow().0.as_ref() != Some(p) {
-            let mut cache = self.powers.borrow_mut();
-            cache.1.clear();
-            for &j in self.used {
-                let (c, d) = (n.dot(self.lights[j]), n.dot(self.halves[j]));
-                cache.1.push(if c > 0.0 && d > 0.0 {
-                    let ln = d.ln();
-                    [ln, (e * ln).exp()]
-                } else {
-                    [0.0, 0.0]
-                });
-            }
-            cache.0 = Some(p.clone());
-        }
-        std::cell::Ref::map(self.powers.borrow(), |c| &c.1)
-    }
-
-    fn normal(&self, p: &DVector<f64>) -> (DVec3, f64) {
+    fn normal(&self, p: &Param) -> (DVec3, f64) {
         let m = self.n0 + self.t * p[0] + self.s * p[1];
         let len = m.length();
         (m / len, len)
     }
 
-    /// Residuals and, when asked, their Jacobian.
-    fn eval(&self, p: &DVector<f64>, jac: Option<&mut DMatrix<f64>>) -> DVector<f64> {
-        let rows = 3 * self.used.len() + 7;
-        let mut r = DVector::zeros(rows);
+    /// Calls `each(k, residuals, Jacobian rows)` for every used observation k (the rows only
+    /// when `jacobian`), then returns the prior's seven residuals √μ·(p − p₀).
+    fn visit(
+        &self,
+        p: &Param,
+        jacobian: bool,
+        mut each: impl FnMut(usize, [f64; 3], Option<[[f64; 7]; 3]>),
+    ) -> Param {
         let (n, len) = self.normal(p);
         let (sigma, t) = (p[5], p[6].clamp(0.0, LN_E_MAX));
         let e = t.exp();
-        let mut jm = jac;
         // ∂n/∂a and ∂n/∂b.
         let dna = (self.t - n * n.dot(self.t)) / len;
         let dnb = (self.s - n * n.dot(self.s)) / len;
-        let powers = self.powers(p, n, e);
         for (k, &j) in self.used.iter().enumerate() {
             let (l, h) = (self.lights[j], self.halves[j]);
             let c = n.dot(l);
             let d = n.dot(h).max(0.0);
-            let [ln_d, de] = powers[k];
+            let (ln_d, de) = if c > 0.0 && d > 0.0 {
+                let ln = d.ln();
+                (ln, (e * ln).exp())
+            } else {
+                (0.0, 0.0)
+            };
             let lobe = if de > 0.0 { (e + 8.0) / 8.0 } else { 0.0 };
             let spec = sigma * lobe * de;
-            for ch in 0..3 {
+            let r: [f64; 3] = std::array::from_fn(|ch| {
                 let pred = if c > 0.0 { (p[2 + ch] + spec) * c } else { 0.0 };
-                r[3 * k + ch] = pred - self.obs[j][ch] as f64;
-            }
-            if let Some(jm) = jm.as_deref_mut() {
-                if c <= 0.0 {
-                    continue;
-                }
+                pred - self.obs[j][ch] as f64
+            });
+            let rows = (jacobian && c > 0.0).then(|| {
                 // ∂spec/∂n = σ·lobe·e·dᵉ⁻¹·h; ∂spec/∂ln e = e·σ·dᵉ·(1/8 + lobe·ln d).
                 let dspec_dn = if d > 0.0 { h * (sigma * lobe * e * de / d) } else { DVec3::ZERO };
                 let dspec_dt = if d > 0.0 && p[6] > 0.0 && p[6] < LN_E_MAX {
@@ -158,62 +137,62 @@ impl<'a> Fit<'a> {
                 } else {
                     0.0
                 };
-                for ch in 0..3 {
-                    let row = 3 * k + ch;
+                std::array::from_fn(|ch| {
                     let dn = l * (p[2 + ch] + spec) + dspec_dn * c;
-                    jm[(row, 0)] = dn.dot(dna);
-                    jm[(row, 1)] = dn.dot(dnb);
-                    jm[(row, 2 + ch)] = c;
-                    jm[(row, 5)] = lobe * de * c;
-                    jm[(row, 6)] = dspec_dt * c;
-                }
-            }
+                    let mut row = [0.0; 7];
+                    row[0] = dn.dot(dna);
+                    row[1] = dn.dot(dnb);
+                    row[2 + ch] = c;
+                    row[5] = lobe * de * c;
+                    row[6] = dspec_dt * c;
+                    row
+                })
+            });
+            each(k, r, if jacobian { Some(rows.unwrap_or([[0.0; 7]; 3])) } else { None });
         }
-        let base = 3 * self.used.len();
-        for i in 0..7 {
-            r[base + i] = PRIOR * (p[i] - self.p0[i]);
-            if let Some(jm) = jm.as_deref_mut() {
-                jm[(base + i, i)] = PRIOR;
-            }
-        }
+        (p - self.p0) * PRIOR
+    }
+
+    /// The residuals, three per used observation then the prior's seven.
+    fn residuals(&self, p: &Param) -> Vec<f64> {
+        let mut r = Vec::with_capacity(3 * self.used.len() + 7);
+        let prior = self.visit(p, false, |_, res, _| r.extend(res));
+        r.extend(prior.iter());
         r
     }
-}
 
-impl Operator for Fit<'_> {
-    type Param = DVector<f64>;
-    type Output = DVector<f64>;
-    fn apply(&self, p: &Self::Param) -> Result<Self::Output, ArgminError> {
-        Ok(self.eval(p, None))
+    /// ‖r‖.
+    fn cost(&self, p: &Param) -> f64 {
+        let mut sum = 0.0;
+        let prior = self.visit(p, false, |_, r, _| sum += r.iter().map(|v| v * v).sum::<f64>());
+        (sum + prior.norm_squared()).sqrt()
     }
-}
 
-impl Jacobian for Fit<'_> {
-    type Param = DVector<f64>;
-    type Jacobian = DMatrix<f64>;
-    fn jacobian(&self, p: &Self::Param) -> Result<Self::Jacobian, ArgminError> {
-        let mut j = DMatrix::zeros(3 * self.used.len() + 7, 7);
-        self.eval(p, Some(&mut j));
-        Ok(j)
-    }
-}
-
-type GnState = IterState<DVector<f64>, DVector<f64>, DMatrix<f64>, (), (), f64>;
-
-/// Records the normal after every iteration.
-struct History {
-    n0: DVec3,
-    t: DVec3,
-    s: DVec3,
-    normals: Arc<Mutex<Vec<DVec3>>>,
-}
-
-impl Observe<GnState> for History {
-    fn observe_iter(&mut self, state: &GnState, _kv: &KV) -> Result<(), ArgminError> {
-        if let (Some(p), Ok(mut v)) = (state.get_param(), self.normals.lock()) {
-            v.push((self.n0 + self.t * p[0] + self.s * p[1]).normalize());
+    /// ‖r‖, JᵀJ and Jᵀr, accumulated observation by observation (no Jacobian matrix).
+    fn normal_equations(&self, p: &Param) -> (f64, SMatrix<f64, 7, 7>, Param) {
+        let (mut sum, mut jtj, mut jtr) = (0.0, SMatrix::<f64, 7, 7>::zeros(), Param::zeros());
+        let prior = self.visit(p, true, |_, r, rows| {
+            for (ch, row) in rows.into_iter().flatten().enumerate() {
+                // A row is zero but at a, b, ρ_ch, σ and ln e: the upper triangle of its
+                // outer product over those five, 15 products instead of 49.
+                let idx = [0, 1, 2 + ch, 5, 6];
+                for (u, &i) in idx.iter().enumerate() {
+                    jtr[i] += row[i] * r[ch];
+                    for &k in &idx[u..] {
+                        jtj[(i, k)] += row[i] * row[k];
+                    }
+                }
+            }
+            sum += r.iter().map(|v| v * v).sum::<f64>();
+        });
+        for i in 0..7 {
+            jtj[(i, i)] += PRIOR * PRIOR;
+            for k in 0..i {
+                jtj[(i, k)] = jtj[(k, i)];
+            }
         }
-        Ok(())
+        jtr += prior * PRIOR;
+        ((sum + prior.norm_squared()).sqrt(), jtj, jtr)
     }
 }
 
@@ -226,7 +205,7 @@ fn start_at(
     halves: &[DVec3],
     obs: &[[f32; 3]],
     used: &[usize],
-) -> Option<DVector<f64>> {
+) -> Option<Param> {
     // Row (j, c): c_j·ρ_c + g_j·σ with g = c·lobe·dᵉ.
     let mut a = Matrix4::<f64>::zeros();
     let mut b = Vector4::<f64>::zeros();
@@ -242,17 +221,9 @@ fn start_at(
         }
     }
     let x = a.cholesky()?.solve(&b);
-    x.iter().all(|v| v.is_finite()).then(|| {
-        DVector::from_column_slice(&[
-            0.0,
-            0.0,
-            x[0].max(0.0),
-            x[1].max(0.0),
-            x[2].max(0.0),
-            x[3].max(0.0),
-            e.ln(),
-        ])
-    })
+    x.iter()
+        .all(|v| v.is_finite())
+        .then(|| Param::from([0.0, 0.0, x[0].max(0.0), x[1].max(0.0), x[2].max(0.0), x[3].max(0.0), e.ln()]))
 }
 
 /// Whether some used observation lies where the lobe is at least 1 % of its peak.
@@ -260,24 +231,48 @@ fn lobe_seen(n: DVec3, e: f64, halves: &[DVec3], used: &[usize]) -> bool {
     used.iter().any(|&j| n.dot(halves[j]).max(0.0).powf(e) >= 0.01)
 }
 
-/// Gauss-Newton from `p` over the `used` observations: the solution, its cost ‖r‖, and the
-/// normal after each iteration.
-fn gauss_newton(fit: Fit, p: &DVector<f64>, iterations: u64) -> Option<(DVector<f64>, f64, Vec<DVec3>)> {
-    let (n0, t, s) = (fit.n0, fit.t, fit.s);
-    let normals = Arc::new(Mutex::new(Vec::new()));
-    let observer = History { n0, t, s, normals: normals.clone() };
-    let line_search = BacktrackingLineSearch::new(ArmijoCondition::new(1e-4).ok()?).rho(0.5).ok()?;
-    let solver = GaussNewtonLS::new(line_search).with_tolerance(TOLERANCE).ok()?;
-    let mut result = Executor::new(fit, solver)
-        .configure(|state| state.param(p.clone()).max_iters(iterations))
-        .add_observer(observer, ObserverMode::Always)
-        .timer(false)
-        .run()
-        .ok()?;
-    let cost = result.state.get_best_cost();
-    let best = result.state.take_best_param().or_else(|| result.state.take_param())?;
-    let history = normals.lock().ok()?.clone();
-    cost.is_finite().then_some((best, cost, history))
+/// Gauss-Newton from `p` over the `used` observations, with a backtracking (Armijo, step
+/// halving from 1) line search on ‖r‖ along the Gauss-Newton step, the Armijo slope taken as
+/// Jᵀr·step, stopping after `iterations` or when ‖r‖ changes by less than `TOLERANCE`, as
+/// argmin's `GaussNewtonLS` with `BacktrackingLineSearch` does: the solution, its cost ‖r‖,
+/// and the normal after each iteration. Hand-written on 7×7 normal equations accumulated per
+/// observation (15 products per row: a row is zero but at five parameters), so an iteration
+/// allocates nothing; argmin builds the (3m + 7) × 7 Jacobian and JᵀJ as dynamic matrices
+/// each time, which was most of the fit's time.
+fn gauss_newton(fit: &Fit, p: &Param, iterations: u64) -> Option<(Param, f64, Vec<DVec3>)> {
+    let mut p = *p;
+    let mut history = Vec::with_capacity(iterations as usize);
+    let mut previous = f64::INFINITY;
+    let mut cost = f64::INFINITY;
+    for _ in 0..iterations {
+        let (c0, jtj, jtr) = fit.normal_equations(&p);
+        let step = jtj.cholesky().map(|ch| ch.solve(&-jtr)).or_else(|| jtj.lu().solve(&-jtr))?;
+        // Armijo: ‖r(p + α·step)‖ ≤ c₀ + 10⁻⁴·α·(Jᵀr)·step, α halved from 1.
+        let slope = jtr.dot(&step);
+        let mut alpha = 1.0;
+        let mut accepted = None;
+        for _ in 0..MAX_HALVINGS {
+            let q = p + step * alpha;
+            let c = fit.cost(&q);
+            if c <= c0 + 1e-4 * alpha * slope {
+                accepted = Some((q, c));
+                break;
+            }
+            alpha *= 0.5;
+        }
+        let Some((q, c)) = accepted else { break };
+        p = q;
+        cost = c;
+        history.push(fit.normal(&p).0);
+        if (previous - cost).abs() < TOLERANCE {
+            break;
+        }
+        previous = cost;
+    }
+    if !cost.is_finite() {
+        cost = fit.cost(&p);
+    }
+    (cost.is_finite() && p.iter().all(|v| v.is_finite())).then_some((p, cost, history))
 }
 
 /// Fits one pixel (module docs). `view` points from the surface towards the camera; `valid`
@@ -298,8 +293,8 @@ pub fn solve(lights: &[DVec3], view: DVec3, obs: &[[f32; 3]], valid: &[bool]) ->
     let lit = |n: DVec3| -> Vec<usize> {
         (0..lights.len()).filter(|&j| valid[j] && n.dot(lights[j]) > 0.02).collect()
     };
-    let fit = |used: &[usize], p: &DVector<f64>, iterations| -> Option<(DVector<f64>, f64, Vec<DVec3>)> {
-        gauss_newton(Fit::new(lights, &halves, obs, used, (n0, t, s), p), p, iterations)
+    let fit = |used: &[usize], p: &Param, iterations| -> Option<(Param, f64, Vec<DVec3>)> {
+        gauss_newton(&Fit::new(lights, &halves, obs, used, (n0, t, s), p), p, iterations)
     };
     // The starts all fit the same observations, so that their costs compare: every
     // unsaturated one except clear cast shadows, lit under n₀ yet far darker than the
@@ -340,7 +335,7 @@ pub fn solve(lights: &[DVec3], view: DVec3, obs: &[[f32; 3]], valid: &[bool]) ->
         }
         // Keep the observations the fit explains.
         let lit_now = lit(normal_of(n0, t, s, &p));
-        let r = Fit::new(lights, &halves, obs, &lit_now, (n0, t, s), &p).eval(&p, None);
+        let r = Fit::new(lights, &halves, obs, &lit_now, (n0, t, s), &p).residuals(&p);
         // Per observation: the largest channel residual, and the mean prediction.
         let judged: Vec<(f64, f64)> = (0..lit_now.len())
             .map(|k| {
@@ -382,7 +377,7 @@ pub fn solve(lights: &[DVec3], view: DVec3, obs: &[[f32; 3]], valid: &[bool]) ->
     Some(Pixel { normal, albedo: [p[2], p[3], p[4]], specular: sigma, exponent, used: used.len(), history })
 }
 
-fn normal_of(n0: DVec3, t: DVec3, s: DVec3, p: &DVector<f64>) -> DVec3 {
+fn normal_of(n0: DVec3, t: DVec3, s: DVec3, p: &Param) -> DVec3 {
     (n0 + t * p[0] + s * p[1]).normalize()
 }
 
