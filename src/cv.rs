@@ -6,8 +6,7 @@
 //!   iterations or a 1e-4 px step — the recipe that gives 0.195 px on OpenCV's sample
 //!   photographs (its tutorial's 23×23 window gives 0.409 px);
 //! - `calibrate`: `calibrateCamera` with k1, k2, p1, p2, k3 free and the stopping criteria
-//!   given, returning what lumen's calibration returns.
-//!
+//!   given, returning what lumen's calibration returns;
 //! - `hdr_stack`: `CalibrateDebevec`, `MergeDebevec` and `MergeMertens` on an exposure stack.
 //!
 //! Corners cross the boundary as f32 (`Point2f`), which is what `calibrateCamera` takes.
@@ -164,6 +163,9 @@ pub fn hdr_stack(
     let response_ln = [ln(0), ln(1), ln(2)];
     let given;
     let merge_with = match merge_response {
+        Some(g) if g.len() != 3 || g.iter().any(|c| c.len() != 256) => {
+            return Err("the merge's response needs 3 channels of 256 values (8-bit frames)".into());
+        }
         Some(g) => {
             let values: Vec<opencv::core::Vec3f> = (0..256)
                 .map(|z| {
