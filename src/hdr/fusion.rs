@@ -56,7 +56,7 @@ impl Mertens {
     }
 }
 
-/// A planar f32 image of `c` channels.
+/// An f32 image of `c` interleaved channels: 1 (weights) or 3 (RGB).
 #[derive(Clone, Debug)]
 struct Plane {
     w: usize,
@@ -105,10 +105,11 @@ fn pyr_down(src: &Plane) -> Plane {
         for ((t, m), ((a, e), (b, d))) in tmp.iter_mut().zip(m).zip(outer) {
             *t = (a + e + 4.0 * (b + d) + 6.0 * m) * (1.0 / 16.0);
         }
-        match c {
-            1 => down_row::<1>(&tmp, out, w),
-            3 => down_row::<3>(&tmp, out, w),
-            _ => down_row_any(&tmp, out, w, c),
+        // Planes hold one channel (weights) or three (RGB).
+        if c == 1 {
+            down_row::<1>(&tmp, out, w)
+        } else {
+            down_row::<3>(&tmp, out, w)
         }
     }
     dst
@@ -130,12 +131,6 @@ fn down_row<const C: usize>(line: &[f32], out: &mut [f32], w: usize) {
     }
     for x in std::iter::once(0).chain(inside_end.max(1)..dw) {
         down_edge(line, &mut out[x * C..(x + 1) * C], x, w, C);
-    }
-}
-
-fn down_row_any(line: &[f32], out: &mut [f32], w: usize, c: usize) {
-    for x in 0..out.len() / c {
-        down_edge(line, &mut out[x * c..(x + 1) * c], x, w, c);
     }
 }
 
@@ -179,10 +174,10 @@ fn pyr_up_rows(src: &Plane, w: usize, h: usize, mut each: impl FnMut(usize, &[f3
     // The horizontal pass over the source's rows (half the output's height).
     let mut rows = vec![0.0f32; w * sh * c];
     for (line, out) in src.data.chunks_exact(sw * c).zip(rows.chunks_exact_mut(w * c)) {
-        match c {
-            1 => up_row::<1>(line, out, w),
-            3 => up_row::<3>(line, out, w),
-            _ => (0..w).for_each(|x| up_edge(line, &mut out[x * c..(x + 1) * c], x, w, c)),
+        if c == 1 {
+            up_row::<1>(line, out, w)
+        } else {
+            up_row::<3>(line, out, w)
         }
     }
     let row = |s: usize| &rows[s * w * c..(s + 1) * w * c];
@@ -255,27 +250,51 @@ fn levels(w: usize, h: usize) -> usize {
 }
 
 /// Frame `j`'s values in [0, 1], interleaved RGB.
-fn values(input: &Input, j: usize) -> Plane {
-    let top = (input.levels - 1) as f32;
-    let data = input.frames[j].codes.iter().map(|&z| z as f32 / top).collect();
+fn values(input: &Input, j: usize, tables: &Tables) -> Plane {
+    let data = input.frames[j].codes.iter().map(|&z| tables.value[z as usize]).collect();
     Plane { w: input.width, h: input.height, c: 3, data }
 }
 
-/// The unnormalised weight of every pixel of one frame (module docs).
-fn weights(img: &Plane, codes: &[u16], exposedness: &[f32], p: &Mertens) -> Vec<f32> {
-    // The paper's exponents (all 1) get a loop without `powf`: a branch on the exponent
-    // inside the loop is compiled to a select that calls `powf` anyway.
-    if *p == Mertens::default() {
-        weights_with::<true>(img, codes, exposedness, p)
-    } else {
-        weights_with::<false>(img, codes, exposedness, p)
+/// Per code value: the value in [0, 1], and the well-exposedness exp(−(v − ½)²/(2·0.2²)), so
+/// the weights need no division or exp per pixel.
+struct Tables {
+    value: Vec<f32>,
+    exposedness: Vec<f32>,
+}
+
+impl Tables {
+    fn new(levels: usize) -> Tables {
+        let top = (levels - 1) as f32;
+        let value: Vec<f32> = (0..levels).map(|z| z as f32 / top).collect();
+        let exposedness = value.iter().map(|v| (-(v - 0.5).powi(2) / (2.0 * 0.2 * 0.2)).exp()).collect();
+        Tables { value, exposedness }
     }
 }
 
-fn weights_with<const ONES: bool>(img: &Plane, codes: &[u16], exposedness: &[f32], p: &Mertens) -> Vec<f32> {
-    let (w, h) = (img.w, img.h);
-    let grey: Vec<f32> =
-        img.data.chunks_exact(3).map(|q| 0.299 * q[0] + 0.587 * q[1] + 0.114 * q[2]).collect();
+/// The unnormalised weight of every pixel of one frame (module docs): `codes` interleaved
+/// RGB, `w` × `h`.
+fn weights(codes: &[u16], w: usize, h: usize, tables: &Tables, p: &Mertens) -> Vec<f32> {
+    // The paper's exponents (all 1) get a loop without `powf`: a branch on the exponent
+    // inside the loop is compiled to a select that calls `powf` anyway.
+    if *p == Mertens::default() {
+        weights_with::<true>(codes, w, h, tables, p)
+    } else {
+        weights_with::<false>(codes, w, h, tables, p)
+    }
+}
+
+fn weights_with<const ONES: bool>(
+    codes: &[u16],
+    w: usize,
+    h: usize,
+    tables: &Tables,
+    p: &Mertens,
+) -> Vec<f32> {
+    let (value, exposedness) = (&tables.value, &tables.exposedness);
+    let grey: Vec<f32> = codes
+        .chunks_exact(3)
+        .map(|z| 0.299 * value[z[0] as usize] + 0.587 * value[z[1] as usize] + 0.114 * value[z[2] as usize])
+        .collect();
     let (ec, es, ee) = (p.contrast as f32, p.saturation as f32, p.exposedness as f32);
     let mut out = vec![0.0f32; w * h];
     for (y, row) in out.chunks_exact_mut(w).enumerate() {
@@ -284,9 +303,9 @@ fn weights_with<const ONES: bool>(img: &Plane, codes: &[u16], exposedness: &[f32
             &grey[sy * w..(sy + 1) * w]
         };
         let (up, mid, down) = (line(-1), line(0), line(1));
-        let pixels = img.data[y * w * 3..(y + 1) * w * 3].chunks_exact(3);
-        let z = codes[y * w * 3..(y + 1) * w * 3].chunks_exact(3);
-        for (x, (o, (q, z))) in row.iter_mut().zip(pixels.zip(z)).enumerate() {
+        let pixels = codes[y * w * 3..(y + 1) * w * 3].chunks_exact(3);
+        for (x, (o, z)) in row.iter_mut().zip(pixels).enumerate() {
+            let q = [value[z[0] as usize], value[z[1] as usize], value[z[2] as usize]];
             // Mirrored neighbours (reflect-101) without a division per pixel.
             let left = if x > 0 { x - 1 } else { 1.min(w - 1) };
             let right = if x + 1 < w { x + 1 } else { x.saturating_sub(1) };
@@ -352,16 +371,11 @@ pub fn mertens(input: &Input, p: &Mertens) -> Vec<f32> {
     let (w, h) = (input.width, input.height);
     let depth = levels(w, h);
     let frames = input.frames.len();
-    // exp(−(v − ½)²/(2·0.2²)) per code value, so the weights need no exp per pixel.
-    let top = (input.levels - 1) as f32;
-    let exposedness: Vec<f32> =
-        (0..input.levels).map(|z| (-(z as f32 / top - 0.5).powi(2) / (2.0 * 0.2 * 0.2)).exp()).collect();
+    let tables = Tables::new(input.levels);
     // Every frame's weights first (one f32 per pixel and frame, as OpenCV keeps), for their
     // sum; then the frames blended in parallel, each thread into its own pyramid.
-    let all: Vec<Vec<f32>> = (0..frames)
-        .into_par_iter()
-        .map(|j| weights(&values(input, j), &input.frames[j].codes, &exposedness, p))
-        .collect();
+    let all: Vec<Vec<f32>> =
+        (0..frames).into_par_iter().map(|j| weights(&input.frames[j].codes, w, h, &tables, p)).collect();
     let mut total = vec![0.0f32; w * h];
     for wj in &all {
         total.iter_mut().zip(wj).for_each(|(t, v)| *t += v);
@@ -376,7 +390,7 @@ pub fn mertens(input: &Input, p: &Mertens) -> Vec<f32> {
         .enumerate()
         .fold(zeros, |mut acc, (j, mut wj)| {
             wj.iter_mut().zip(&total).for_each(|(v, t)| *v /= t);
-            blend_into(&mut acc, values(input, j), Plane { w, h, c: 1, data: wj }, depth);
+            blend_into(&mut acc, values(input, j, &tables), Plane { w, h, c: 1, data: wj }, depth);
             acc
         })
         .reduce(zeros, |mut a, b| {

@@ -142,6 +142,14 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     order.sort_by(|&a, &b| input.frames[b].time_s.total_cmp(&input.frames[a].time_s));
     let times: Vec<f64> = order.iter().map(|&j| input.frames[j].time_s).collect();
     let frames: Vec<&[u16]> = order.iter().map(|&j| input.frames[j].codes.as_slice()).collect();
+    // Channel c of the frames, read in place.
+    let channel = |c: usize| response::Channel {
+        frames: &frames,
+        stride: 3,
+        offset: c,
+        times: &times,
+        levels: input.levels,
+    };
     let t = std::time::Instant::now();
     let mut samples = 0;
     let (response, method) = match &config.method {
@@ -164,13 +172,7 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
             let fits = (0..3)
                 .into_par_iter()
                 .map(|c| {
-                    let ch = response::Channel {
-                        frames: &frames,
-                        stride: 3,
-                        offset: c,
-                        times: &times,
-                        levels: input.levels,
-                    };
+                    let ch = channel(c);
                     let s = response::choose_samples(
                         &ch,
                         input.width,
@@ -195,13 +197,7 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
             let g = (0..3)
                 .into_par_iter()
                 .map(|c| {
-                    let ch = response::Channel {
-                        frames: &frames,
-                        stride: 3,
-                        offset: c,
-                        times: &times,
-                        levels: input.levels,
-                    };
+                    let ch = channel(c);
                     response::robertson(&ch, &usable, *iterations)
                         .map_err(|m| Error::Unsolvable(format!("channel {c}: {m}")))
                 })

@@ -99,13 +99,14 @@ impl<'a> Fit<'a> {
         (m / len, len)
     }
 
-    /// Calls `each(k, residuals, Jacobian rows)` for every used observation k (the rows only
-    /// when `jacobian`), then returns the prior's seven residuals √μ·(p − p₀).
+    /// Calls `each(residuals, Jacobian rows)` for every used observation in order (the rows
+    /// only when `jacobian` and the light reaches the surface: an unlit observation's rows are
+    /// zero), then returns the prior's seven residuals √μ·(p − p₀).
     fn visit(
         &self,
         p: &Param,
         jacobian: bool,
-        mut each: impl FnMut(usize, [f64; 3], Option<[[f64; 7]; 3]>),
+        mut each: impl FnMut([f64; 3], Option<[[f64; 7]; 3]>),
     ) -> Param {
         let (n, len) = self.normal(p);
         let (sigma, t) = (p[5], p[6].clamp(0.0, LN_E_MAX));
@@ -113,7 +114,7 @@ impl<'a> Fit<'a> {
         // ∂n/∂a and ∂n/∂b.
         let dna = (self.t - n * n.dot(self.t)) / len;
         let dnb = (self.s - n * n.dot(self.s)) / len;
-        for (k, &j) in self.used.iter().enumerate() {
+        for &j in self.used {
             let (l, h) = (self.lights[j], self.halves[j]);
             let c = n.dot(l);
             let d = n.dot(h).max(0.0);
@@ -148,7 +149,7 @@ impl<'a> Fit<'a> {
                     row
                 })
             });
-            each(k, r, if jacobian { Some(rows.unwrap_or([[0.0; 7]; 3])) } else { None });
+            each(r, rows);
         }
         (p - self.p0) * PRIOR
     }
@@ -156,7 +157,7 @@ impl<'a> Fit<'a> {
     /// The residuals, three per used observation then the prior's seven.
     fn residuals(&self, p: &Param) -> Vec<f64> {
         let mut r = Vec::with_capacity(3 * self.used.len() + 7);
-        let prior = self.visit(p, false, |_, res, _| r.extend(res));
+        let prior = self.visit(p, false, |res, _| r.extend(res));
         r.extend(prior.iter());
         r
     }
@@ -164,14 +165,14 @@ impl<'a> Fit<'a> {
     /// ‖r‖.
     fn cost(&self, p: &Param) -> f64 {
         let mut sum = 0.0;
-        let prior = self.visit(p, false, |_, r, _| sum += r.iter().map(|v| v * v).sum::<f64>());
+        let prior = self.visit(p, false, |r, _| sum += r.iter().map(|v| v * v).sum::<f64>());
         (sum + prior.norm_squared()).sqrt()
     }
 
     /// ‖r‖, JᵀJ and Jᵀr, accumulated observation by observation (no Jacobian matrix).
     fn normal_equations(&self, p: &Param) -> (f64, SMatrix<f64, 7, 7>, Param) {
         let (mut sum, mut jtj, mut jtr) = (0.0, SMatrix::<f64, 7, 7>::zeros(), Param::zeros());
-        let prior = self.visit(p, true, |_, r, rows| {
+        let prior = self.visit(p, true, |r, rows| {
             for (ch, row) in rows.into_iter().flatten().enumerate() {
                 // A row is zero but at a, b, ρ_ch, σ and ln e: the upper triangle of its
                 // outer product over those five, 15 products instead of 49.
