@@ -114,6 +114,37 @@ fn missing_reference_is_skipped_with_a_note() {
     assert_eq!((m["value"].is_null(), m["pass"].is_null()), (true, true), "{m}");
 }
 
+/// Cases on real data whose folder is absent are skipped with the folder named, for every
+/// stage that reads real data; the run passes, and nothing is judged. A key of the rendered
+/// variant given beside `dataset` is refused by name.
+#[test]
+fn absent_real_data_is_skipped_and_dataset_keys_are_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let text = "name = \"t\"\n\
+        [[stages]]\nstage = \"calibrate\"\ncase = \"c\"\nimages = \"/nonexistent/boards\"\nbounds = { rms_px = 0.2 }\n\
+        [[stages]]\nstage = \"photometric\"\ncase = \"p\"\ndataset = \"/nonexistent/ball\"\nbounds = { mean_angular_error_deg = 2 }\n\
+        [[stages]]\nstage = \"sfm\"\ncase = \"s\"\nimages = \"/nonexistent/photos\"\ncamera = \"/nonexistent/K.txt\"\ntruth = \"/nonexistent/gt\"\n";
+    let (code, err) = run(text, &out);
+    assert_eq!(code, 0, "{err}");
+    for path in ["/nonexistent/boards", "/nonexistent/ball", "/nonexistent/photos"] {
+        assert!(err.contains(&format!("skipped: {path} is absent")), "{path}: {err}");
+    }
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(j["passed"], true, "{j}");
+    for st in j["stages"].as_array().unwrap() {
+        assert!(st["skipped"].as_str().is_some_and(|s| s.contains("is absent")), "{st}");
+        assert_eq!(st["metrics"].as_array().map(Vec::len), Some(0), "{st}");
+    }
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.contains("| photometric | p | skipped (/nonexistent/ball is absent"), "{md}");
+    let text = "[[stages]]\nstage = \"photometric\"\ncase = \"p\"\ndataset = \"/x\"\nlights = 12\n";
+    let (code, err) = run(text, &out);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("unknown field `lights`") && err.contains("case p"), "{err}");
+}
+
 #[test]
 fn render_command_writes_exr_png_and_truth() {
     let dir = tempfile::tempdir().unwrap();

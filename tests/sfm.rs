@@ -9,16 +9,9 @@ use nalgebra::{Matrix3, Vector3};
 use std::path::Path;
 use std::sync::OnceLock;
 
-/// A ground-truth camera of the Strecha et al. format (the folder's README): K, camera-to-
-/// world R and the centre C.
+/// A ground-truth camera (`sfm::input::read_strecha_camera`): K, camera-to-world R, centre C.
 fn camera(path: &Path) -> (Matrix3<f64>, Matrix3<f64>, Vector3<f64>) {
-    let v: Vec<f64> =
-        std::fs::read_to_string(path).unwrap().split_whitespace().map(|s| s.parse().unwrap()).collect();
-    // The file's rotations carry six digits: the nearest rotation (UVᵀ), so that they do not
-    // add 10⁻⁶-level errors of their own to 0.01°-level comparisons.
-    let svd = Matrix3::from_row_slice(&v[12..21]).svd(true, true);
-    let r = svd.u.unwrap() * svd.v_t.unwrap();
-    (Matrix3::from_row_slice(&v[0..9]), r, Vector3::new(v[21], v[22], v[23]))
+    lumen::sfm::input::read_strecha_camera(path).unwrap()
 }
 
 /// The features of the eight images, detected once for every test.

@@ -285,6 +285,10 @@ fn run_pipeline(
     eprintln!("wrote {} and {}", out.join("report.json").display(), out.join("report.md").display());
     let width = report.stages.iter().map(|s| s.case.chars().count()).max().unwrap_or(0);
     for s in &report.stages {
+        if let Some(why) = &s.skipped {
+            eprintln!("  {:<11} {:<width$} skipped: {why}", s.stage, s.case);
+            continue;
+        }
         let met = s.metrics.iter().filter(|m| m.pass == Some(true)).count();
         let bounded = s.metrics.iter().filter(|m| m.bound.is_some() && m.skipped.is_none()).count();
         eprintln!(

@@ -2,10 +2,9 @@
 //! text model, a PLY point cloud and a summary.
 
 use anyhow::{bail, Context, Result};
-use lumen::image::{self, filter::Grey};
-use lumen::math::{CameraModel, Distortion, Intrinsics};
+use lumen::image;
 use lumen::sfm::{self, colmap};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// `lumen sfm`'s flags.
 #[derive(clap::Args)]
@@ -26,104 +25,23 @@ pub struct SfmArgs {
     pub out: PathBuf,
 }
 
-fn read_camera(path: &Path) -> Result<CameraModel> {
-    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    if ext == "txt" {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("--camera {}: cannot read", path.display()))?;
-        let v: Result<Vec<f64>, _> = text.split_whitespace().map(str::parse::<f64>).collect();
-        let v = v.map_err(|_| {
-            anyhow::anyhow!("--camera {}: expected 9 numbers (K, row by row)", path.display())
-        })?;
-        if v.len() != 9 || v.iter().any(|x| !x.is_finite()) || v[6] != 0.0 || v[7] != 0.0 || v[8] != 1.0 {
-            bail!(
-                "--camera {}: expected a 3×3 camera matrix [fx s cx; 0 fy cy; 0 0 1], 9 numbers",
-                path.display()
-            );
-        }
-        if v[0] <= 0.0 || v[4] <= 0.0 {
-            bail!("--camera {}: focal lengths {} and {} must be positive", path.display(), v[0], v[4]);
-        }
-        // Width and height come from the images.
-        return Ok(CameraModel {
-            width: 0,
-            height: 0,
-            intrinsics: Intrinsics { fx: v[0], fy: v[4], cx: v[2], cy: v[5] },
-            distortion: Distortion::default(),
-        });
-    }
-    let c = lumen::calib::file::read(path).with_context(|| format!("--camera {}", path.display()))?;
-    Ok(c.camera())
-}
-
 pub fn run(a: &SfmArgs) -> Result<()> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(&a.images)
-        .with_context(|| format!("--images {}: not a readable folder", a.images.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            let e = p.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-            matches!(e.as_str(), "jpg" | "jpeg" | "png" | "tif" | "tiff")
-        })
-        .collect();
-    files.sort();
-    if files.len() < 2 {
-        bail!(
-            "--images {}: {} photograph(s) (.jpg, .png, .tif), at least 2 needed",
-            a.images.display(),
-            files.len()
-        );
-    }
+    let files = sfm::input::photographs(&a.images).with_context(|| "--images".to_string())?;
     if a.max_features < 16 {
         bail!("--max-features {}: expected at least 16", a.max_features);
     }
-    let given = a.camera.as_deref().map(read_camera).transpose()?;
-    let mut images = Vec::new();
-    for (n, f) in files.iter().enumerate() {
-        eprintln!("reading {}/{}: {}", n + 1, files.len(), f.display());
-        let img = image::io::read(f).with_context(|| format!("{}", f.display()))?;
-        let grey = Grey::from_image(&img);
-        let c = img.channels as usize;
-        let rgb8 = img
-            .data
-            .chunks_exact(c)
-            .map(|p| {
-                let q = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
-                if c >= 3 {
-                    [q(p[0]), q(p[1]), q(p[2])]
-                } else {
-                    [q(p[0]); 3]
-                }
-            })
-            .collect();
-        let camera = match given {
-            Some(mut cam) if cam.width == 0 => {
-                cam.width = img.width;
-                cam.height = img.height;
-                cam
-            }
-            Some(cam) => cam,
-            None => {
-                let f = 1.2 * img.width.max(img.height) as f64;
-                CameraModel {
-                    width: img.width,
-                    height: img.height,
-                    intrinsics: Intrinsics {
-                        fx: f,
-                        fy: f,
-                        cx: (img.width as f64 - 1.0) / 2.0,
-                        cy: (img.height as f64 - 1.0) / 2.0,
-                    },
-                    distortion: Distortion::default(),
-                }
-            }
-        };
-        let name = f.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-        images.push(sfm::Image { name, grey, rgb8, camera });
-    }
+    let given = a
+        .camera
+        .as_deref()
+        .map(sfm::input::read_camera)
+        .transpose()
+        .with_context(|| "--camera".to_string())?;
+    let input = sfm::input::read_images(&files, given, |n, total, f| {
+        eprintln!("reading {}/{total}: {}", n + 1, f.display())
+    })?;
     if given.is_none() {
         eprintln!("warning: no --camera: a focal length of 1.2 × the longer side is assumed and not refined");
     }
-    let input = sfm::Input { images };
     let config = sfm::Config {
         features: sfm::features::Options { max_features: a.max_features, ..Default::default() },
         ..Default::default()

@@ -37,19 +37,25 @@ pub enum Error {
 pub enum Stage {
     Render(stages::render::Config),
     Calibrate(stages::calibrate::Config),
+    /// A calibrate case on real photographs (an entry with `images`).
+    CalibrateData(stages::calibrate::DataConfig),
     Photometric(stages::photometric::Config),
+    /// A photometric case on a real dataset (an entry with `dataset`).
+    PhotometricData(stages::photometric::DataConfig),
     Color(stages::color::Config),
     Hdr(stages::hdr::Config),
+    Sfm(stages::sfm::Config),
 }
 
 impl Stage {
     pub fn name(&self) -> &'static str {
         match self {
             Stage::Render(_) => "render",
-            Stage::Calibrate(_) => "calibrate",
-            Stage::Photometric(_) => "photometric",
+            Stage::Calibrate(_) | Stage::CalibrateData(_) => "calibrate",
+            Stage::Photometric(_) | Stage::PhotometricData(_) => "photometric",
             Stage::Color(_) => "color",
             Stage::Hdr(_) => "hdr",
+            Stage::Sfm(_) => "sfm",
         }
     }
 
@@ -59,9 +65,11 @@ impl Stage {
             Stage::Render(c) if c.reference.is_some() => "rmse",
             Stage::Render(_) => "mean_rel_err",
             Stage::Calibrate(_) => "fx_rel_err",
-            Stage::Photometric(_) => "mean_angular_error_deg",
+            Stage::CalibrateData(_) => "rms_px",
+            Stage::Photometric(_) | Stage::PhotometricData(_) => "mean_angular_error_deg",
             Stage::Color(_) => "loo_mean_de2000",
             Stage::Hdr(_) => "radiance_median_rel_err",
+            Stage::Sfm(_) => "rotation_err_median_deg",
         }
     }
 }
@@ -160,7 +168,9 @@ pub fn parse(text: &str, path: &Path) -> Result<PipelineFile, Error> {
         let stage_name = match common_t.remove("stage") {
             Some(toml::Value::String(s)) => s,
             Some(other) => return Err(err(format!("`stage` = {other}: expected a stage name"))),
-            None => return Err(err("missing `stage` (render, calibrate, photometric, color or hdr)".into())),
+            None => {
+                return Err(err("missing `stage` (render, calibrate, photometric, color, hdr or sfm)".into()))
+            }
         };
         let common: Common = from_table(common_t).map_err(err)?;
         let err = |message: String| Error::Parse {
@@ -268,13 +278,16 @@ fn from_table<T: serde::de::DeserializeOwned>(t: toml::Table) -> Result<T, Strin
 fn parse_stage(name: &str, own: toml::Table) -> Result<Stage, String> {
     Ok(match name {
         "render" => Stage::Render(from_table(own)?),
+        "calibrate" if own.contains_key("images") => Stage::CalibrateData(from_table(own)?),
         "calibrate" => Stage::Calibrate(from_table(own)?),
+        "photometric" if own.contains_key("dataset") => Stage::PhotometricData(from_table(own)?),
         "photometric" => Stage::Photometric(from_table(own)?),
         "color" => Stage::Color(from_table(own)?),
         "hdr" => Stage::Hdr(from_table(own)?),
+        "sfm" => Stage::Sfm(from_table(own)?),
         other => {
             return Err(format!(
-                "unknown stage `{other}`: expected render, calibrate, photometric, color or hdr"
+                "unknown stage `{other}`: expected render, calibrate, photometric, color, hdr or sfm"
             ))
         }
     })

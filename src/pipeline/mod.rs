@@ -98,10 +98,20 @@ fn run_cases(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Repo
                 |i| stages::calibrate::solve(c, i),
                 |o, t| stages::calibrate::validate(c, o, t),
             ),
+            Stage::CalibrateData(c) => run_case(
+                || stages::calibrate::read(c, &ctx),
+                |i| stages::calibrate::solve_data(c, i),
+                stages::calibrate::validate_data,
+            ),
             Stage::Photometric(c) => run_case(
                 || stages::photometric::synthesize(c, &ctx),
                 |i| stages::photometric::solve(c, i),
-                |o, t| stages::photometric::validate(c, o, t),
+                stages::photometric::validate,
+            ),
+            Stage::PhotometricData(c) => run_case(
+                || stages::photometric::read(c, &ctx),
+                |i| stages::photometric::solve_data(c, i),
+                stages::photometric::validate,
             ),
             Stage::Color(c) => run_case(
                 || stages::color::synthesize(c, &ctx),
@@ -113,13 +123,20 @@ fn run_cases(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Repo
                 |i| stages::hdr::solve(c, i),
                 |o, t| stages::hdr::validate(c, o, t),
             ),
+            Stage::Sfm(c) => {
+                run_case(|| stages::sfm::read(c, &ctx), |i| stages::sfm::solve(c, i), stages::sfm::validate)
+            }
         };
         let total = t.elapsed().as_secs_f64();
         let (mut st, kept) = report_case(path, case, seed, result)?;
         st.timings_s.insert("total".into(), total);
         st.renders = Renders::from_events(&cache.events_of(&case.common.case));
         if opts.progress {
-            let verdict = if st.failed() { "MISSED" } else { "ok" };
+            let verdict = match (&st.skipped, st.failed()) {
+                (Some(_), _) => "skipped (its data are absent)",
+                (None, true) => "MISSED",
+                (None, false) => "ok",
+            };
             eprintln!(
                 "[{}/{n}] {} {}: {verdict}, {:.1} s ({} rendered, {} reused; {:.0} s elapsed)",
                 k + 1,
@@ -165,8 +182,14 @@ fn report_case(
         renders: Renders::default(),
         plot_metric: common.plot.clone().unwrap_or_else(|| case.stage.headline().to_string()),
         notes: Vec::new(),
+        skipped: None,
     };
     match result {
+        Err(StageError::Absent(p)) => {
+            st.outcome.actual = "skipped".into();
+            st.skipped = Some(format!("{} is absent: the case reads real data from there", p.display()));
+            Ok((st, Vec::new()))
+        }
         Ok(r) => {
             st.metrics = apply_bounds(r.metrics, common).map_err(|message| Error::Bounds {
                 path: path.into(),

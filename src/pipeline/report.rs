@@ -72,13 +72,17 @@ pub struct StageReport {
     /// The metric this case's sweep plots against time.
     pub plot_metric: String,
     pub notes: Vec<String>,
+    /// Why the case did not run (its real data are absent): no metric, no verdict, no miss.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub skipped: Option<String>,
 }
 
 impl StageReport {
     /// Whether the case failed: an outcome other than declared, or a metric that missed its
     /// bound without a declared miss.
     pub fn failed(&self) -> bool {
-        self.outcome.declared != self.outcome.actual || self.metrics.iter().any(Metric::failed)
+        self.skipped.is_none() && self.outcome.declared != self.outcome.actual
+            || self.metrics.iter().any(Metric::failed)
     }
 }
 
@@ -130,7 +134,7 @@ impl Report {
     pub fn failures(&self) -> Vec<String> {
         let mut v = Vec::new();
         for s in &self.stages {
-            if s.outcome.declared != s.outcome.actual {
+            if s.skipped.is_none() && s.outcome.declared != s.outcome.actual {
                 let why = s.error.as_ref().map(|e| format!(": {}", e.message)).unwrap_or_default();
                 v.push(format!(
                     "{}/{} declared {}, ended with {}{why}",
@@ -208,7 +212,10 @@ impl Report {
             if skipped > 0 {
                 met_text += &format!(", {skipped} skipped");
             }
-            let outcome = if st.outcome.declared == st.outcome.actual {
+            let outcome = if let Some(why) = &st.skipped {
+                met_text = "—".into();
+                format!("skipped ({why})")
+            } else if st.outcome.declared == st.outcome.actual {
                 st.outcome.actual.clone()
             } else {
                 format!("**{}** (declared {})", st.outcome.actual, st.outcome.declared)
@@ -256,6 +263,9 @@ impl Report {
             let _ = writeln!(s, "\n## {} — {}\n", st.stage, st.case);
             if let Some(e) = &st.error {
                 let _ = writeln!(s, "Ended with a {} error: {}\n", e.kind, e.message);
+            }
+            if let Some(why) = &st.skipped {
+                let _ = writeln!(s, "Skipped: {why}.\n");
             }
             if !st.metrics.is_empty() {
                 let _ = writeln!(s, "| metric | value | unit | bound | verdict |\n|---|---:|---|---:|---|");

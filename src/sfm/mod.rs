@@ -1,7 +1,8 @@
 //! Structure from motion: keypoints and descriptors (`features`), matching (`matching`),
 //! two-view geometry (`two_view`), tracks (`tracks`), PnP (`pnp`), bundle adjustment
 //! (`bundle`), the incremental mapper (`mapper`), the COLMAP text model (`colmap`) and the
-//! comparison with ground truth (`eval`).
+//! comparison with ground truth (`eval`); reading photographs, cameras and ground truth
+//! (`input`).
 //!
 //! [`run`] is what `lumen sfm` calls: features per image, keypoints undistorted through each
 //! image's camera model, then the mapper on the known intrinsics.
@@ -10,6 +11,7 @@ pub mod bundle;
 pub mod colmap;
 pub mod eval;
 pub mod features;
+pub mod input;
 pub mod mapper;
 pub mod matching;
 pub mod pnp;
@@ -24,6 +26,11 @@ pub enum Error {
     /// The images or a setting are wrong (names what and why).
     #[error("{0}")]
     BadInput(String),
+    /// A camera, ground-truth or folder file that cannot be read or is malformed.
+    #[error("{path}: {message}")]
+    File { path: std::path::PathBuf, message: String },
+    #[error(transparent)]
+    Image(#[from] crate::image::io::Error),
 }
 
 /// One image: its name, grey levels in [0, 1], 8-bit colours (row-major, for the points'

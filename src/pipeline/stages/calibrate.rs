@@ -25,6 +25,12 @@
 //!   step of the refinement, from its trace);
 //! - `zhang_condition_number`, `homography_condition_number_max`: how well the closed form's
 //!   linear systems determine their solutions (`calib::Conditioning`; warned above 10³).
+//!
+//! A case with `images` instead of `scene` (`DataConfig`) calibrates real photographs, every
+//! image file in a folder, as `lumen calibrate` does. They have no truth: such a case reports
+//! the metrics that need none (`views_detected`, `views_missed`, `rms_px`, the condition
+//! numbers) and the estimate, to be bounded by a peer's figure on the same photographs. When
+//! the folder is absent (no `../shared` beside a fresh clone) the case is skipped.
 
 use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError};
 use crate::calib::{self, detect::BoardSize};
@@ -83,6 +89,21 @@ pub struct Config {
     pub save_views: bool,
 }
 
+/// A case on real photographs (module docs).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DataConfig {
+    /// Folder of photographs (every .jpg, .jpeg, .png, .tif, .tiff or .exr file in it, in name
+    /// order), relative to the pipeline file.
+    pub images: String,
+    /// Inner corners [cols, rows] (default [9, 6]) and square side (default 0.025; the unit of
+    /// the poses only).
+    #[serde(default = "default_board")]
+    pub board: [usize; 2],
+    #[serde(default = "default_square")]
+    pub square: f64,
+}
+
 fn default_views() -> usize {
     16
 }
@@ -100,6 +121,19 @@ fn default_iterations() -> usize {
 }
 fn yes() -> bool {
     true
+}
+
+impl DataConfig {
+    /// What `lumen calibrate --board … --square …` runs with its other flags at their defaults.
+    pub fn solver(&self) -> calib::Config {
+        calib::Config {
+            board: BoardSize { cols: self.board[0], rows: self.board[1] },
+            square: self.square,
+            flags: Default::default(),
+            detect: Default::default(),
+            max_iterations: default_iterations(),
+        }
+    }
 }
 
 impl Config {
@@ -306,6 +340,91 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Fin
 
 pub fn solve(c: &Config, input: &calib::Input) -> Result<calib::Output, StageError> {
     Ok(calib::run(input, &c.solver())?)
+}
+
+/// Image files a photograph folder holds, by extension.
+const PHOTO_EXTENSIONS: [&str; 6] = ["jpg", "jpeg", "png", "tif", "tiff", "exr"];
+
+/// Reads the photographs of a `DataConfig` case, named by file name.
+pub fn read(c: &DataConfig, ctx: &Context) -> Result<(calib::Input, (), Findings), StageError> {
+    let board = BoardSize { cols: c.board[0], rows: c.board[1] };
+    if board.cols < 2 || board.rows < 2 || !(c.square.is_finite() && c.square > 0.0) {
+        return Err(StageError::Config(format!(
+            "board = {:?}, square = {}: need ≥ 2×2 corners and a finite positive square",
+            c.board, c.square
+        )));
+    }
+    let dir = super::dataset_path(ctx, &c.images)?;
+    let listing = std::fs::read_dir(&dir)
+        .map_err(|e| StageError::Config(format!("images = \"{}\": {}: {e}", c.images, dir.display())))?;
+    let mut files: Vec<std::path::PathBuf> = listing
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.is_file()
+                && p.extension()
+                    .and_then(|e| e.to_str())
+                    .is_some_and(|e| PHOTO_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+        })
+        .collect();
+    files.sort();
+    if files.len() < 2 {
+        return Err(StageError::Config(format!(
+            "images = \"{}\": {} holds {} image file(s) ({}); calibration needs at least 2",
+            c.images,
+            dir.display(),
+            files.len(),
+            PHOTO_EXTENSIONS.join(", ")
+        )));
+    }
+    let mut images = Vec::new();
+    for f in &files {
+        let img = crate::image::io::read(f)?;
+        let name = f.file_name().map_or_else(|| f.display().to_string(), |n| n.to_string_lossy().into());
+        images.push((name, Grey::from_image(&img)));
+    }
+    let mut found = Findings::default();
+    found.notes.push(format!(
+        "Real data: {} photographs in {}, {}×{} corners; no truth, so only the metrics that need none.",
+        images.len(),
+        dir.display(),
+        board.cols,
+        board.rows
+    ));
+    Ok((calib::Input { images }, (), found))
+}
+
+pub fn solve_data(c: &DataConfig, input: &calib::Input) -> Result<calib::Output, StageError> {
+    Ok(calib::run(input, &c.solver())?)
+}
+
+/// The metrics of a calibration that need no truth, and the estimate as a note.
+pub fn validate_data(out: &calib::Output, _truth: &()) -> Findings {
+    let cal = &out.calibration;
+    let mut f = Findings::default();
+    for sk in &cal.skipped {
+        f.notes.push(format!("{} skipped: {}", sk.name, sk.reason));
+    }
+    let m = &mut f.metrics;
+    m.push(Metric::new("views_detected", cal.views.len() as f64, "views", Better::Higher));
+    m.push(Metric::new("views_missed", cal.skipped.len() as f64, "views", Better::Lower));
+    m.push(Metric::new("rms_px", cal.rms_px, "px", Better::Lower));
+    m.push(Metric::new("zhang_condition_number", cal.conditioning.zhang, "", Better::Lower));
+    m.push(Metric::new(
+        "homography_condition_number_max",
+        cal.conditioning.homography_worst,
+        "",
+        Better::Lower,
+    ));
+    for w in cal.conditioning.warnings() {
+        f.notes.push(format!("warning: {w}"));
+    }
+    let (k, sd) = (cal.camera().intrinsics, &cal.std_dev);
+    f.notes.push(format!(
+        "estimate (± standard deviation) fx {:.3} ± {:.3}, fy {:.3} ± {:.3}, cx {:.3} ± {:.3}, cy {:.3} ± {:.3}, d {:?}.",
+        k.fx, sd.fx, k.fy, sd.fy, k.cx, sd.cx, k.cy, sd.cy,
+        cal.camera().distortion.to_array().map(|v| (v * 1e5).round() / 1e5),
+    ));
+    f
 }
 
 pub fn validate(_c: &Config, out: &calib::Output, truth: &Truth) -> Findings {

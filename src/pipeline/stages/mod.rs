@@ -16,6 +16,18 @@ pub mod color;
 pub mod hdr;
 pub mod photometric;
 pub mod render;
+pub mod sfm;
+
+/// The folder or file a dataset case reads, relative to the pipeline file: `Absent` (the case
+/// is skipped) when it is not there, with the path shown without `..` detours.
+pub fn dataset_path(ctx: &Context, path: &str) -> Result<PathBuf, StageError> {
+    let p = render::clean(&ctx.dir.join(path));
+    if p.exists() {
+        Ok(p)
+    } else {
+        Err(StageError::Absent(p))
+    }
+}
 
 use super::cache::Cache;
 use super::metric::Metric;
@@ -28,6 +40,10 @@ pub enum StageError {
     /// A setting of the pipeline entry is out of range or inconsistent.
     #[error("{0}")]
     Config(String),
+    /// The real data a case reads are not there (for example `../shared` beside a fresh
+    /// clone): the case is skipped with this reason, not failed.
+    #[error("{} is absent", .0.display())]
+    Absent(PathBuf),
     #[error(transparent)]
     Render(#[from] crate::render::Error),
     #[error(transparent)]
@@ -40,6 +56,8 @@ pub enum StageError {
     Color(#[from] crate::color::Error),
     #[error(transparent)]
     Hdr(#[from] crate::hdr::Error),
+    #[error(transparent)]
+    Sfm(#[from] crate::sfm::Error),
 }
 
 /// The kinds a pipeline entry can declare with `expect_error`.
@@ -55,6 +73,7 @@ impl StageError {
         use crate::render::Error as R;
         match self {
             StageError::Config(_) => "bad-input",
+            StageError::Absent(_) => "io",
             StageError::Render(R::Io { .. }) | StageError::Image(I::Read { .. } | I::Write { .. }) => "io",
             StageError::Render(R::Image(I::Read { .. })) => "io",
             StageError::Render(_) | StageError::Image(_) => "bad-input",
@@ -73,6 +92,9 @@ impl StageError {
             StageError::Hdr(crate::hdr::Error::File { .. }) => "io",
             StageError::Hdr(crate::hdr::Error::Image(I::Read { .. } | I::Write { .. })) => "io",
             StageError::Hdr(_) => "bad-input",
+            StageError::Sfm(crate::sfm::Error::File { .. }) => "io",
+            StageError::Sfm(crate::sfm::Error::Image(I::Read { .. } | I::Write { .. })) => "io",
+            StageError::Sfm(_) => "bad-input",
         }
     }
 }

@@ -16,6 +16,11 @@
 //! The solver is `photometric::run`, the function `lumen ps` calls; it never sees the truth.
 //! Each light's render goes through the render cache.
 //!
+//! A case with `dataset` instead of `scene` (`DataConfig`) reads a real capture in DiLiGenT's
+//! layout, as `lumen ps --dataset` does, and compares with the dataset's own ground-truth
+//! normals (`Normal_gt.mat`); it has no albedo truth. When the folder is absent (no
+//! `../shared` beside a fresh clone) the case is skipped with the reason.
+//!
 //! Metrics: `mean_angular_error_deg`, `median_angular_error_deg`, `masked_pixels` (mask
 //! pixels left without a normal), `mean_albedo_rel_err` (|π·ρ − kd|/kd against the truth
 //! albedo image, over channels and solved pixels), `light_condition_number`, `pixel_lights_per_s`,
@@ -78,6 +83,18 @@ pub struct Config {
 /// pixel to be in the truth mask (degrees).
 const MAX_SPREAD_DEG: f64 = 10.0;
 
+/// A case on a real dataset (module docs).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DataConfig {
+    /// Folder in DiLiGenT's layout (`photometric::dataset`), relative to the pipeline file;
+    /// it must hold `Normal_gt.mat`.
+    pub dataset: String,
+    /// `lambertian`, `robust` or `blinn-phong` (default robust).
+    #[serde(default = "default_model")]
+    pub model: String,
+}
+
 fn one() -> f64 {
     1.0
 }
@@ -110,7 +127,8 @@ pub fn light_directions(n: usize, elevation_deg: [f64; 2]) -> Vec<DVec3> {
 /// frame) and the renderer's albedo kd.
 pub struct Truth {
     normals: Vec<DVec3>,
-    albedo: Vec<[f64; 3]>,
+    /// `None` for a real dataset.
+    albedo: Option<Vec<[f64; 3]>>,
 }
 
 /// The solver's output, and for Blinn-Phong the robust Lambertian model's on the same data.
@@ -300,11 +318,44 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Trut
         files.extend(images.into_iter().map(|(n, img)| (folder.join(n), Kept::Image(img))));
         files.extend(bytes.into_iter().map(|(n, b)| (folder.join(n), Kept::Bytes(b))));
     }
-    Ok((input, Truth { normals, albedo }, Findings { notes, files, ..Default::default() }))
+    Ok((input, Truth { normals, albedo: Some(albedo) }, Findings { notes, files, ..Default::default() }))
+}
+
+/// Reads a real dataset (`DataConfig`), keeping its ground truth apart from the input.
+pub fn read(c: &DataConfig, ctx: &Context) -> Result<(photometric::Input, Truth, Findings), StageError> {
+    let model: Model = c.model.parse().map_err(StageError::Config)?;
+    let dir = super::dataset_path(ctx, &c.dataset)?;
+    let data = photometric::dataset::read(&dir)?;
+    let Some(normals) = data.truth else {
+        return Err(StageError::Config(format!(
+            "dataset = \"{}\": {} has no Normal_gt.mat to validate against",
+            c.dataset,
+            dir.display()
+        )));
+    };
+    let input = data.input;
+    let notes = vec![format!(
+        "Real data: {} ({} lights, {} mask pixels of {}x{}), model {}; the truth is the dataset's Normal_gt.mat.",
+        dir.display(),
+        input.lights.len(),
+        input.pixels.len(),
+        input.width,
+        input.height,
+        model.name()
+    )];
+    Ok((input, Truth { normals, albedo: None }, Findings { notes, ..Default::default() }))
 }
 
 pub fn solve(c: &Config, input: &photometric::Input) -> Result<Output, StageError> {
-    let model: Model = c.model.parse().map_err(StageError::Config)?;
+    solve_model(&c.model, input)
+}
+
+pub fn solve_data(c: &DataConfig, input: &photometric::Input) -> Result<Output, StageError> {
+    solve_model(&c.model, input)
+}
+
+fn solve_model(model: &str, input: &photometric::Input) -> Result<Output, StageError> {
+    let model: Model = model.parse().map_err(StageError::Config)?;
     let config = photometric::Config { model, trace: model == Model::BlinnPhong };
     let main = photometric::run(input, &config)?;
     // The Lambertian baseline on the same images, for the improvement the glossy model buys.
@@ -314,7 +365,7 @@ pub fn solve(c: &Config, input: &photometric::Input) -> Result<Output, StageErro
     Ok(Output { main, baseline })
 }
 
-pub fn validate(_c: &Config, out: &Output, truth: &Truth) -> Findings {
+pub fn validate(out: &Output, truth: &Truth) -> Findings {
     let mut f = Findings::default();
     let sm = &out.main.summary;
     let acc = photometric::accuracy(&out.main, &truth.normals);
@@ -337,18 +388,20 @@ pub fn validate(_c: &Config, out: &Output, truth: &Truth) -> Findings {
     m.push(Metric::new("masked_pixels", sm.masked_pixels as f64, "pixels", Better::Lower));
     // Albedo: the solvers' ρ is kd/π in the renderer's terms (observations are radiance over
     // irradiance), so π·ρ is compared with the truth albedo, relative, per channel.
-    let mut rel = Vec::new();
-    for (k, kd) in truth.albedo.iter().enumerate() {
-        if out.main.normals[k].is_some() {
-            for ch in 0..3 {
-                if kd[ch] > 0.0 {
-                    rel.push((std::f64::consts::PI * out.main.albedo[k][ch] - kd[ch]).abs() / kd[ch]);
+    if let Some(albedo) = &truth.albedo {
+        let mut rel = Vec::new();
+        for (k, kd) in albedo.iter().enumerate() {
+            if out.main.normals[k].is_some() {
+                for ch in 0..3 {
+                    if kd[ch] > 0.0 {
+                        rel.push((std::f64::consts::PI * out.main.albedo[k][ch] - kd[ch]).abs() / kd[ch]);
+                    }
                 }
             }
         }
+        let albedo_err = (!rel.is_empty()).then(|| rel.iter().sum::<f64>() / rel.len() as f64);
+        m.push(Metric::maybe("mean_albedo_rel_err", albedo_err, "", Better::Lower, none));
     }
-    let albedo_err = (!rel.is_empty()).then(|| rel.iter().sum::<f64>() / rel.len() as f64);
-    m.push(Metric::maybe("mean_albedo_rel_err", albedo_err, "", Better::Lower, none));
     m.push(Metric::new("light_condition_number", sm.light_condition_number, "", Better::Lower));
     if sm.lights_nearly_coplanar {
         f.notes.push(format!(
