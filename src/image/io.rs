@@ -16,6 +16,20 @@ pub enum Error {
     Format { path: PathBuf },
 }
 
+/// The files of `dir` whose extension is one of `extensions` (lower case; matched without
+/// case), in name order.
+pub fn files_with_extensions(dir: &Path, extensions: &[&str]) -> std::io::Result<Vec<PathBuf>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            let e = p.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+            p.is_file() && extensions.contains(&e.as_str())
+        })
+        .collect();
+    files.sort();
+    Ok(files)
+}
+
 /// Writes to `path.tmp` with `write`, then renames to `path`.
 pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<(), String>) -> Result<(), Error> {
     let err = |message: String| Error::Write { path: path.to_path_buf(), message };

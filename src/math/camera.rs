@@ -118,7 +118,16 @@ impl CameraModel {
     /// A centred camera whose field of view `fov_deg` spans the shorter image side
     /// (Mitsuba's `fov_axis = "smaller"`): f = (min(W, H)/2) / tan(fov/2).
     pub fn from_fov(width: u32, height: u32, fov_deg: f64) -> Self {
-        let f = 0.5 * width.min(height) as f64 / (0.5 * fov_deg.to_radians()).tan();
+        CameraModel::centred(
+            width,
+            height,
+            0.5 * width.min(height) as f64 / (0.5 * fov_deg.to_radians()).tan(),
+        )
+    }
+
+    /// A camera without distortion, of focal length `f` pixels, its principal point at the
+    /// image centre ((W − 1)/2, (H − 1)/2).
+    pub fn centred(width: u32, height: u32, f: f64) -> Self {
         CameraModel {
             width,
             height,

@@ -16,6 +16,15 @@ fn file_error(path: &Path, message: impl Into<String>) -> Error {
     Error::File { path: path.to_path_buf(), message: message.into() }
 }
 
+/// The whitespace-separated numbers of a text file; `expected` says what, when one is not.
+fn numbers(path: &Path, expected: &str) -> Result<Vec<f64>, Error> {
+    let text = std::fs::read_to_string(path).map_err(|e| file_error(path, format!("cannot read: {e}")))?;
+    text.split_whitespace()
+        .map(str::parse::<f64>)
+        .collect::<Result<_, _>>()
+        .map_err(|_| file_error(path, expected))
+}
+
 /// A camera: a calibration from `lumen calibrate` or OpenCV (.yaml/.yml/.json), or a text
 /// file of the 3×3 camera matrix K, row by row (no distortion; its width and height then
 /// come from the images, as 0 here).
@@ -25,12 +34,7 @@ pub fn read_camera(path: &Path) -> Result<CameraModel, Error> {
         let c = crate::calib::file::read(path).map_err(|e| file_error(path, e.to_string()))?;
         return Ok(c.camera());
     }
-    let text = std::fs::read_to_string(path).map_err(|e| file_error(path, format!("cannot read: {e}")))?;
-    let v: Vec<f64> = text
-        .split_whitespace()
-        .map(str::parse::<f64>)
-        .collect::<Result<_, _>>()
-        .map_err(|_| file_error(path, "expected 9 numbers (K, row by row)"))?;
+    let v = numbers(path, "expected 9 numbers (K, row by row)")?;
     if v.len() != 9 || v.iter().any(|x| !x.is_finite()) || v[6] != 0.0 || v[7] != 0.0 || v[8] != 1.0 {
         return Err(file_error(path, "expected a 3×3 camera matrix [fx s cx; 0 fy cy; 0 0 1], 9 numbers"));
     }
@@ -47,16 +51,8 @@ pub fn read_camera(path: &Path) -> Result<CameraModel, Error> {
 
 /// The photographs of a folder, in name order (`EXTENSIONS`).
 pub fn photographs(dir: &Path) -> Result<Vec<PathBuf>, Error> {
-    let listing =
-        std::fs::read_dir(dir).map_err(|e| file_error(dir, format!("not a readable folder: {e}")))?;
-    let mut files: Vec<PathBuf> = listing
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            let e = p.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-            p.is_file() && EXTENSIONS.contains(&e.as_str())
-        })
-        .collect();
-    files.sort();
+    let files = crate::image::io::files_with_extensions(dir, &EXTENSIONS)
+        .map_err(|e| file_error(dir, format!("not a readable folder: {e}")))?;
     if files.len() < 2 {
         return Err(file_error(
             dir,
@@ -68,18 +64,7 @@ pub fn photographs(dir: &Path) -> Result<Vec<PathBuf>, Error> {
 
 /// The focal length assumed without a camera: 1.2 × the longer side, as COLMAP's default.
 pub fn assumed_camera(width: u32, height: u32) -> CameraModel {
-    let f = 1.2 * width.max(height) as f64;
-    CameraModel {
-        width,
-        height,
-        intrinsics: Intrinsics {
-            fx: f,
-            fy: f,
-            cx: (width as f64 - 1.0) / 2.0,
-            cy: (height as f64 - 1.0) / 2.0,
-        },
-        distortion: Distortion::default(),
-    }
+    CameraModel::centred(width, height, 1.2 * width.max(height) as f64)
 }
 
 /// Reads `files` with their camera (`None`: `assumed_camera`), calling `on_image(k, n, file)`
@@ -125,12 +110,7 @@ pub type StrechaCamera = (Matrix3<f64>, Matrix3<f64>, Vector3<f64>);
 /// files carry six digits, whose 10⁻⁶-level non-orthogonality would add an error of its own
 /// to 0.01°-level comparisons.
 pub fn read_strecha_camera(path: &Path) -> Result<StrechaCamera, Error> {
-    let text = std::fs::read_to_string(path).map_err(|e| file_error(path, format!("cannot read: {e}")))?;
-    let v: Vec<f64> = text
-        .split_whitespace()
-        .map(str::parse::<f64>)
-        .collect::<Result<_, _>>()
-        .map_err(|_| file_error(path, "expected numbers only (K, distortion, R, C, width height)"))?;
+    let v = numbers(path, "expected numbers only (K, distortion, R, C, width height)")?;
     if v.len() < 24 || v[..24].iter().any(|x| !x.is_finite()) {
         return Err(file_error(path, format!("{} numbers, expected at least 24 finite ones", v.len())));
     }

@@ -355,18 +355,8 @@ pub fn read(c: &DataConfig, ctx: &Context) -> Result<(calib::Input, (), Findings
         )));
     }
     let dir = super::dataset_path(ctx, &c.images)?;
-    let listing = std::fs::read_dir(&dir)
+    let files = crate::image::io::files_with_extensions(&dir, &PHOTO_EXTENSIONS)
         .map_err(|e| StageError::Config(format!("images = \"{}\": {}: {e}", c.images, dir.display())))?;
-    let mut files: Vec<std::path::PathBuf> = listing
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            p.is_file()
-                && p.extension()
-                    .and_then(|e| e.to_str())
-                    .is_some_and(|e| PHOTO_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
-        })
-        .collect();
-    files.sort();
     if files.len() < 2 {
         return Err(StageError::Config(format!(
             "images = \"{}\": {} holds {} image file(s) ({}); calibration needs at least 2",
@@ -401,12 +391,24 @@ pub fn solve_data(c: &DataConfig, input: &calib::Input) -> Result<calib::Output,
 pub fn validate_data(out: &calib::Output, _truth: &()) -> Findings {
     let cal = &out.calibration;
     let mut f = Findings::default();
+    views_found(cal, &mut f);
+    fit_quality(cal, &mut f);
+    f.notes.push(format!("{}.", estimate(cal)));
+    f
+}
+
+/// Why views were skipped (notes), `views_detected` and `views_missed`.
+fn views_found(cal: &calib::Calibration, f: &mut Findings) {
     for sk in &cal.skipped {
         f.notes.push(format!("{} skipped: {}", sk.name, sk.reason));
     }
+    f.metrics.push(Metric::new("views_detected", cal.views.len() as f64, "views", Better::Higher));
+    f.metrics.push(Metric::new("views_missed", cal.skipped.len() as f64, "views", Better::Lower));
+}
+
+/// `rms_px` and the closed form's condition numbers, with their warnings as notes.
+fn fit_quality(cal: &calib::Calibration, f: &mut Findings) {
     let m = &mut f.metrics;
-    m.push(Metric::new("views_detected", cal.views.len() as f64, "views", Better::Higher));
-    m.push(Metric::new("views_missed", cal.skipped.len() as f64, "views", Better::Lower));
     m.push(Metric::new("rms_px", cal.rms_px, "px", Better::Lower));
     m.push(Metric::new("zhang_condition_number", cal.conditioning.zhang, "", Better::Lower));
     m.push(Metric::new(
@@ -418,24 +420,24 @@ pub fn validate_data(out: &calib::Output, _truth: &()) -> Findings {
     for w in cal.conditioning.warnings() {
         f.notes.push(format!("warning: {w}"));
     }
-    let (k, sd) = (cal.camera().intrinsics, &cal.std_dev);
-    f.notes.push(format!(
-        "estimate (± standard deviation) fx {:.3} ± {:.3}, fy {:.3} ± {:.3}, cx {:.3} ± {:.3}, cy {:.3} ± {:.3}, d {:?}.",
+}
+
+/// The estimate with its standard deviations, for a note.
+fn estimate(cal: &calib::Calibration) -> String {
+    let (cam, sd) = (cal.camera(), &cal.std_dev);
+    let k = cam.intrinsics;
+    format!(
+        "estimate (± standard deviation) fx {:.3} ± {:.3}, fy {:.3} ± {:.3}, cx {:.3} ± {:.3}, cy {:.3} ± {:.3}, d {:?}",
         k.fx, sd.fx, k.fy, sd.fy, k.cx, sd.cx, k.cy, sd.cy,
-        cal.camera().distortion.to_array().map(|v| (v * 1e5).round() / 1e5),
-    ));
-    f
+        cam.distortion.to_array().map(|v| (v * 1e5).round() / 1e5),
+    )
 }
 
 pub fn validate(_c: &Config, out: &calib::Output, truth: &Truth) -> Findings {
     let cal = &out.calibration;
     let mut f = Findings::default();
-    for sk in &cal.skipped {
-        f.notes.push(format!("{} skipped: {}", sk.name, sk.reason));
-    }
+    views_found(cal, &mut f);
     let m = &mut f.metrics;
-    m.push(Metric::new("views_detected", cal.views.len() as f64, "views", Better::Higher));
-    m.push(Metric::new("views_missed", cal.skipped.len() as f64, "views", Better::Lower));
     // Detected corners against the projected true corners.
     let (mut sq, mut count) = (0.0, 0usize);
     for (name, found) in &out.corners {
@@ -475,17 +477,7 @@ pub fn validate(_c: &Config, out: &calib::Output, truth: &Truth) -> Findings {
         Better::Lower,
         "a detected corner lies where a distortion model cannot be inverted",
     ));
-    m.push(Metric::new("rms_px", cal.rms_px, "px", Better::Lower));
-    m.push(Metric::new("zhang_condition_number", cal.conditioning.zhang, "", Better::Lower));
-    m.push(Metric::new(
-        "homography_condition_number_max",
-        cal.conditioning.homography_worst,
-        "",
-        Better::Lower,
-    ));
-    for w in cal.conditioning.warnings() {
-        f.notes.push(format!("warning: {w}"));
-    }
+    fit_quality(cal, &mut f);
     let kt = truth.camera.intrinsics;
     if out.trace.len() > 1 {
         let shown: Vec<String> = out
@@ -508,11 +500,13 @@ pub fn validate(_c: &Config, out: &calib::Output, truth: &Truth) -> Findings {
         ));
     }
     f.notes.push(format!(
-        "estimate (± standard deviation) fx {:.3} ± {:.3}, fy {:.3} ± {:.3}, cx {:.3} ± {:.3}, cy {:.3} ± {:.3}, d {:?}; \
-         truth fx {} fy {} cx {} cy {}, d {:?}.",
-        ke.fx, sd.fx, ke.fy, sd.fy, ke.cx, sd.cx, ke.cy, sd.cy,
-        est.distortion.to_array().map(|v| (v * 1e5).round() / 1e5),
-        kt.fx, kt.fy, kt.cx, kt.cy, truth.camera.distortion.to_array()
+        "{}; truth fx {} fy {} cx {} cy {}, d {:?}.",
+        estimate(cal),
+        kt.fx,
+        kt.fy,
+        kt.cx,
+        kt.cy,
+        truth.camera.distortion.to_array()
     ));
     f
 }

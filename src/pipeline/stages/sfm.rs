@@ -45,7 +45,8 @@ pub fn read(c: &Config, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), 
         return Err(StageError::Config(format!("max_features = {}: expected at least 16", c.max_features)));
     }
     let dir = super::dataset_path(ctx, &c.images)?;
-    let camera = sfm::input::read_camera(&super::dataset_path(ctx, &c.camera)?)?;
+    let camera_path = super::dataset_path(ctx, &c.camera)?;
+    let camera = sfm::input::read_camera(&camera_path)?;
     let truth_dir = super::dataset_path(ctx, &c.truth)?;
     let files = sfm::input::photographs(&dir)?;
     let input = sfm::input::read_images(&files, Some(camera), |_, _, _| {})?;
@@ -61,7 +62,7 @@ pub fn read(c: &Config, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), 
         dir.display(),
         input.images[0].grey.width,
         input.images[0].grey.height,
-        c.camera,
+        camera_path.display(),
         truth_dir.display()
     )];
     Ok((input, Truth { poses }, Findings { notes, ..Default::default() }))
