@@ -124,10 +124,12 @@ fn absent_real_data_is_skipped_and_dataset_keys_are_checked() {
     let text = "name = \"t\"\n\
         [[stages]]\nstage = \"calibrate\"\ncase = \"c\"\nimages = \"/nonexistent/boards\"\nbounds = { rms_px = 0.2 }\n\
         [[stages]]\nstage = \"photometric\"\ncase = \"p\"\ndataset = \"/nonexistent/ball\"\nbounds = { mean_angular_error_deg = 2 }\n\
-        [[stages]]\nstage = \"sfm\"\ncase = \"s\"\nimages = \"/nonexistent/photos\"\ncamera = \"/nonexistent/K.txt\"\ntruth = \"/nonexistent/gt\"\n";
+        [[stages]]\nstage = \"sfm\"\ncase = \"s\"\nimages = \"/nonexistent/photos\"\ncamera = \"/nonexistent/K.txt\"\ntruth = \"/nonexistent/gt\"\n\
+        [[stages]]\nstage = \"hdr\"\ncase = \"h\"\nlist = \"/nonexistent/times.txt\"\n";
     let (code, err) = run(text, &out);
     assert_eq!(code, 0, "{err}");
-    for path in ["/nonexistent/boards", "/nonexistent/ball", "/nonexistent/photos"] {
+    for path in ["/nonexistent/boards", "/nonexistent/ball", "/nonexistent/photos", "/nonexistent/times.txt"]
+    {
         assert!(err.contains(&format!("skipped: {path} is absent")), "{path}: {err}");
     }
     let j: serde_json::Value =
@@ -143,6 +145,54 @@ fn absent_real_data_is_skipped_and_dataset_keys_are_checked() {
     let (code, err) = run(text, &out);
     assert_eq!(code, 1, "{err}");
     assert!(err.contains("unknown field `lights`") && err.contains("case p"), "{err}");
+}
+
+/// An `hdr` case on a stack of files (`list`): on a stack exposed exactly as its list says,
+/// the response is increasing and each frame left out is predicted from the others within
+/// 8-bit quantisation; when one frame's stated time is twice its real one, that frame's bias
+/// shows (ln 2 ≈ 0.69 before the fit absorbs part of it).
+#[test]
+fn hdr_case_on_files_checks_the_stack_against_itself() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (w, h) = (96u32, 64u32);
+    let real = [1.0, 0.25, 0.0625, 0.015625];
+    for (k, t) in real.iter().enumerate() {
+        let img = ::image::RgbImage::from_fn(w, h, |x, y| {
+            // Radiance from 10⁻³ to 1 over the image, a little different per channel.
+            let l = (-(6.9 * (x + w * y) as f64) / (w * h) as f64).exp();
+            let code = |s: f64| (255.0 * (l * s * t * 8.0).clamp(0.0, 1.0).powf(1.0 / 2.2)).round() as u8;
+            ::image::Rgb([code(1.0), code(0.8), code(0.6)])
+        });
+        img.save(d.join(format!("f{k}.png"))).unwrap();
+    }
+    std::fs::write(d.join("right.txt"), "f0.png 1\nf1.png 1/4\nf2.png 1/16\nf3.png 1/64\n").unwrap();
+    std::fs::write(d.join("wrong.txt"), "f0.png 1\nf1.png 1/4\nf2.png 1/8\nf3.png 1/64\n").unwrap();
+    let mut text = String::from("name = \"t\"\n");
+    for list in ["right", "wrong"] {
+        let path = d.join(format!("{list}.txt"));
+        text += &format!(
+            "[[stages]]\nstage = \"hdr\"\ncase = \"{list}\"\nlist = \"{}\"\nbounds = {{ non_monotone_values = 0, non_finite_values = 0 }}\n",
+            path.display()
+        );
+    }
+    let out = d.join("out");
+    let (code, err) = run(&text, &out);
+    assert_eq!(code, 0, "{err}");
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let metric = |case: usize, name: &str| {
+        j["stages"][case]["metrics"]
+            .as_array()
+            .and_then(|m| m.iter().find(|m| m["name"] == name))
+            .and_then(|m| m["value"].as_f64())
+            .unwrap_or_else(|| panic!("{name} of case {case}: {j}"))
+    };
+    assert_eq!(metric(0, "non_monotone_values"), 0.0);
+    let (right, wrong) = (metric(0, "loo_worst_frame_bias_ln"), metric(1, "loo_worst_frame_bias_ln"));
+    // Half a code of rounding at the middle of a gamma-2.2 curve is about 0.01 in ln.
+    assert!(right < 0.02, "exact times: worst frame bias {right}");
+    assert!(wrong > 0.2, "one time wrong by 2×: worst frame bias {wrong}");
 }
 
 #[test]

@@ -1,7 +1,7 @@
 //! `lumen hdr`: recover a camera's response from an exposure stack and merge the radiance.
 
 use anyhow::{bail, Context, Result};
-use lumen::hdr::{self, merge, response, Frame, Input, Method, Weights};
+use lumen::hdr::{self, input, merge, response, Method, Weights};
 use lumen::image::{self, Image};
 use std::path::{Path, PathBuf};
 
@@ -57,31 +57,6 @@ pub struct HdrArgs {
     pub out: PathBuf,
 }
 
-/// `1/30`, `0.5` or `6.1035e-05` seconds.
-pub fn parse_time(s: &str) -> Result<f64, String> {
-    let v = match s.split_once('/') {
-        Some((a, b)) => {
-            let (a, b): (f64, f64) = (
-                a.trim().parse().map_err(|_| {
-                    format!("exposure time `{s}`: expected a number or a fraction such as 1/30")
-                })?,
-                b.trim().parse().map_err(|_| {
-                    format!("exposure time `{s}`: expected a number or a fraction such as 1/30")
-                })?,
-            );
-            a / b
-        }
-        None => s
-            .trim()
-            .parse()
-            .map_err(|_| format!("exposure time `{s}`: expected a number or a fraction such as 1/30"))?,
-    };
-    if !(v.is_finite() && v > 0.0) {
-        return Err(format!("exposure time `{s}`: expected a positive, finite number of seconds"));
-    }
-    Ok(v)
-}
-
 /// The frames and their times from `--images`/`--times` or `--list` (a name and a time per
 /// line, names relative to the list's folder, `#` comments).
 fn stack(a: &HdrArgs) -> Result<Vec<(PathBuf, f64)>> {
@@ -90,28 +65,7 @@ fn stack(a: &HdrArgs) -> Result<Vec<(PathBuf, f64)>> {
             if !a.images.is_empty() || !a.times.is_empty() {
                 bail!("give --list, or --images with --times, not both");
             }
-            let text = std::fs::read_to_string(list)
-                .with_context(|| format!("cannot read --list {}", list.display()))?;
-            let dir = list.parent().unwrap_or(Path::new("."));
-            let mut out = Vec::new();
-            for (n, line) in text.lines().enumerate() {
-                let line = line.trim();
-                if line.is_empty() || line.starts_with('#') {
-                    continue;
-                }
-                let mut parts = line.split_whitespace();
-                let (Some(name), Some(time), None) = (parts.next(), parts.next(), parts.next()) else {
-                    bail!(
-                        "{} line {}: expected a file name and an exposure time in seconds",
-                        list.display(),
-                        n + 1
-                    );
-                };
-                let t = parse_time(time)
-                    .map_err(|m| anyhow::anyhow!("{} line {}: {m}", list.display(), n + 1))?;
-                out.push((dir.join(name), t));
-            }
-            Ok(out)
+            Ok(input::read_list(list)?)
         }
         None => {
             if a.images.len() != a.times.len() {
@@ -124,7 +78,7 @@ fn stack(a: &HdrArgs) -> Result<Vec<(PathBuf, f64)>> {
             let times: Vec<f64> = a
                 .times
                 .iter()
-                .map(|t| parse_time(t))
+                .map(|t| input::parse_time(t))
                 .collect::<Result<_, _>>()
                 .map_err(anyhow::Error::msg)?;
             Ok(a.images.iter().cloned().zip(times).collect())
@@ -132,34 +86,11 @@ fn stack(a: &HdrArgs) -> Result<Vec<(PathBuf, f64)>> {
     }
 }
 
-/// Reads an 8- or 16-bit image's code values as RGB, with its number of levels.
-fn read_codes(path: &Path) -> Result<(u32, u32, usize, Vec<u16>)> {
-    use ::image::DynamicImage as D;
-    let img = ::image::open(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let (w, h) = (img.width(), img.height());
-    let (levels, codes) = match img {
-        D::ImageLuma8(_) | D::ImageLumaA8(_) | D::ImageRgb8(_) | D::ImageRgba8(_) => {
-            (256, img.into_rgb8().into_raw().into_iter().map(u16::from).collect())
-        }
-        D::ImageLuma16(_) | D::ImageLumaA16(_) | D::ImageRgb16(_) | D::ImageRgba16(_) => {
-            (65536, img.into_rgb16().into_raw())
-        }
-        _ => bail!(
-            "{}: expected 8- or 16-bit integer samples (a float image is already radiance)",
-            path.display()
-        ),
-    };
-    Ok((w, h, levels, codes))
-}
-
 pub fn run(a: &HdrArgs) -> Result<()> {
     if a.out.extension().and_then(|e| e.to_str()).map(str::to_lowercase).as_deref() != Some("exr") {
         bail!("--out {}: the radiance is written as .exr", a.out.display());
     }
     let frames_in = stack(a)?;
-    if frames_in.len() < 2 {
-        bail!("{} image(s): a stack needs at least 2 exposures", frames_in.len());
-    }
     let weights = match (a.weights.as_str(), a.full_well) {
         ("hat", _) => Weights::Hat,
         ("noise", Some(fw))
@@ -195,35 +126,9 @@ pub fn run(a: &HdrArgs) -> Result<()> {
         .transpose()
         .map_err(|_| anyhow::anyhow!("--exclude-color: expected three code values R,G,B"))?;
     let t = std::time::Instant::now();
-    let mut frames = Vec::new();
-    let (mut size, mut levels) = (None, 0);
-    for (path, time) in &frames_in {
-        let (w, h, l, codes) = read_codes(path)?;
-        match size {
-            None => {
-                size = Some((w, h));
-                levels = l;
-            }
-            Some((w0, h0)) if (w0, h0) != (w, h) => {
-                bail!(
-                    "{}: {w}×{h}, but {} is {w0}×{h0}: every frame must have the same size",
-                    path.display(),
-                    frames_in[0].0.display()
-                )
-            }
-            Some(_) if l != levels => {
-                bail!("{}: {} levels, but the first frame has {levels}: mixed bit depths", path.display(), l)
-            }
-            Some(_) => {}
-        }
-        frames.push(Frame { name: path.display().to_string(), time_s: *time, codes });
-    }
+    let input = input::read_stack(&frames_in, exclude)?;
     let read_s = t.elapsed().as_secs_f64();
-    let (w, h) = size.unwrap_or((0, 0));
-    let n = (w * h) as usize;
-    let usable = exclude.map(|c| {
-        (0..n).map(|i| frames.iter().all(|f| f.codes[3 * i..3 * i + 3] != c)).collect::<Vec<bool>>()
-    });
+    let (w, h) = (input.width as u32, input.height as u32);
     let method = match a.response.as_str() {
         "debevec" => Method::Debevec { lambda: a.lambda, samples_per_value: a.samples_per_value, smoothness },
         "robertson" => Method::Robertson { iterations: 50 },
@@ -233,7 +138,6 @@ pub fn run(a: &HdrArgs) -> Result<()> {
             Method::Given(response::from_csv(&text).map_err(|m| anyhow::anyhow!("--response {file}: {m}"))?)
         }
     };
-    let input = Input { width: w as usize, height: h as usize, levels, frames, usable };
     let fusion = a.fusion.then(hdr::fusion::Mertens::default);
     let out = hdr::run(&input, &hdr::Config { method, weights, fusion })?;
 

@@ -11,6 +11,7 @@
 //! al.'s exposure fusion, an LDR picture blended from the frames without a response.
 
 pub mod fusion;
+pub mod input;
 pub mod merge;
 pub mod response;
 pub mod tonemap;

@@ -44,6 +44,8 @@ pub enum Stage {
     PhotometricData(stages::photometric::DataConfig),
     Color(stages::color::Config),
     Hdr(stages::hdr::Config),
+    /// An hdr case on a photographed stack (an entry with `list`).
+    HdrData(stages::hdr::DataConfig),
     Sfm(stages::sfm::Config),
 }
 
@@ -54,7 +56,7 @@ impl Stage {
             Stage::Calibrate(_) | Stage::CalibrateData(_) => "calibrate",
             Stage::Photometric(_) | Stage::PhotometricData(_) => "photometric",
             Stage::Color(_) => "color",
-            Stage::Hdr(_) => "hdr",
+            Stage::Hdr(_) | Stage::HdrData(_) => "hdr",
             Stage::Sfm(_) => "sfm",
         }
     }
@@ -69,6 +71,7 @@ impl Stage {
             Stage::Photometric(_) | Stage::PhotometricData(_) => "mean_angular_error_deg",
             Stage::Color(_) => "loo_mean_de2000",
             Stage::Hdr(_) => "radiance_median_rel_err",
+            Stage::HdrData(_) => "loo_rms_codes",
             Stage::Sfm(_) => "rotation_err_median_deg",
         }
     }
@@ -283,6 +286,7 @@ fn parse_stage(name: &str, own: toml::Table) -> Result<Stage, String> {
         "photometric" if own.contains_key("dataset") => Stage::PhotometricData(from_table(own)?),
         "photometric" => Stage::Photometric(from_table(own)?),
         "color" => Stage::Color(from_table(own)?),
+        "hdr" if own.contains_key("list") => Stage::HdrData(from_table(own)?),
         "hdr" => Stage::Hdr(from_table(own)?),
         "sfm" => Stage::Sfm(from_table(own)?),
         other => {

@@ -123,6 +123,11 @@ fn run_cases(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Repo
                 |i| stages::hdr::solve(c, i),
                 |o, t| stages::hdr::validate(c, o, t),
             ),
+            Stage::HdrData(c) => run_case(
+                || stages::hdr::read(c, &ctx),
+                |i| stages::hdr::solve_data(c, i),
+                stages::hdr::validate_data,
+            ),
             Stage::Sfm(c) => {
                 run_case(|| stages::sfm::read(c, &ctx), |i| stages::sfm::solve(c, i), stages::sfm::validate)
             }

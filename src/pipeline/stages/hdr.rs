@@ -246,18 +246,25 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(hdr::Input, Truth, Findi
     Ok((input, truth, Findings { notes, ..Default::default() }))
 }
 
-fn method(c: &Config) -> Result<(Method, Weights), StageError> {
-    let m = match c.method.as_str() {
-        "debevec" => Method::Debevec {
-            lambda: c.lambda,
-            samples_per_value: c.samples_per_value.max(1),
-            smoothness: c.smoothness,
-        },
+/// The response fit an entry names: `debevec` (with its λ, samples and smoothness) or
+/// `robertson`.
+fn fit(
+    name: &str,
+    lambda: f64,
+    samples_per_value: usize,
+    smoothness: hdr::response::Smoothness,
+) -> Result<Method, StageError> {
+    Ok(match name {
+        "debevec" => Method::Debevec { lambda, samples_per_value: samples_per_value.max(1), smoothness },
         "robertson" => Method::Robertson { iterations: 200 },
         other => {
             return Err(StageError::Config(format!("method = \"{other}\": expected debevec or robertson")))
         }
-    };
+    })
+}
+
+fn method(c: &Config) -> Result<(Method, Weights), StageError> {
+    let m = fit(&c.method, c.lambda, c.samples_per_value, c.smoothness)?;
     let w = match c.weights.as_str() {
         "hat" => Weights::Hat,
         // The sensor's specification, as a camera's data sheet gives it.
@@ -376,5 +383,149 @@ pub fn validate(_c: &Config, out: &hdr::Output, truth: &Truth) -> Findings {
         Better::Higher,
     ));
     m.push(Metric::new("response_s", s.response_s, "s", Better::Lower));
+    f
+}
+
+/// An `hdr` case on photographs (an entry with `list`): the stack `lumen hdr --list` reads,
+/// with no truth. What can be checked without one: the response is finite and strictly
+/// increasing on every channel (OpenCV's fits are not on the Memorial stack), the merge spans
+/// the exposure times' range, and the stack agrees with itself: each frame, left out of the
+/// merge, is predicted from the others through the recovered curve.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DataConfig {
+    /// The list file, a frame name and an exposure time per line (as `lumen hdr --list`),
+    /// relative to the pipeline file.
+    pub list: String,
+    /// Pixels of this colour (R, G, B code values) in any frame are left out of the fit
+    /// (registration borders), as `lumen hdr --exclude-color`.
+    pub exclude_color: Option<[u16; 3]>,
+    /// `debevec` or `robertson` (default debevec), with Debevec's λ, samples and smoothness
+    /// as in `Config`. The merge uses hat weights: a photograph's noise model is unknown.
+    #[serde(default = "default_method")]
+    pub method: String,
+    #[serde(default = "default_lambda")]
+    pub lambda: f64,
+    #[serde(default = "default_samples_per_value")]
+    pub samples_per_value: usize,
+    #[serde(default)]
+    pub smoothness: hdr::response::Smoothness,
+}
+
+/// A photographed stack's own frames, against which the merge is checked.
+pub struct Stack {
+    input: hdr::Input,
+}
+
+pub fn read(c: &DataConfig, ctx: &Context) -> Result<(hdr::Input, Stack, Findings), StageError> {
+    fit(&c.method, c.lambda, c.samples_per_value, c.smoothness)?;
+    let list = super::dataset_path(ctx, &c.list)?;
+    let frames = hdr::input::read_list(&list)?;
+    let input = hdr::input::read_stack(&frames, c.exclude_color)?;
+    let (lo, hi) = frames.iter().fold((f64::INFINITY, 0f64), |(lo, hi), f| (lo.min(f.1), hi.max(f.1)));
+    let notes = vec![format!(
+        "Real data: {} frames listed in {} ({}×{} px, {} levels), exposure times {lo:.4e} to {hi:.4e} s ({:.1} stops){}.",
+        input.frames.len(),
+        list.display(),
+        input.width,
+        input.height,
+        input.levels,
+        (hi / lo).log2(),
+        match c.exclude_color {
+            Some([r, g, b]) => format!("; pixels coloured {r},{g},{b} in any frame left out of the fit"),
+            None => String::new(),
+        }
+    )];
+    Ok((input.clone(), Stack { input }, Findings { notes, ..Default::default() }))
+}
+
+pub fn solve_data(c: &DataConfig, input: &hdr::Input) -> Result<hdr::Output, StageError> {
+    let method = fit(&c.method, c.lambda, c.samples_per_value, c.smoothness)?;
+    Ok(hdr::run(input, &hdr::Config { method, weights: Weights::Hat, fusion: None })?)
+}
+
+/// Metrics:
+/// - `non_monotone_values`, `non_finite_values`: steps z → z + 1 where a channel's g does not
+///   rise, and values of g that are not finite, over the three channels;
+/// - `dynamic_range_stops`: the merge's range (`hdr::Summary`);
+/// - `loo_median_abs_ln`, `loo_worst_frame_bias_ln`: each frame left out of the merge in
+///   turn and predicted from the others: |g(z) − (ln E + ln Δt)| in ln exposure over the
+///   pixel channels whose code lies in the middle half of the range (where g is best
+///   determined) and where the others' merge is well exposed (borders the fit left out are
+///   left out here too), its median over all frames, and the largest |median| of the signed
+///   difference of one frame: a frame whose effective exposure differs from its stated time
+///   (film's reciprocity failure at long times, a shutter's error) shows there, and every
+///   frame's is listed in a note;
+/// - `saturated_pixels`, `dark_pixels`, `response_s`, `merge_megapixel_frames_per_s`.
+pub fn validate_data(out: &hdr::Output, stack: &Stack) -> Findings {
+    let mut f = Findings::default();
+    let r = &out.response;
+    let non_finite = r.g.iter().flatten().filter(|v| !v.is_finite()).count();
+    let non_monotone: usize = r.g.iter().map(|g| g.windows(2).filter(|p| !(p[1] > p[0])).count()).sum();
+    let input = &stack.input;
+    let n = input.width * input.height;
+    let middle = (input.levels / 4) as u16..=(3 * input.levels / 4) as u16;
+    let mut all_abs = Vec::new();
+    let mut biases = Vec::new();
+    if non_finite == 0 {
+        for k in 0..input.frames.len() {
+            let others: Vec<&hdr::Frame> =
+                input.frames.iter().enumerate().filter(|(j, _)| *j != k).map(|(_, f)| f).collect();
+            let codes: Vec<&[u16]> = others.iter().map(|f| f.codes.as_slice()).collect();
+            let times: Vec<f64> = others.iter().map(|f| f.time_s).collect();
+            let (radiance, mask) = hdr::merge::merge(&codes, &times, r, Weights::Hat);
+            let frame = &input.frames[k];
+            let ln_t = frame.time_s.ln();
+            let mut signed = Vec::new();
+            for i in 0..n {
+                if mask[i] != hdr::merge::WELL_EXPOSED || input.usable.as_ref().is_some_and(|u| !u[i]) {
+                    continue;
+                }
+                for c in 0..3 {
+                    let z = frame.codes[3 * i + c];
+                    let e = radiance[3 * i + c] as f64;
+                    if middle.contains(&z) && e > 0.0 {
+                        signed.push(r.g[c][z as usize] - (e.ln() + ln_t));
+                    }
+                }
+            }
+            signed.sort_by(f64::total_cmp);
+            if let Some(b) = quantile(&signed, 0.5) {
+                biases.push((frame.time_s, b));
+            }
+            all_abs.extend(signed.iter().map(|d| d.abs()));
+        }
+    }
+    all_abs.sort_by(f64::total_cmp);
+    let m = &mut f.metrics;
+    m.push(Metric::new("non_monotone_values", non_monotone as f64, "values", Better::Lower));
+    m.push(Metric::new("non_finite_values", non_finite as f64, "values", Better::Lower));
+    m.push(Metric::new("dynamic_range_stops", out.summary.dynamic_range_stops, "stops", Better::Higher));
+    let none = "the response is not finite, or no frame holds a code in the middle of the range";
+    m.push(Metric::maybe("loo_median_abs_ln", quantile(&all_abs, 0.5), "ln", Better::Lower, none));
+    let worst = biases.iter().map(|(_, b)| b.abs()).reduce(f64::max);
+    m.push(Metric::maybe("loo_worst_frame_bias_ln", worst, "ln", Better::Lower, none));
+    let s = &out.summary;
+    m.push(Metric::new("saturated_pixels", s.saturated_pixels as f64, "pixels", Better::Lower));
+    m.push(Metric::new("dark_pixels", s.dark_pixels as f64, "pixels", Better::Lower));
+    m.push(Metric::new("response_s", s.response_s, "s", Better::Lower));
+    m.push(Metric::new(
+        "merge_megapixel_frames_per_s",
+        s.merge_megapixel_frames_per_s,
+        "1/s",
+        Better::Higher,
+    ));
+    f.notes.push(format!(
+        "Response by {} in {:.3} s ({} samples); {} pixel channels predicted with each frame left out.",
+        s.method,
+        s.response_s,
+        s.samples,
+        all_abs.len()
+    ));
+    let listed: Vec<String> = biases.iter().map(|(t, b)| format!("{t:.4e} s: {b:+.3}")).collect();
+    f.notes.push(format!(
+        "Each frame left out, the median of g(z) − ln(E·Δt) (ln; positive: the frame is brighter than the others predict): {}.",
+        listed.join(", ")
+    ));
     f
 }
