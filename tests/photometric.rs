@@ -332,3 +332,35 @@ fn too_few_lights_or_an_empty_mask() {
     assert!(err.contains("the mask selects no pixel"), "{err}");
     assert!(!out.exists());
 }
+
+/// `error.png` shows the angular error in viridis on a scale fitted to it, with a colour bar:
+/// a glossy sphere solved as Lambertian (errors of a few degrees) gets a scale that rounds its
+/// 99th percentile up to 1, 2 or 5 × 10^k, each solved pixel the colour of its error on it,
+/// and a bar beside the image from viridis(0) at the bottom to viridis(1) at the top.
+#[test]
+fn error_png_is_coloured_on_a_fitted_scale() {
+    use lumen::image::colormap::viridis;
+    let ds = glossy_sphere(48, &spread(24), 0.5, 0.3, 20.0);
+    let out = solve(&ds, Model::Lambertian);
+    let truth = ds.truth.as_ref().unwrap();
+    let scale = photometric::error_scale_deg(&out, truth);
+    let mut errs = photometric::angular_errors(&out.normals, truth);
+    errs.sort_by(f64::total_cmp);
+    let p99 = errs[(errs.len() - 1) * 99 / 100];
+    assert!(scale >= p99 && scale <= 2.5 * p99 && p99 > 0.5, "scale {scale}°, 99th percentile {p99}°");
+    let dir = tempfile::tempdir().unwrap();
+    photometric::write(dir.path(), &ds.input, &out, Some(truth)).unwrap();
+    let png = image::open(dir.path().join("error.png")).unwrap().into_rgb8();
+    assert!(png.width() > 48 && png.height() >= 64, "{}×{}", png.width(), png.height());
+    for (k, &i) in ds.input.pixels.iter().enumerate().step_by(37) {
+        let n = out.normals[k].unwrap();
+        let want = viridis(n.angle_between(truth[k]).to_degrees() / scale);
+        let got = png.get_pixel((i % 48) as u32, (i / 48) as u32).0;
+        assert!(got.iter().zip(want).all(|(a, b)| a.abs_diff(b) <= 1), "pixel {i}: {got:?} vs {want:?}");
+    }
+    let bar: Vec<[u8; 3]> = (0..png.height()).map(|y| png.get_pixel(48 + 4, y).0).collect();
+    assert!(bar.contains(&viridis(0.0)) && bar.contains(&viridis(1.0)));
+    let (bottom, top) =
+        (bar.iter().rposition(|c| *c == viridis(0.0)), bar.iter().position(|c| *c == viridis(1.0)));
+    assert!(top < bottom, "the high end is at the top");
+}

@@ -112,8 +112,8 @@ enum Command {
         /// shininess per pixel).
         #[arg(long, default_value = "robust")]
         model: String,
-        /// Output folder: normals.exr/.png, albedo.exr/.png, error.png (with ground truth),
-        /// depth.exr and surface.obj (the integrated surface), summary.json; with blinn-phong
+        /// Output folder: normals.exr/.png, albedo.exr/.png, error.png (with ground truth: the
+        /// angular error in colour, its scale on a colour bar), depth.exr and surface.obj (the integrated surface), summary.json; with blinn-phong
         /// also specular.exr and shininess.exr.
         #[arg(long)]
         out: PathBuf,
@@ -548,8 +548,10 @@ fn ps_cmd(dir: &Path, model: &str, out: &Path) -> Result<()> {
     let s = &result.summary;
     let err = match truth.map(|t| lumen::photometric::accuracy(&result, t)) {
         Some(Some(a)) => format!(
-            "mean angular error {:.3}°, median {:.3}°; ",
-            a.mean_angular_error_deg, a.median_angular_error_deg
+            "mean angular error {:.3}°, median {:.3}° (error.png from 0 to {}°); ",
+            a.mean_angular_error_deg,
+            a.median_angular_error_deg,
+            truth.map_or(0.0, |t| lumen::photometric::error_scale_deg(&result, t))
         ),
         Some(None) => "no solved pixel has a ground-truth normal; ".to_string(),
         None => String::new(),

@@ -1,5 +1,6 @@
 //! Linear float images, their file formats, and image metrics.
 
+pub mod colormap;
 pub mod filter;
 pub mod io;
 pub mod metrics;

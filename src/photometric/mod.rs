@@ -382,6 +382,15 @@ pub fn angular_errors(normals: &[Option<DVec3>], truth: &[DVec3]) -> Vec<f64> {
         .collect()
 }
 
+/// The upper end of `error.png`'s scale: the 99th percentile of the angular errors, rounded up
+/// to 1, 2 or 5 × 10^k degrees (so a 2° map is not nearly black on a fixed 20° scale).
+pub fn error_scale_deg(out: &Output, truth: &[DVec3]) -> f64 {
+    let mut e = angular_errors(&out.normals, truth);
+    e.sort_by(f64::total_cmp);
+    let p99 = e.get(e.len().saturating_sub(1) * 99 / 100).copied().unwrap_or(1.0);
+    crate::image::colormap::nice_ceiling(p99)
+}
+
 fn mean_of(v: &[f64]) -> Option<f64> {
     (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
 }
@@ -399,12 +408,13 @@ fn median_of(v: &[f64]) -> Option<f64> {
 
 /// Writes `normals.exr` / `.png`, `albedo.exr` / `.png`, for Blinn-Phong `specular.exr`
 /// (σ) and `shininess.exr` (e; both 0 where a pixel has no specular term), `error.png` (with ground truth:
-/// angular error, black 0° to white 20° and above), the integrated surface as `depth.exr`
+/// the angular error in viridis from 0° to `error_scale_deg`, with a labelled colour bar; white
+/// where a pixel has no estimate, black outside the mask or without truth), the integrated surface as `depth.exr`
 /// (orthographic, pixel units, mean 0) and `surface.obj`, and `summary.json` into `dir`. Normals are
 /// unit vectors in the dataset's frame, zero outside the mask; the PNG shows (n + 1)/2. The
 /// albedo PNG is scaled so that the brightest 1 % of pixels saturate.
 pub fn write(dir: &Path, data: &Input, out: &Output, truth: Option<&[DVec3]>) -> Result<(), Error> {
-    use crate::image::{io, Image};
+    use crate::image::{colormap, io, Image};
     std::fs::create_dir_all(dir).map_err(|e| Error::Write { path: dir.into(), message: e.to_string() })?;
     let (w, h) = (data.width as u32, data.height as u32);
     let mut normals = Image::new(w, h, 3);
@@ -438,18 +448,20 @@ pub fn write(dir: &Path, data: &Input, out: &Output, truth: Option<&[DVec3]>) ->
         }
     }
     if let Some(truth) = truth {
-        let mut err = vec![0u16; (w * h) as usize];
+        let scale = error_scale_deg(out, truth);
+        let mut err = vec![0u8; 3 * (w * h) as usize];
         for (k, &i) in data.pixels.iter().enumerate() {
-            err[i] = match out.normals[k] {
-                Some(_) if !usable(&truth[k]) => 0,
-                Some(n) => {
-                    let deg = angle_deg(n, truth[k]);
-                    (deg / 20.0 * 255.0).round().clamp(0.0, 255.0) as u16
-                }
-                None => 255,
+            let c = match out.normals[k] {
+                Some(_) if !usable(&truth[k]) => continue,
+                Some(n) => colormap::viridis(angle_deg(n, truth[k]) / scale),
+                None => [255; 3],
             };
+            err[3 * i..3 * i + 3].copy_from_slice(&c);
         }
-        io::write_png_raw(&dir.join("error.png"), w, h, 1, &err, 8)?;
+        let (rgb, ew, eh) =
+            colormap::with_colour_bar(&err, w, h, "0°", &format!("{}°", colormap::label(scale)));
+        let rgb: Vec<u16> = rgb.into_iter().map(u16::from).collect();
+        io::write_png_raw(&dir.join("error.png"), ew, eh, 3, &rgb, 8)?;
     }
     if let Some(z) = integrate::depth(data.width, &data.pixels, &out.normals) {
         let mut depth = Image::new(w, h, 1);
