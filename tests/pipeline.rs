@@ -210,6 +210,7 @@ fn render_command_writes_exr_png_and_truth() {
             out.to_str().unwrap(),
             "--aov",
             "depth,normal,id,variance",
+            "--preview",
         ])
         .output()
         .unwrap();
@@ -219,6 +220,25 @@ fn render_command_writes_exr_png_and_truth() {
     for name in ["f.depth.exr", "f.normal.exr", "f.id.exr", "f.variance.exr", "f.ids.json"] {
         assert!(dir.path().join(name).exists(), "{name} missing");
     }
+    // --preview: a PNG beside every EXR; depth and variance carry a scale bar, so are wider.
+    for name in ["f.png", "f.normal.png", "f.id.png"] {
+        let png = image::open(dir.path().join(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!((png.width(), png.height()), (16, 16), "{name}");
+    }
+    for name in ["f.depth.png", "f.variance.png"] {
+        let png = image::open(dir.path().join(name)).unwrap();
+        assert!(png.width() > 16 && png.height() >= 64, "{name}");
+    }
+    // `lumen preview` reads everything before it writes: one bad file, no preview written.
+    let again = dir.path().join("again.exr");
+    std::fs::copy(&out, &again).unwrap();
+    let (code, err) =
+        common::lumen(&["preview", again.to_str().unwrap(), dir.path().join("f.png").to_str().unwrap()]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("f.png: expected an .exr file"), "{err}");
+    assert!(!dir.path().join("again.png").exists());
+    let (code, err) = common::lumen(&["preview", again.to_str().unwrap(), "--kind", "shiny"]);
+    assert!(code == 1 && err.contains("--kind: kind `shiny`"), "{err}");
     let depth = lumen::image::io::read_exr(&dir.path().join("f.depth.exr")).unwrap();
     assert_eq!(depth.channels, 1);
     // The camera is at the centre of a unit sphere: the centre pixel's depth is ~1.

@@ -68,6 +68,22 @@ enum Command {
         /// normal_camera, albedo, position, id, or variance (of the mean radiance).
         #[arg(long, value_delimiter = ',')]
         aov: Vec<String>,
+        /// Also write a PNG preview of every EXR written (as `lumen preview` does).
+        #[arg(long)]
+        preview: bool,
+    },
+    /// PNG previews of EXR images, written beside each as NAME.png: radiance tone-mapped,
+    /// normals as (n + 1)/2, depth and scalars in colour with a labelled scale bar, ids in
+    /// distinct colours.
+    Preview {
+        /// EXR files, e.g. box.exr box.depth.exr ps-ball/normals.exr.
+        #[arg(required = true, num_args = 1..)]
+        files: Vec<PathBuf>,
+        /// radiance, normal, depth, id, albedo, position or scalar (default: from the file
+        /// name as `lumen render --aov` and `lumen ps` write it, else one channel is a scalar
+        /// and three are radiance).
+        #[arg(long)]
+        kind: Option<String>,
     },
     /// Calibrate a camera from chessboard images (Zhang's method).
     Calibrate {
@@ -216,9 +232,10 @@ pub fn main() -> i32 {
                 if no_cache { None } else { Some(cache.unwrap_or_else(|| PathBuf::from("out/cache"))) };
             run_pipeline(&pipeline, out, threads, cache)
         }
-        Command::Render { scene, out, spp, max_depth, seed, threads, aov } => {
-            render_cmd(&scene, &out, spp, max_depth, seed, threads, &aov).map(|_| 0)
+        Command::Render { scene, out, spp, max_depth, seed, threads, aov, preview } => {
+            render_cmd(&scene, &out, spp, max_depth, seed, threads, &aov, preview).map(|_| 0)
         }
+        Command::Preview { files, kind } => preview_cmd(&files, kind.as_deref()).map(|_| 0),
         Command::Calibrate {
             images,
             board,
@@ -327,6 +344,7 @@ fn render_cmd(
     seed: Option<u64>,
     threads: Option<usize>,
     aov: &[String],
+    preview: bool,
 ) -> Result<()> {
     let ext = out.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     if ext != "exr" && ext != "png" {
@@ -370,8 +388,13 @@ fn render_cmd(
         }
         _ => lumen::image::io::write(out, &film.mean)?,
     }
+    let mut written: Vec<PathBuf> = Vec::new();
+    if ext == "exr" {
+        written.push(out.to_path_buf());
+    }
     if aov.iter().any(|a| a == "variance") {
         lumen::image::io::write_exr(&sibling(out, "variance"), &film.variance)?;
+        written.push(sibling(out, "variance"));
     }
     let truth_names: Vec<&String> = aov.iter().filter(|a| *a != "variance").collect();
     if !truth_names.is_empty() {
@@ -379,6 +402,7 @@ fn render_cmd(
         for name in truth_names {
             if let Some(img) = truth.get(name) {
                 lumen::image::io::write_exr(&sibling(out, name), img)?;
+                written.push(sibling(out, name));
             }
         }
         if aov.iter().any(|a| a == "id") {
@@ -402,6 +426,34 @@ fn render_cmd(
     );
     if film.dropped_samples > 0 {
         eprintln!("warning: {} non-finite samples were dropped", film.dropped_samples);
+    }
+    if preview {
+        preview_cmd(&written, None)?;
+    }
+    Ok(())
+}
+
+fn preview_cmd(files: &[PathBuf], kind: Option<&str>) -> Result<()> {
+    use lumen::image::preview;
+    let kind: Option<preview::Kind> =
+        kind.map(|k| k.parse()).transpose().map_err(|e: String| anyhow::anyhow!("--kind: {e}"))?;
+    // Everything read before anything is written: a bad file leaves no previews behind.
+    let mut images = Vec::new();
+    for file in files {
+        if file.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() != Some("exr") {
+            bail!("{}: expected an .exr file", file.display());
+        }
+        let img = lumen::image::io::read_exr(file)?;
+        if !matches!(img.channels, 1 | 3 | 4) {
+            bail!("{}: {} channels; a preview shows 1, 3 or 4", file.display(), img.channels);
+        }
+        images.push(img);
+    }
+    for (file, img) in files.iter().zip(&images) {
+        let k = kind.unwrap_or_else(|| preview::kind_of(file, img));
+        let png = preview::png_path(file);
+        preview::write(&png, img, k)?;
+        eprintln!("wrote {} ({k:?})", png.display());
     }
     Ok(())
 }

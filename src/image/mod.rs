@@ -4,6 +4,7 @@ pub mod colormap;
 pub mod filter;
 pub mod io;
 pub mod metrics;
+pub mod preview;
 
 use serde::{Deserialize, Serialize};
 
