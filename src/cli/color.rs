@@ -85,11 +85,11 @@ pub struct FitArgs {
     /// Read a PNG/TIFF's code values as linear (raw sensor data), not sRGB-encoded.
     #[arg(long)]
     linear: bool,
-    /// The level at which a channel clips, in the image's units (default 1: full scale
-    /// of a PNG/TIFF, or of an EXR scaled to it).
+    /// The level at which a channel clips, in the image's units (1 is the full scale of a
+    /// PNG/TIFF, or of an EXR scaled to it).
     #[arg(long, default_value_t = 1.0)]
     saturation: f64,
-    /// The patch white-preserving maps exactly, 1 to 24 (default 19, "white 9.5").
+    /// The patch white-preserving maps exactly, 1 to 24 (19 is "white 9.5").
     #[arg(long, default_value_t = 19)]
     white_patch: usize,
     /// Output JSON: the model, its white and the report.

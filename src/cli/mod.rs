@@ -45,33 +45,7 @@ enum Command {
     },
     /// Render a scene file to an image: .exr (linear float) or .png (sRGB, or raw sensor values
     /// when the scene has a [sensor]).
-    Render {
-        /// Scene file (TOML), e.g. pipelines/scenes/cornell-box.toml.
-        scene: PathBuf,
-        /// Output image: .exr or .png; truth images and the variance go beside it as
-        /// NAME.<aov>.exr.
-        #[arg(long)]
-        out: PathBuf,
-        /// Samples per pixel (default: the scene's [render] spp).
-        #[arg(long)]
-        spp: Option<u32>,
-        /// Longest path in segments (default: the scene's max_depth).
-        #[arg(long)]
-        max_depth: Option<u32>,
-        /// Seed of every random stream (default: the scene's [render] seed).
-        #[arg(long)]
-        seed: Option<u64>,
-        /// Worker threads, 1 to 1024 (default: all cores).
-        #[arg(long, value_parser = parse_threads)]
-        threads: Option<usize>,
-        /// Truth images to write beside the output, comma-separated: depth, normal,
-        /// normal_camera, albedo, position, id, or variance (of the mean radiance).
-        #[arg(long, value_delimiter = ',')]
-        aov: Vec<String>,
-        /// Also write a PNG preview of every EXR written (as `lumen preview` does).
-        #[arg(long)]
-        preview: bool,
-    },
+    Render(RenderArgs),
     /// PNG previews of EXR images, written beside each as NAME.png: radiance tone-mapped,
     /// normals as (n + 1)/2, depth and scalars in colour with a labelled scale bar, ids in
     /// distinct colours.
@@ -167,16 +141,50 @@ enum Command {
     },
 }
 
+/// `lumen render`'s flags.
+#[derive(clap::Args)]
+pub struct RenderArgs {
+    /// Scene file (TOML), e.g. pipelines/scenes/cornell-box.toml.
+    pub scene: PathBuf,
+    /// Output image: .exr or .png; truth images and the variance go beside it as
+    /// NAME.<aov>.exr.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Samples per pixel (default: the scene's [render] spp).
+    #[arg(long)]
+    pub spp: Option<u32>,
+    /// Longest path in segments (default: the scene's max_depth).
+    #[arg(long)]
+    pub max_depth: Option<u32>,
+    /// Seed of every random stream (default: the scene's [render] seed).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Worker threads, 1 to 1024 (default: all cores).
+    #[arg(long, value_parser = parse_threads)]
+    pub threads: Option<usize>,
+    /// Truth images to write beside the output, comma-separated: depth, normal,
+    /// normal_camera, albedo, position, id, or variance (of the mean radiance).
+    #[arg(long, value_delimiter = ',')]
+    pub aov: Vec<String>,
+    /// Also write a PNG preview of every EXR written (as `lumen preview` does).
+    #[arg(long)]
+    pub preview: bool,
+}
+
 #[derive(Subcommand)]
 enum Bench {
     /// Million paths per second on a scene (default: the Cornell box, 256×256, depth 8).
     Render {
+        /// Scene file (TOML).
         #[arg(long, default_value = "pipelines/scenes/cornell-box.toml")]
         scene: PathBuf,
+        /// Samples per pixel.
         #[arg(long, default_value_t = 64)]
         spp: u32,
+        /// Longest path in segments.
         #[arg(long, default_value_t = 8)]
         max_depth: u32,
+        /// Worker threads, 1 to 1024 (default: all cores).
         #[arg(long, value_parser = parse_threads)]
         threads: Option<usize>,
         /// Repetitions; the best is reported.
@@ -192,13 +200,16 @@ enum Bench {
     /// RMSE against a reference image as the sample count grows, for the independent and
     /// the Sobol sampler (default: the Cornell box against Mitsuba 3's 8192-spp reference).
     Convergence {
+        /// Scene file (TOML).
         #[arg(long, default_value = "pipelines/scenes/cornell-box.toml")]
         scene: PathBuf,
+        /// Reference image (.exr, linear) of the same scene, e.g. a high-spp Mitsuba 3 render.
         #[arg(long, default_value = "../shared/data/scenes/cornell-box/reference.exr")]
         reference: PathBuf,
         /// Sample counts, comma-separated.
         #[arg(long, default_value = "4,16,64,256")]
         spp: String,
+        /// Worker threads, 1 to 1024 (default: all cores).
         #[arg(long, value_parser = parse_threads)]
         threads: Option<usize>,
     },
@@ -232,9 +243,7 @@ pub fn main() -> i32 {
                 if no_cache { None } else { Some(cache.unwrap_or_else(|| PathBuf::from("out/cache"))) };
             run_pipeline(&pipeline, out, threads, cache)
         }
-        Command::Render { scene, out, spp, max_depth, seed, threads, aov, preview } => {
-            render_cmd(&scene, &out, spp, max_depth, seed, threads, &aov, preview).map(|_| 0)
-        }
+        Command::Render(args) => render_cmd(&args).map(|_| 0),
         Command::Preview { files, kind } => preview_cmd(&files, kind.as_deref()).map(|_| 0),
         Command::Calibrate {
             images,
@@ -336,16 +345,9 @@ fn sibling(out: &Path, suffix: &str) -> PathBuf {
     out.with_file_name(format!("{stem}.{suffix}.exr"))
 }
 
-fn render_cmd(
-    scene_path: &Path,
-    out: &Path,
-    spp: Option<u32>,
-    max_depth: Option<u32>,
-    seed: Option<u64>,
-    threads: Option<usize>,
-    aov: &[String],
-    preview: bool,
-) -> Result<()> {
+fn render_cmd(a: &RenderArgs) -> Result<()> {
+    let RenderArgs { scene: scene_path, out, spp, max_depth, seed, threads, aov, preview } = a;
+    let (spp, max_depth, seed, threads) = (*spp, *max_depth, *seed, *threads);
     let ext = out.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     if ext != "exr" && ext != "png" {
         bail!("--out {}: expected a file name ending in .exr or .png", out.display());
@@ -427,7 +429,7 @@ fn render_cmd(
     if film.dropped_samples > 0 {
         eprintln!("warning: {} non-finite samples were dropped", film.dropped_samples);
     }
-    if preview {
+    if *preview {
         preview_cmd(&written, None)?;
     }
     Ok(())
@@ -660,4 +662,37 @@ fn undistort_cmd(camera: &Path, alpha: f64, input: &Path, output: &Path) -> Resu
         new.cy
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Cli;
+    use clap::CommandFactory;
+
+    /// Every argument of every command says what it is, and its default once: either clap's
+    /// `[default: …]` or a "(default …)" in the text, never both.
+    #[test]
+    fn every_argument_is_described_with_its_default_once() {
+        fn visit(cmd: &clap::Command, path: &str, bad: &mut Vec<String>) {
+            for arg in cmd.get_arguments() {
+                let id = arg.get_id().as_str();
+                if id == "help" || id == "version" {
+                    continue;
+                }
+                let help = arg.get_help().map(|h| h.to_string()).unwrap_or_default();
+                if help.trim().is_empty() {
+                    bad.push(format!("{path} {id}: no description"));
+                }
+                if !arg.get_default_values().is_empty() && help.contains("(default") {
+                    bad.push(format!("{path} {id}: default given twice"));
+                }
+            }
+            for sub in cmd.get_subcommands() {
+                visit(sub, &format!("{path} {}", sub.get_name()), bad);
+            }
+        }
+        let mut bad = Vec::new();
+        visit(&Cli::command(), "lumen", &mut bad);
+        assert!(bad.is_empty(), "{bad:#?}");
+    }
 }
