@@ -237,3 +237,25 @@ fn cli_real_photographs() {
     let v = photo.get_pixel(20, 460).0[0];
     assert_eq!(overlay.get_pixel(20, 460).0, [v, v, v]);
 }
+
+/// `--board 7x5` on the 9×6 photographs: a part of each board is fitted, and the command
+/// says that the photographs hold a larger grid (without the warning the calibration would
+/// look like a success).
+#[test]
+fn a_wrong_board_size_is_warned_about() {
+    let Some(data) = common::shared_data() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("cam.yaml");
+    let pattern = format!("{}/calibration/opencv-left/*.jpg", data.display());
+    let (code, err) =
+        lumen(&["calibrate", "--images", &pattern, "--board", "7x5", "--out", out.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("warning:") && err.contains("up to 9×6 inner corners, larger than the board given"),
+        "{err}"
+    );
+    let (code, err) =
+        lumen(&["calibrate", "--images", &pattern, "--board", "9x6", "--out", out.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(!err.contains("larger than the board"), "{err}");
+}

@@ -86,3 +86,18 @@ fn heavy_noise() {
     eprintln!("heavy noise: corner RMS {rms:.3} px");
     assert!(rms < 0.5, "corner RMS {rms} px");
 }
+
+/// A wrong, smaller `--board`: a part of the 9×6 board is fitted, but the detection says the
+/// complete grid is larger (9×6 in the board's orientation, or 6×9 when the smaller size is
+/// given the other way round); the right size finds no larger grid.
+#[test]
+fn a_smaller_board_than_photographed_is_noticed() {
+    let (img, _) = view(&[]);
+    let right = calib::detect::find(&img, BOARD, &Default::default()).unwrap();
+    assert_eq!(right.larger_grid, None);
+    let small = calib::detect::find(&img, BoardSize { cols: 7, rows: 5 }, &Default::default()).unwrap();
+    assert_eq!(small.corners.len(), 35);
+    assert_eq!(small.larger_grid, Some((9, 6)));
+    let turned = calib::detect::find(&img, BoardSize { cols: 4, rows: 8 }, &Default::default()).unwrap();
+    assert_eq!(turned.larger_grid, Some((6, 9)));
+}

@@ -57,6 +57,19 @@ impl Default for DetectOptions {
 
 /// Detects the board; `Err` says why the view has no complete board.
 pub fn detect(img: &Grey, board: BoardSize, opts: &DetectOptions) -> Result<Vec<DVec2>, String> {
+    find(img, board, opts).map(|f| f.corners)
+}
+
+/// A detection: the board's corners in order and, when they are a window of a complete grid
+/// of corners larger than the board asked for, that grid's size as (cols, rows) in the
+/// board's orientation (the board size given is then likely wrong: a sub-grid was fitted).
+pub struct Found {
+    pub corners: Vec<DVec2>,
+    pub larger_grid: Option<(usize, usize)>,
+}
+
+/// `detect`, saying whether the board found lies inside a larger grid.
+pub fn find(img: &Grey, board: BoardSize, opts: &DetectOptions) -> Result<Found, String> {
     if board.cols < 2 || board.rows < 2 {
         return Err(format!("a board needs at least 2×2 inner corners, not {}×{}", board.cols, board.rows));
     }
@@ -71,9 +84,9 @@ pub fn detect(img: &Grey, board: BoardSize, opts: &DetectOptions) -> Result<Vec<
             board.rows
         ));
     }
-    let grid = find_grid(&points, board, &sampler)?;
+    let (grid, larger_grid) = find_grid(&points, board, &sampler)?;
     let ordered = order(&grid, board, &sampler);
-    Ok(refine(&sampler, &ordered, board, opts))
+    Ok(Found { corners: refine(&sampler, &ordered, board, opts), larger_grid })
 }
 
 /// Saddle points that pass the X-junction check (steps 1 and 2).
@@ -190,7 +203,14 @@ fn is_x_junction(img: &Grey, p: DVec2, ring: &[DVec2]) -> bool {
 
 /// Grows grids from seeds; returns grid coordinates → point for the first grid of the board's
 /// size.
-fn find_grid(points: &[DVec2], board: BoardSize, img: &Grey) -> Result<HashMap<(i32, i32), DVec2>, String> {
+/// The board's window of the grid of candidates (module docs), and the size of the complete
+/// grid around it when that is larger (`Found::larger_grid`).
+#[allow(clippy::type_complexity)]
+fn find_grid(
+    points: &[DVec2],
+    board: BoardSize,
+    img: &Grey,
+) -> Result<(HashMap<(i32, i32), DVec2>, Option<(usize, usize)>), String> {
     let nearest = |p: DVec2, exclude: &dyn Fn(usize) -> bool| -> Option<(usize, f64)> {
         points
             .iter()
@@ -243,10 +263,43 @@ fn find_grid(points: &[DVec2], board: BoardSize, img: &Grey) -> Result<HashMap<(
         }
         if let Some((score, i0, j0, wi, wj)) = best {
             if score >= 0.75 {
-                return Ok((i0..i0 + wi)
+                let window = (i0..i0 + wi)
                     .flat_map(|i| (j0..j0 + wj).map(move |j| (i, j)))
                     .map(|(i, j)| ((i - i0, j - j0), points[grid[&(i, j)]]))
-                    .collect());
+                    .collect();
+                // The complete grid around the window: grown a row or column at a time while
+                // the new one is fully populated.
+                let full = |(a, b, c, d): (i32, i32, i32, i32)| {
+                    (a..=b).all(|i| (c..=d).all(|j| grid.contains_key(&(i, j))))
+                };
+                let (mut a, mut b, mut c, mut d) = (i0, i0 + wi - 1, j0, j0 + wj - 1);
+                loop {
+                    let before = (a, b, c, d);
+                    if full((a - 1, a - 1, c, d)) {
+                        a -= 1;
+                    }
+                    if full((b + 1, b + 1, c, d)) {
+                        b += 1;
+                    }
+                    if full((a, b, c - 1, c - 1)) {
+                        c -= 1;
+                    }
+                    if full((a, b, d + 1, d + 1)) {
+                        d += 1;
+                    }
+                    if (a, b, c, d) == before {
+                        break;
+                    }
+                }
+                let (ni, nj) = ((b - a + 1) as usize, (d - c + 1) as usize);
+                let larger = (ni > wi as usize || nj > wj as usize).then_some({
+                    if wi as usize == board.cols {
+                        (ni, nj)
+                    } else {
+                        (nj, ni)
+                    }
+                });
+                return Ok((window, larger));
             }
         }
     }

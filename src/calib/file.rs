@@ -132,5 +132,6 @@ fn from_yaml(text: &str) -> Result<Calibration, String> {
         views: Vec::new(),
         skipped: Vec::new(),
         conditioning: Default::default(),
+        larger_grids: Vec::new(),
     })
 }

@@ -84,6 +84,10 @@ pub struct Calibration {
     /// for a person, not read back.
     #[serde(skip_deserializing)]
     pub conditioning: Conditioning,
+    /// Views whose board is a window of a larger complete grid of corners: the board size
+    /// given is likely wrong (written for a person, not read back).
+    #[serde(skip_deserializing, skip_serializing_if = "Vec::is_empty")]
+    pub larger_grids: Vec<LargerGrid>,
 }
 
 /// How well the closed form's linear systems determine their solutions: σ_max / σ₂ of each
@@ -128,6 +132,24 @@ pub struct Skipped {
 }
 
 impl Calibration {
+    /// What a person should be told: poorly conditioned systems (`Conditioning::warnings`)
+    /// and a board that looks smaller than the one photographed.
+    pub fn warnings(&self) -> Vec<String> {
+        let mut w = self.conditioning.warnings();
+        if let Some(first) = self.larger_grids.first() {
+            let cols = self.larger_grids.iter().map(|g| g.cols).max().unwrap_or(first.cols);
+            let rows = self.larger_grids.iter().map(|g| g.rows).max().unwrap_or(first.rows);
+            w.push(format!(
+                "{} of {} views ({}{}) hold a complete grid of up to {cols}×{rows} inner corners, larger than the board given: a part of it was fitted; is the board size right?",
+                self.larger_grids.len(),
+                self.views.len(),
+                first.name,
+                if self.larger_grids.len() > 1 { ", …" } else { "" }
+            ));
+        }
+        w
+    }
+
     pub fn camera(&self) -> crate::math::CameraModel {
         let k = &self.camera_matrix;
         crate::math::CameraModel {
@@ -149,8 +171,24 @@ pub fn board_points(board: BoardSize, square: f64) -> Vec<DVec3> {
 /// Detected views (name and corners in `detect`'s order) and the views skipped, with reasons.
 pub type Detections = (Vec<(String, Vec<DVec2>)>, Vec<Skipped>);
 
+/// `Detections` and the views whose board lies inside a larger grid.
+type Checked = (Vec<(String, Vec<DVec2>)>, Vec<Skipped>, Vec<LargerGrid>);
+
+/// A view whose board is a window of a larger complete grid of corners (`detect::Found`).
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct LargerGrid {
+    pub name: String,
+    pub cols: usize,
+    pub rows: usize,
+}
+
 /// Detects the board in every image; all images must have the first one's size.
 pub fn detect_views(images: &[(String, Grey)], config: &Config) -> Result<Detections, Error> {
+    detect_views_checked(images, config).map(|(views, skipped, _)| (views, skipped))
+}
+
+/// `detect_views`, with the views whose board lies inside a larger grid.
+fn detect_views_checked(images: &[(String, Grey)], config: &Config) -> Result<Checked, Error> {
     let Some((_, first)) = images.first() else {
         return Err(Error::BadInput("no images to calibrate from".into()));
     };
@@ -164,17 +202,23 @@ pub fn detect_views(images: &[(String, Grey)], config: &Config) -> Result<Detect
     // Views are independent: detect them in parallel, keeping the input order.
     let found: Vec<_> = {
         use rayon::prelude::*;
-        images.par_iter().map(|(_, img)| detect::detect(img, config.board, &config.detect)).collect()
+        images.par_iter().map(|(_, img)| detect::find(img, config.board, &config.detect)).collect()
     };
     let mut views = Vec::new();
     let mut skipped = Vec::new();
+    let mut larger = Vec::new();
     for ((name, _), result) in images.iter().zip(found) {
         match result {
-            Ok(corners) => views.push((name.clone(), corners)),
+            Ok(found) => {
+                if let Some((cols, rows)) = found.larger_grid {
+                    larger.push(LargerGrid { name: name.clone(), cols, rows });
+                }
+                views.push((name.clone(), found.corners));
+            }
             Err(reason) => skipped.push(Skipped { name: name.clone(), reason }),
         }
     }
-    Ok((views, skipped))
+    Ok((views, skipped, larger))
 }
 
 /// What calibration reads: named greyscale views of one camera.
@@ -195,10 +239,11 @@ pub struct Output {
 
 /// Detects the board in every image and calibrates from the views where it was found.
 pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
-    let (views, skipped) = detect_views(&input.images, config)?;
+    let (views, skipped, larger) = detect_views_checked(&input.images, config)?;
     let size = input.images.first().map_or((0, 0), |(_, g)| (g.width as u32, g.height as u32));
     let (mut calibration, trace) = calibrate_traced(&views, size, config)?;
     calibration.skipped = skipped;
+    calibration.larger_grids = larger;
     Ok(Output { calibration, corners: views, trace })
 }
 
@@ -315,6 +360,7 @@ pub fn calibrate_traced(
             .collect(),
         skipped: Vec::new(),
         conditioning,
+        larger_grids: Vec::new(),
     };
     let finite =
         out.camera_matrix.iter().flatten().chain(&out.distortion_coefficients).all(|v| v.is_finite());

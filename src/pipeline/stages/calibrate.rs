@@ -417,7 +417,7 @@ fn fit_quality(cal: &calib::Calibration, f: &mut Findings) {
         "",
         Better::Lower,
     ));
-    for w in cal.conditioning.warnings() {
+    for w in cal.warnings() {
         f.notes.push(format!("warning: {w}"));
     }
 }
