@@ -16,6 +16,10 @@ const MI_DOUBLE: u32 = 9;
 const MI_MATRIX: u32 = 14;
 const MI_COMPRESSED: u32 = 15;
 
+/// Largest inflated element read: the image readers' decoded-size limit (a 16384² normal map
+/// in f64 is 6 GB and far beyond what the solvers accept anyway).
+pub const MAX_INFLATED_BYTES: u64 = crate::image::io::MAX_DECODED_BYTES;
+
 /// A numeric array: its dimensions and its values in MATLAB's column-major order.
 #[derive(Debug)]
 pub struct Array {
@@ -105,10 +109,18 @@ pub fn read_variable(bytes: &[u8], name: &str) -> Result<Array, String> {
         at += used;
         let inflated;
         let (ty, payload) = if ty == MI_COMPRESSED {
+            // Inflated with a limit: a small file may claim gigabytes (a zip bomb).
             let mut out = Vec::new();
             flate2::read::ZlibDecoder::new(payload)
+                .take(MAX_INFLATED_BYTES + 1)
                 .read_to_end(&mut out)
                 .map_err(|e| format!("compressed element: {e}"))?;
+            if out.len() as u64 > MAX_INFLATED_BYTES {
+                return Err(format!(
+                    "a compressed element inflates to more than {} MB, the limit for a normal map",
+                    MAX_INFLATED_BYTES >> 20
+                ));
+            }
             inflated = out;
             let (t, p, _) = element(&inflated)?;
             (t, p)
@@ -181,5 +193,24 @@ mod tests {
         assert!(read_variable(b"hello", "A").unwrap_err().contains("not a MATLAB"));
         // Truncated: an error, not a panic.
         assert!(read_variable(&file[..file.len() - 10], "B").is_err());
+    }
+
+    /// A compressed element that inflates beyond the limit is refused while inflating, not
+    /// after allocating it all.
+    #[test]
+    fn a_compressed_element_inflating_past_the_limit_is_refused() {
+        let mut file = write_variable("A", &[1, 1], &[1.0]);
+        let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::fast());
+        let zeros = vec![0u8; 1 << 20];
+        for _ in 0..(MAX_INFLATED_BYTES >> 20) + 1 {
+            std::io::Write::write_all(&mut z, &zeros).unwrap();
+        }
+        let packed = z.finish().unwrap();
+        assert!(packed.len() < 4 << 20, "{} bytes packed", packed.len());
+        file.extend(MI_COMPRESSED.to_le_bytes());
+        file.extend((packed.len() as u32).to_le_bytes());
+        file.extend(packed);
+        let e = read_variable(&file, "B").unwrap_err();
+        assert!(e.contains("inflates to more than 512 MB"), "{e}");
     }
 }
