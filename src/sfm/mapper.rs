@@ -225,8 +225,10 @@ pub fn reconstruct(features: &[Features], k: &[Matrix3<f64>], opts: &Options) ->
     out.poses[*b] = Some(Pose { r: tv.pose.r, t: tv.pose.t });
     // Track index → point index.
     let mut point_of: Vec<Option<usize>> = vec![None; tracks.len()];
-    // Per image: (keypoint → track).
-    let mut track_of: Vec<std::collections::HashMap<u32, usize>> = vec![Default::default(); n];
+    // Per image: (keypoint → track), in keypoint order: a keypoint with several orientations
+    // gives several correspondences at one pixel, which the sort by pixel below leaves in
+    // this order (a HashMap's would change from run to run, and with it RANSAC's samples).
+    let mut track_of: Vec<std::collections::BTreeMap<u32, usize>> = vec![Default::default(); n];
     for (t, track) in tracks.iter().enumerate() {
         for node in track {
             track_of[node.image as usize].insert(node.keypoint, t);
