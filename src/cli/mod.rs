@@ -383,39 +383,58 @@ fn render_cmd(a: &RenderArgs) -> Result<()> {
     let t = std::time::Instant::now();
     let film = render::render(&scene, &settings);
     let secs = t.elapsed().as_secs_f64();
-    match (&scene.sensor, ext.as_str()) {
-        (Some(sensor), "png") => {
-            let codes = sensor.expose(&film.mean, settings.seed);
-            lumen::image::io::write_png_raw(out, film.mean.width, film.mean.height, 3, &codes, sensor.bits)?;
+    // Everything this command writes appears together or not at all.
+    let dir = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let Some(file_name) = out.file_name() else {
+        bail!("--out {}: expected a file name", out.display());
+    };
+    lumen::image::io::write_together(dir, |staged| -> Result<()> {
+        let out = &staged.join(file_name);
+        match (&scene.sensor, ext.as_str()) {
+            (Some(sensor), "png") => {
+                let codes = sensor.expose(&film.mean, settings.seed);
+                lumen::image::io::write_png_raw(
+                    out,
+                    film.mean.width,
+                    film.mean.height,
+                    3,
+                    &codes,
+                    sensor.bits,
+                )?;
+            }
+            _ => lumen::image::io::write(out, &film.mean)?,
         }
-        _ => lumen::image::io::write(out, &film.mean)?,
-    }
-    let mut written: Vec<PathBuf> = Vec::new();
-    if ext == "exr" {
-        written.push(out.to_path_buf());
-    }
-    if aov.iter().any(|a| a == "variance") {
-        lumen::image::io::write_exr(&sibling(out, "variance"), &film.variance)?;
-        written.push(sibling(out, "variance"));
-    }
-    let truth_names: Vec<&String> = aov.iter().filter(|a| *a != "variance").collect();
-    if !truth_names.is_empty() {
-        let truth = render::truth(&scene, None);
-        for name in truth_names {
-            if let Some(img) = truth.get(name) {
-                lumen::image::io::write_exr(&sibling(out, name), img)?;
-                written.push(sibling(out, name));
+        let mut written: Vec<PathBuf> = Vec::new();
+        if ext == "exr" {
+            written.push(out.to_path_buf());
+        }
+        if aov.iter().any(|a| a == "variance") {
+            lumen::image::io::write_exr(&sibling(out, "variance"), &film.variance)?;
+            written.push(sibling(out, "variance"));
+        }
+        let truth_names: Vec<&String> = aov.iter().filter(|a| *a != "variance").collect();
+        if !truth_names.is_empty() {
+            let truth = render::truth(&scene, None);
+            for name in truth_names {
+                if let Some(img) = truth.get(name) {
+                    lumen::image::io::write_exr(&sibling(out, name), img)?;
+                    written.push(sibling(out, name));
+                }
+            }
+            if aov.iter().any(|a| a == "id") {
+                let ids = out.with_file_name(format!(
+                    "{}.ids.json",
+                    out.file_stem().and_then(|s| s.to_str()).unwrap_or("render")
+                ));
+                std::fs::write(&ids, serde_json::to_string_pretty(&scene.object_names)?)
+                    .with_context(|| format!("cannot write {}", ids.display()))?;
             }
         }
-        if aov.iter().any(|a| a == "id") {
-            let ids = out.with_file_name(format!(
-                "{}.ids.json",
-                out.file_stem().and_then(|s| s.to_str()).unwrap_or("render")
-            ));
-            std::fs::write(&ids, serde_json::to_string_pretty(&scene.object_names)?)
-                .with_context(|| format!("cannot write {}", ids.display()))?;
+        if *preview {
+            write_previews(&written, None)?;
         }
-    }
+        Ok(())
+    })?;
     let paths = film.mean.width as f64 * film.mean.height as f64 * settings.spp as f64;
     eprintln!(
         "rendered {} ({}x{}, {} spp, max depth {}) in {secs:.2} s: {:.2} M paths/s",
@@ -430,16 +449,27 @@ fn render_cmd(a: &RenderArgs) -> Result<()> {
         eprintln!("warning: {} non-finite samples were dropped", film.dropped_samples);
     }
     if *preview {
-        preview_cmd(&written, None)?;
+        eprintln!("wrote a PNG preview beside each EXR");
     }
     Ok(())
 }
 
 fn preview_cmd(files: &[PathBuf], kind: Option<&str>) -> Result<()> {
-    use lumen::image::preview;
-    let kind: Option<preview::Kind> =
+    let kind: Option<lumen::image::preview::Kind> =
         kind.map(|k| k.parse()).transpose().map_err(|e: String| anyhow::anyhow!("--kind: {e}"))?;
-    // Everything read before anything is written: a bad file leaves no previews behind.
+    for (png, k) in write_previews(files, kind)? {
+        eprintln!("wrote {} ({k:?})", png.display());
+    }
+    Ok(())
+}
+
+/// Writes a PNG preview beside each EXR of `files` (the kind from each name unless given),
+/// reading every file before writing any: a bad file leaves no previews behind.
+fn write_previews(
+    files: &[PathBuf],
+    kind: Option<lumen::image::preview::Kind>,
+) -> Result<Vec<(PathBuf, lumen::image::preview::Kind)>> {
+    use lumen::image::preview;
     let mut images = Vec::new();
     for file in files {
         if file.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() != Some("exr") {
@@ -451,13 +481,14 @@ fn preview_cmd(files: &[PathBuf], kind: Option<&str>) -> Result<()> {
         }
         images.push(img);
     }
+    let mut written = Vec::new();
     for (file, img) in files.iter().zip(&images) {
         let k = kind.unwrap_or_else(|| preview::kind_of(file, img));
         let png = preview::png_path(file);
         preview::write(&png, img, k)?;
-        eprintln!("wrote {} ({k:?})", png.display());
+        written.push((png, k));
     }
-    Ok(())
+    Ok(written)
 }
 
 /// Parses `--threads`: 1 to `pipeline::MAX_THREADS`.
@@ -542,7 +573,7 @@ fn calibrate_cmd(
     for s in &cal.skipped {
         eprintln!("skipped {}: {}", s.name, s.reason);
     }
-    for w in cal.conditioning.warnings() {
+    for w in cal.warnings() {
         eprintln!("warning: {w}");
     }
     let k = &cal.camera_matrix;

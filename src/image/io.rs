@@ -48,6 +48,36 @@ pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<(), Str
     })
 }
 
+/// Writes a set of files that belong together into `dir` all or nothing: `write` writes them
+/// into a fresh staging folder beside `dir` (`.<name>.partial-<pid>`), and only when it has
+/// succeeded are they moved into `dir` (created if need be; other files there are left
+/// alone). On an error the staging folder is removed and `dir` is as it was.
+pub fn write_together<T, E: From<Error>>(
+    dir: &Path,
+    write: impl FnOnce(&Path) -> Result<T, E>,
+) -> Result<T, E> {
+    let err =
+        |path: &Path, e: std::io::Error| Error::Write { path: path.to_path_buf(), message: e.to_string() };
+    let name = dir.file_name().and_then(|n| n.to_str()).unwrap_or("out");
+    let parent = dir.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    std::fs::create_dir_all(parent).map_err(|e| err(parent, e))?;
+    let stage = parent.join(format!(".{name}.partial-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&stage);
+    std::fs::create_dir_all(&stage).map_err(|e| err(&stage, e))?;
+    let result = write(&stage).and_then(|value| {
+        std::fs::create_dir_all(dir).map_err(|e| err(dir, e))?;
+        let entries = std::fs::read_dir(&stage).map_err(|e| err(&stage, e))?;
+        for entry in entries {
+            let from = entry.map_err(|e| err(&stage, e))?.path();
+            let to = dir.join(from.file_name().unwrap_or_default());
+            std::fs::rename(&from, &to).map_err(|e| err(&to, e))?;
+        }
+        Ok(value)
+    });
+    let _ = std::fs::remove_dir_all(&stage);
+    result
+}
+
 fn extension(path: &Path) -> String {
     path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase()
 }
@@ -223,6 +253,34 @@ pub fn read(path: &Path) -> Result<Image, Error> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Files written together appear together: on an error none of them is in place and the
+    /// staging folder is gone; on success all are, beside what the folder already held.
+    #[test]
+    fn files_written_together_appear_all_or_not_at_all() {
+        let root = std::env::temp_dir().join(format!("lumen-io-together-{}", std::process::id()));
+        let dir = root.join("out");
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("mine.txt"), "kept").unwrap();
+        let failed: Result<(), Error> = write_together(&dir, |tmp| {
+            std::fs::write(tmp.join("a.txt"), "a").unwrap();
+            Err(Error::Write { path: tmp.join("b.txt"), message: "disk full".into() })
+        });
+        assert!(failed.is_err());
+        assert!(!dir.join("a.txt").exists());
+        assert_eq!(std::fs::read_dir(&root).unwrap().count(), 1, "the staging folder is removed");
+        write_together(&dir, |tmp| {
+            std::fs::write(tmp.join("a.txt"), "a").unwrap();
+            std::fs::write(tmp.join("b.txt"), "b").unwrap();
+            Ok::<_, Error>(())
+        })
+        .unwrap();
+        for f in ["a.txt", "b.txt", "mine.txt"] {
+            assert!(dir.join(f).is_file(), "{f}");
+        }
+        assert_eq!(std::fs::read_dir(&root).unwrap().count(), 1);
+        std::fs::remove_dir_all(&root).unwrap();
+    }
 
     /// A small file whose header claims 100000 × 100000 pixels: refused from the header.
     #[test]

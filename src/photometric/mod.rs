@@ -413,7 +413,12 @@ fn median_of(v: &[f64]) -> Option<f64> {
 /// (orthographic, pixel units, mean 0) and `surface.obj`, and `summary.json` into `dir`. Normals are
 /// unit vectors in the dataset's frame, zero outside the mask; the PNG shows (n + 1)/2. The
 /// albedo PNG is scaled so that the brightest 1 % of pixels saturate.
+/// The files are written together: on an error none of them is left in `dir`.
 pub fn write(dir: &Path, data: &Input, out: &Output, truth: Option<&[DVec3]>) -> Result<(), Error> {
+    crate::image::io::write_together(dir, |staged| write_files(staged, data, out, truth))
+}
+
+fn write_files(dir: &Path, data: &Input, out: &Output, truth: Option<&[DVec3]>) -> Result<(), Error> {
     use crate::image::{colormap, io, Image};
     std::fs::create_dir_all(dir).map_err(|e| Error::Write { path: dir.into(), message: e.to_string() })?;
     let (w, h) = (data.width as u32, data.height as u32);
