@@ -7,7 +7,7 @@ mod common;
 use std::path::Path;
 use std::process::Command;
 
-/// The tour's `lumen render|calibrate|ps|undistort|color|hdr|sfm` lines, from the README's tour block.
+/// The tour's `lumen render|preview|calibrate|ps|undistort|color|hdr|sfm` lines, from the README's tour block.
 fn tour_commands() -> Vec<String> {
     let readme = std::fs::read_to_string(common::root().join("README.md")).unwrap();
     let tour = readme.split("## A tour of the command line").nth(1).expect("the README has a tour");
@@ -18,6 +18,7 @@ fn tour_commands() -> Vec<String> {
         .filter(|l| {
             [
                 "lumen render ",
+                "lumen preview ",
                 "lumen calibrate ",
                 "lumen ps ",
                 "lumen undistort ",
@@ -55,7 +56,7 @@ fn run(line: &str, dir: &Path, photos: &Path) -> (bool, String) {
 #[test]
 fn readme_tour_writes_what_it_says() {
     let lines = tour_commands();
-    assert_eq!(lines.len(), 9, "the tour's commands: {lines:?}");
+    assert_eq!(lines.len(), 10, "the tour's commands: {lines:?}");
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let shared = common::root().join("../shared/data");
@@ -74,6 +75,11 @@ fn readme_tour_writes_what_it_says() {
     ] {
         assert!(d.join("out").join(f).is_file(), "{f} missing after: {err}");
     }
+    let (ok, err) = run(&lines[1], d, &photos);
+    assert!(ok, "{err}");
+    for f in ["box.png", "box.depth.png", "box.normal.png", "box.id.png"] {
+        assert!(d.join("out").join(f).is_file(), "{f} missing after: {err}");
+    }
     // Colour: the chart the README's pipeline run keeps (its case chart-d65-root-poly-2),
     // made here by that one case, then the tour's three colour commands.
     let pipeline = d.join("out/chart.toml");
@@ -88,7 +94,7 @@ fn readme_tour_writes_what_it_says() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    for line in &lines[4..7] {
+    for line in &lines[5..8] {
         let (ok, err) = run(line, d, &photos);
         assert!(ok, "{err}");
     }
@@ -104,7 +110,7 @@ fn readme_tour_writes_what_it_says() {
     if common::shared_data().is_none() {
         return;
     }
-    for line in &lines[1..4] {
+    for line in &lines[2..5] {
         let (ok, err) = run(line, d, &photos);
         assert!(ok, "{err}");
     }
@@ -113,12 +119,12 @@ fn readme_tour_writes_what_it_says() {
         assert!(d.join("out/ps-ball").join(f).is_file(), "ps-ball/{f} missing");
     }
     assert!(d.join("out/undistorted.png").is_file());
-    let (ok, err) = run(&lines[7], d, &photos);
+    let (ok, err) = run(&lines[8], d, &photos);
     assert!(ok, "{err}");
     for f in ["radiance.exr", "response.csv", "response.svg", "mask.png", "preview.png", "summary.json"] {
         assert!(d.join("out/memorial").join(f).is_file(), "memorial/{f} missing");
     }
-    let (ok, err) = run(&lines[8], d, &photos);
+    let (ok, err) = run(&lines[9], d, &photos);
     assert!(ok, "{err}");
     for f in ["cameras.txt", "images.txt", "points3D.txt", "points.ply", "summary.json"] {
         assert!(d.join("out/herz-jesu").join(f).is_file(), "herz-jesu/{f} missing");
