@@ -145,6 +145,20 @@ fn absent_real_data_is_skipped_and_dataset_keys_are_checked() {
     let (code, err) = run(text, &out);
     assert_eq!(code, 1, "{err}");
     assert!(err.contains("unknown field `lights`") && err.contains("case p"), "{err}");
+    // A rendered sfm case (an entry with `scene`) checks its own keys and settings.
+    let sfm = |extra: &str| {
+        let scene = common::root().join("pipelines/scenes/sfm-courtyard.toml");
+        format!(
+            "[[stages]]\nstage = \"sfm\"\ncase = \"r\"\nscene = \"{}\"\ntarget = [0.0, 0.5, 0.6]\nradius = 3.5\nheight = 1.3\narc_deg = 40\n{extra}",
+            scene.display()
+        )
+    };
+    let (code, err) = run(&sfm("images = \"/x\"\n"), &out);
+    assert!(code == 1 && err.contains("unknown field `images`"), "{err}");
+    let (code, err) = run(&sfm("views = 1\nexpect_error = \"bad-input\"\n"), &out);
+    assert_eq!(code, 0, "a one-view case is refused as bad input: {err}");
+    let (code, err) = run(&sfm("radius = -1\n").replace("radius = 3.5\n", ""), &out);
+    assert!(code == 1 && err.contains("positive radius"), "{err}");
 }
 
 /// An `hdr` case on a stack of files (`list`): on a stack exposed exactly as its list says,

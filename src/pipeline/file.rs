@@ -47,6 +47,8 @@ pub enum Stage {
     /// An hdr case on a photographed stack (an entry with `list`).
     HdrData(stages::hdr::DataConfig),
     Sfm(stages::sfm::Config),
+    /// An sfm case on renders (an entry with `scene`).
+    SfmRender(stages::sfm::RenderConfig),
 }
 
 impl Stage {
@@ -57,7 +59,7 @@ impl Stage {
             Stage::Photometric(_) | Stage::PhotometricData(_) => "photometric",
             Stage::Color(_) => "color",
             Stage::Hdr(_) | Stage::HdrData(_) => "hdr",
-            Stage::Sfm(_) => "sfm",
+            Stage::Sfm(_) | Stage::SfmRender(_) => "sfm",
         }
     }
 
@@ -72,7 +74,7 @@ impl Stage {
             Stage::Color(_) => "loo_mean_de2000",
             Stage::Hdr(_) => "radiance_median_rel_err",
             Stage::HdrData(_) => "loo_rms_codes",
-            Stage::Sfm(_) => "rotation_err_median_deg",
+            Stage::Sfm(_) | Stage::SfmRender(_) => "rotation_err_median_deg",
         }
     }
 }
@@ -288,6 +290,7 @@ fn parse_stage(name: &str, own: toml::Table) -> Result<Stage, String> {
         "color" => Stage::Color(from_table(own)?),
         "hdr" if own.contains_key("list") => Stage::HdrData(from_table(own)?),
         "hdr" => Stage::Hdr(from_table(own)?),
+        "sfm" if own.contains_key("scene") => Stage::SfmRender(from_table(own)?),
         "sfm" => Stage::Sfm(from_table(own)?),
         other => {
             return Err(format!(

@@ -128,6 +128,11 @@ fn run_cases(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Repo
                 |i| stages::hdr::solve_data(c, i),
                 stages::hdr::validate_data,
             ),
+            Stage::SfmRender(c) => run_case(
+                || stages::sfm::synthesize(c, &ctx),
+                |i| stages::sfm::solve_render(c, i),
+                stages::sfm::validate,
+            ),
             Stage::Sfm(c) => {
                 run_case(|| stages::sfm::read(c, &ctx), |i| stages::sfm::solve(c, i), stages::sfm::validate)
             }

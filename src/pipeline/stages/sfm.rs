@@ -1,6 +1,12 @@
-//! The `sfm` stage on real photographs with ground-truth cameras: reads a photograph folder
-//! and its camera as `lumen sfm` does (`sfm::input`), runs the same `sfm::run`, and compares
-//! the registered cameras with the truth, free of gauge: pairwise relative rotation errors
+//! The `sfm` stage, on renders or on real photographs with ground-truth cameras.
+//!
+//! Renders (an entry with `scene`): the scene is rendered from `views` cameras spaced evenly
+//! along a horizontal arc of `arc_deg` around `target`, at `radius` from it and `height` above
+//! the ground, each looking at `target` (the scene's own camera gives the intrinsics); the
+//! solver gets the images and the true intrinsics, as it gets K.txt on photographs.
+//! Photographs (an entry with `images`): reads the folder and its camera as `lumen sfm` does
+//! (`sfm::input`). Both run the same `sfm::run` and compare the registered cameras with the
+//! truth, free of gauge: pairwise relative rotation errors
 //! over every pair of registered images, and camera-centre errors after the similarity that
 //! best maps the estimated centres onto the true ones (`sfm::eval`), relative to the largest
 //! distance between two true centres. Truth: one file per image in the Strecha et al. format,
@@ -11,10 +17,135 @@
 //! `reprojection_rms_px`, `rotation_err_median_deg`, `rotation_err_max_deg`,
 //! `centre_err_max_rel`; and the phases' times as a note.
 
-use super::{Context, Findings, StageError};
+use super::{apply_overrides, Context, Findings, SettingsKey, StageError};
+use crate::math::Pose as CameraPose;
+use crate::pipeline::cache::scene_digest;
 use crate::pipeline::metric::{Better, Metric};
+use crate::render;
 use crate::sfm::{self, bundle::Pose, eval};
-use serde::Deserialize;
+use glam::DVec3;
+use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// An `sfm` case on renders (module docs).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RenderConfig {
+    /// Scene file, relative to the pipeline file.
+    pub scene: String,
+    /// Number of views (default 8, at least 2).
+    #[serde(default = "default_views")]
+    pub views: usize,
+    /// The point every camera looks at, in the scene's frame (z up).
+    pub target: [f64; 3],
+    /// Horizontal distance of the cameras from `target`, and their height (z).
+    pub radius: f64,
+    pub height: f64,
+    /// The arc the cameras span, in degrees, centred on the −y side of `target`.
+    pub arc_deg: f64,
+    /// Keypoints per image at most (default 8192, COLMAP's).
+    #[serde(default = "default_features")]
+    pub max_features: usize,
+    /// Samples per pixel (default: the scene's).
+    pub spp: Option<u32>,
+}
+
+fn default_views() -> usize {
+    8
+}
+
+#[derive(Serialize)]
+struct ViewRecipe<'a> {
+    product: &'static str,
+    scene: &'a str,
+    t_world_cam: [f64; 12],
+    settings: SettingsKey,
+}
+
+pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), StageError> {
+    if c.views < 2 || c.views > 1000 {
+        return Err(StageError::Config(format!("views = {}: expected 2 to 1000", c.views)));
+    }
+    if c.max_features < 16 {
+        return Err(StageError::Config(format!("max_features = {}: expected at least 16", c.max_features)));
+    }
+    let numbers = [c.radius, c.height, c.arc_deg, c.target[0], c.target[1], c.target[2]];
+    if !numbers.iter().all(|v| v.is_finite()) || c.radius <= 0.0 || !(0.0..=360.0).contains(&c.arc_deg) {
+        return Err(StageError::Config(format!(
+            "radius = {}, height = {}, arc_deg = {}, target = {:?}: expected finite numbers, a positive radius and an arc of 0° to 360°",
+            c.radius, c.height, c.arc_deg, c.target
+        )));
+    }
+    let scene_path = ctx.dir.join(&c.scene);
+    let mut scene = render::load(&scene_path)?;
+    let digest = scene_digest(&scene_path)?;
+    let mut settings = render::Settings::from_scene(&scene);
+    apply_overrides(&mut settings, c.spp, None)?;
+    let camera = scene.camera;
+    let target = DVec3::from_array(c.target);
+    let bar = render::progress_bar(c.views as u64, &format!("{} views", ctx.case), ctx.progress);
+    let mut images = Vec::new();
+    let mut poses = Vec::new();
+    for k in 0..c.views {
+        let f = if c.views == 1 { 0.5 } else { k as f64 / (c.views - 1) as f64 };
+        let phi = (-90.0 + c.arc_deg * (f - 0.5)).to_radians();
+        let origin = DVec3::new(target.x + c.radius * phi.cos(), target.y + c.radius * phi.sin(), c.height);
+        let Some(world_from_cam) = CameraPose::look_at(origin, target, DVec3::Z) else {
+            return Err(StageError::Config(format!(
+                "view {k}: the camera at {origin} cannot look at {target}"
+            )));
+        };
+        scene.t_world_cam = world_from_cam;
+        settings.seed = render::sampler::mix64(ctx.seed ^ (k as u64 + 1));
+        let mut pose = [0.0; 12];
+        pose[..9].copy_from_slice(&world_from_cam.rotation.to_cols_array());
+        pose[9..].copy_from_slice(&world_from_cam.translation.to_array());
+        let name = format!("view{k:03}.png");
+        let recipe = ViewRecipe {
+            product: "sfm-rgb",
+            scene: &digest,
+            t_world_cam: pose,
+            settings: SettingsKey::from(&settings),
+        };
+        let rendered = ctx.cache.images(ctx.case, &name, &recipe, || {
+            Ok::<_, StageError>(vec![render::render(&scene, &settings).mean])
+        })?;
+        let Some(img) = rendered
+            .into_iter()
+            .next()
+            .filter(|i| i.channels == 3 && (i.width, i.height) == (camera.width, camera.height))
+        else {
+            return Err(StageError::Config(format!("{name}: the cached render has the wrong size")));
+        };
+        // As a photograph: 8-bit sRGB codes, read back as the photograph reader reads them.
+        let q = |v: f32| (crate::image::srgb_encode(v.max(0.0)) * 255.0).round().clamp(0.0, 255.0) as u8;
+        let rgb8: Vec<[u8; 3]> = img.data.chunks_exact(3).map(|p| [q(p[0]), q(p[1]), q(p[2])]).collect();
+        let coded = crate::image::Image {
+            width: img.width,
+            height: img.height,
+            channels: 3,
+            data: rgb8.iter().flat_map(|p| p.map(|v| v as f32 / 255.0)).collect(),
+        };
+        let grey = crate::image::filter::Grey::from_image(&coded);
+        images.push(sfm::Image { name, grey, rgb8, camera });
+        // World to camera: R = R_wcᵀ, t = −R C.
+        let r = world_from_cam.rotation.transpose();
+        let m = Matrix3::from_fn(|i, j| r.col(j)[i]);
+        let t = -(m * Vector3::new(origin.x, origin.y, origin.z));
+        poses.push(Pose { r: m, t });
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let notes = vec![format!(
+        "{}: {} views of {}×{} px at {} spp along a {}° arc, {} from {:?} at height {}.",
+        c.scene, c.views, camera.width, camera.height, settings.spp, c.arc_deg, c.radius, c.target, c.height
+    )];
+    Ok((sfm::Input { images }, Truth { poses }, Findings { notes, ..Default::default() }))
+}
+
+pub fn solve_render(c: &RenderConfig, input: &sfm::Input) -> Result<sfm::Output, StageError> {
+    solve_with(c.max_features, input)
+}
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -69,8 +200,12 @@ pub fn read(c: &Config, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), 
 }
 
 pub fn solve(c: &Config, input: &sfm::Input) -> Result<sfm::Output, StageError> {
+    solve_with(c.max_features, input)
+}
+
+fn solve_with(max_features: usize, input: &sfm::Input) -> Result<sfm::Output, StageError> {
     let config = sfm::Config {
-        features: sfm::features::Options { max_features: c.max_features, ..Default::default() },
+        features: sfm::features::Options { max_features, ..Default::default() },
         ..Default::default()
     };
     Ok(sfm::run(input, &config)?)
