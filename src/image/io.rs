@@ -65,17 +65,28 @@ pub fn write_together<T, E: From<Error>>(
     let _ = std::fs::remove_dir_all(&stage);
     std::fs::create_dir_all(&stage).map_err(|e| err(&stage, e))?;
     let result = write(&stage).and_then(|value| {
-        std::fs::create_dir_all(dir).map_err(|e| err(dir, e))?;
-        let entries = std::fs::read_dir(&stage).map_err(|e| err(&stage, e))?;
-        for entry in entries {
-            let from = entry.map_err(|e| err(&stage, e))?.path();
-            let to = dir.join(from.file_name().unwrap_or_default());
-            std::fs::rename(&from, &to).map_err(|e| err(&to, e))?;
-        }
+        move_into(&stage, dir)?;
         Ok(value)
     });
     let _ = std::fs::remove_dir_all(&stage);
     result
+}
+
+/// Moves the files of `from` into `to`, subfolders merged into existing ones.
+fn move_into(from: &Path, to: &Path) -> Result<(), Error> {
+    let err =
+        |path: &Path, e: std::io::Error| Error::Write { path: path.to_path_buf(), message: e.to_string() };
+    std::fs::create_dir_all(to).map_err(|e| err(to, e))?;
+    for entry in std::fs::read_dir(from).map_err(|e| err(from, e))? {
+        let source = entry.map_err(|e| err(from, e))?.path();
+        let target = to.join(source.file_name().unwrap_or_default());
+        if source.is_dir() {
+            move_into(&source, &target)?;
+        } else {
+            std::fs::rename(&source, &target).map_err(|e| err(&target, e))?;
+        }
+    }
+    Ok(())
 }
 
 fn extension(path: &Path) -> String {
@@ -269,13 +280,16 @@ mod tests {
         assert!(failed.is_err());
         assert!(!dir.join("a.txt").exists());
         assert_eq!(std::fs::read_dir(&root).unwrap().count(), 1, "the staging folder is removed");
+        std::fs::create_dir_all(dir.join("sub")).unwrap();
+        std::fs::write(dir.join("sub/old.txt"), "kept").unwrap();
         write_together(&dir, |tmp| {
             std::fs::write(tmp.join("a.txt"), "a").unwrap();
-            std::fs::write(tmp.join("b.txt"), "b").unwrap();
+            std::fs::create_dir_all(tmp.join("sub")).unwrap();
+            std::fs::write(tmp.join("sub/b.txt"), "b").unwrap();
             Ok::<_, Error>(())
         })
         .unwrap();
-        for f in ["a.txt", "b.txt", "mine.txt"] {
+        for f in ["a.txt", "sub/b.txt", "sub/old.txt", "mine.txt"] {
             assert!(dir.join(f).is_file(), "{f}");
         }
         assert_eq!(std::fs::read_dir(&root).unwrap().count(), 1);

@@ -34,6 +34,16 @@ pub enum Error {
     Write { path: PathBuf, message: String },
 }
 
+impl From<crate::image::io::Error> for Error {
+    fn from(e: crate::image::io::Error) -> Error {
+        use crate::image::io::Error as I;
+        match e {
+            I::Write { path, message } | I::Read { path, message } => Error::Write { path, message },
+            I::Format { path } => Error::Write { path, message: "expected a .exr or .png file name".into() },
+        }
+    }
+}
+
 /// Most worker threads a run may ask for: more than any machine lumen runs on has cores, few
 /// enough that a typo (`--threads 100000`) is refused rather than starving the machine.
 pub const MAX_THREADS: usize = 1024;

@@ -307,7 +307,13 @@ impl Report {
 
     /// Writes `report.json`, `report.md`, the sweeps' plots and the files cases asked to keep
     /// into `dir`, each atomically.
+    /// Writes the report, its plots and the files cases kept, all together (`io::write_together`):
+    /// a failure leaves none of them in `dir`.
     pub fn write(&self, dir: &Path) -> Result<(), super::Error> {
+        crate::image::io::write_together(dir, |staged| self.write_files(staged))
+    }
+
+    fn write_files(&self, dir: &Path) -> Result<(), super::Error> {
         let werr = |path: &Path, message: String| super::Error::Write { path: path.into(), message };
         for (name, kept) in &self.files {
             let path = dir.join(name);
