@@ -184,7 +184,25 @@ fn cli_bad_input() {
         lumen(&["calibrate", "--images", blank.to_str().unwrap(), "--board", "9x6", "--out", o]);
     assert_eq!(code, 1);
     assert!(err.contains("found in 0 view"), "{err}");
+    // ... saying why, per image.
+    assert!(err.contains("blank.png: found 0 chessboard-like corners"), "{err}");
     assert!(!out.exists());
+    // A square size whose board coordinates would overflow or lose precision is named.
+    for square in ["1e300", "1e-300", "inf"] {
+        let (code, err) = lumen(&[
+            "calibrate",
+            "--images",
+            blank.to_str().unwrap(),
+            "--board",
+            "9x6",
+            "--square",
+            square,
+            "--out",
+            o,
+        ]);
+        assert_eq!(code, 1, "{square}: {err}");
+        assert!(err.contains("square size") && err.contains("1e-6 to 1e6"), "{square}: {err}");
+    }
 }
 
 /// The CLI on the real photographs writes a file OpenCV's FileStorage format describes.

@@ -239,12 +239,36 @@ pub struct Output {
 
 /// Detects the board in every image and calibrates from the views where it was found.
 pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
+    check_square(config.square)?;
     let (views, skipped, larger) = detect_views_checked(&input.images, config)?;
+    if views.len() < 2 {
+        // Why each view was left out: the user's next step depends on it.
+        let why: Vec<String> = skipped.iter().take(5).map(|s| format!("{}: {}", s.name, s.reason)).collect();
+        return Err(Error::BadInput(format!(
+            "the board was found in {} view(s); calibration needs at least 2 (3 or more for a reliable principal point). {}{}",
+            views.len(),
+            why.join("; "),
+            if skipped.len() > 5 { format!("; and {} more", skipped.len() - 5) } else { String::new() }
+        )));
+    }
     let size = input.images.first().map_or((0, 0), |(_, g)| (g.width as u32, g.height as u32));
     let (mut calibration, trace) = calibrate_traced(&views, size, config)?;
     calibration.skipped = skipped;
     calibration.larger_grids = larger;
     Ok(Output { calibration, corners: views, trace })
+}
+
+/// The side of a square, in any unit from micrometres to kilometres (in metres: 10⁻⁶ to 10³;
+/// in millimetres up to 10⁶): beyond that the board's coordinates lose the precision the
+/// homographies need, or overflow.
+fn check_square(square: f64) -> Result<(), Error> {
+    if square.is_finite() && (1e-6..=1e6).contains(&square) {
+        Ok(())
+    } else {
+        Err(Error::BadInput(format!(
+            "square size {square:?}: expected a length from 1e-6 to 1e6 (in the unit translations should come out in)"
+        )))
+    }
 }
 
 /// Calibrates from detected corners (`views`: name and corners in `detect`'s order).
@@ -268,9 +292,7 @@ pub fn calibrate_traced(
             views.len()
         )));
     }
-    if !(config.square.is_finite() && config.square > 0.0) {
-        return Err(Error::BadInput(format!("square size {} must be a positive length", config.square)));
-    }
+    check_square(config.square)?;
     let board = board_points(config.board, config.square);
     let plane: Vec<DVec2> = board.iter().map(|p| p.truncate()).collect();
     let mut hs = Vec::new();

@@ -541,8 +541,8 @@ fn calibrate_cmd(
     debug: Option<&Path>,
 ) -> Result<()> {
     let board = parse_board(board)?;
-    if !(square.is_finite() && square > 0.0) {
-        bail!("--square {square}: expected a positive length");
+    if !(square.is_finite() && (1e-6..=1e6).contains(&square)) {
+        bail!("--square {square:?}: expected a square size from 1e-6 to 1e6 (in the unit translations should come out in)");
     }
     let ext = out.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     if !["yaml", "yml", "json"].contains(&ext.as_str()) {
