@@ -277,3 +277,52 @@ fn a_wrong_board_size_is_warned_about() {
     assert_eq!(code, 0, "{err}");
     assert!(!err.contains("larger than the board"), "{err}");
 }
+
+/// `lumen undistort` blames what is wrong: an --alpha out of range names --alpha, while a
+/// 1×1 image or a distortion that folds the image border over itself names the camera file.
+#[test]
+fn undistort_names_the_camera_or_the_alpha() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let camera = |w: u32, h: u32, k: &str, k1: f64| {
+        let p = d.join(format!("cam-{w}-{k1}.yaml"));
+        std::fs::write(
+            &p,
+            format!(
+                "%YAML:1.0\n---\nimage_width: {w}\nimage_height: {h}\ncamera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ {k} ]\ndistortion_coefficients: !!opencv-matrix\n   rows: 1\n   cols: 5\n   dt: d\n   data: [ {k1}, 0., 0., 0., 0. ]\n"
+            ),
+        )
+        .unwrap();
+        p
+    };
+    let png = |w: u32, h: u32| {
+        let p = d.join(format!("grey-{w}.png"));
+        image::save_buffer(&p, &vec![128u8; (w * h) as usize], w, h, image::ExtendedColorType::L8).unwrap();
+        p
+    };
+    let out = d.join("u.png");
+    let run = |cam: &std::path::Path, img: &std::path::Path, alpha: &str| {
+        lumen(&[
+            "undistort",
+            "--camera",
+            cam.to_str().unwrap(),
+            "--alpha",
+            alpha,
+            img.to_str().unwrap(),
+            out.to_str().unwrap(),
+        ])
+    };
+    let one = camera(1, 1, "1., 0., 0., 0., 1., 0., 0., 0., 1.", 0.0);
+    let (code, err) = run(&one, &png(1, 1), "0");
+    assert!(code == 1 && err.contains("--camera") && err.contains("1×1 image"), "{err}");
+    let k = "500., 0., 319.5, 0., 500., 239.5, 0., 0., 1.";
+    let folding = camera(640, 480, k, -5.0);
+    let (code, err) = run(&folding, &png(640, 480), "0");
+    assert!(code == 1 && err.contains("--camera") && err.contains("fold"), "{err}");
+    let plain = camera(640, 480, k, 0.0);
+    let (code, err) = run(&plain, &png(640, 480), "2");
+    assert!(code == 1 && err.contains("--alpha 2"), "{err}");
+    assert!(!out.exists());
+    let (code, err) = run(&plain, &png(640, 480), "0");
+    assert_eq!(code, 0, "{err}");
+}

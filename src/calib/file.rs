@@ -66,7 +66,13 @@ pub fn write(path: &Path, c: &Calibration) -> Result<(), Error> {
         }
     };
     crate::image::io::write_atomically(path, |tmp| std::fs::write(tmp, &text).map_err(|e| e.to_string()))
-        .map_err(|e| Error::File { path: path.into(), message: e.to_string() })
+        .map_err(|e| {
+            let message = match e {
+                crate::image::io::Error::Write { message, .. } => format!("cannot write: {message}"),
+                other => other.to_string(),
+            };
+            Error::File { path: path.into(), message }
+        })
 }
 
 /// Reads a calibration written by lumen or OpenCV (`.yaml`/`.yml`/`.json`).

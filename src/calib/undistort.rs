@@ -36,6 +36,9 @@ pub fn new_camera_matrix(cam: &CameraModel, alpha: f64) -> Result<Intrinsics, St
     if !(0.0..=1.0).contains(&alpha) {
         return Err(format!("alpha = {alpha}: expected a value in [0, 1]"));
     }
+    if cam.width < 2 || cam.height < 2 {
+        return Err(format!("a {}×{} image: undistortion needs at least 2×2 pixels", cam.width, cam.height));
+    }
     let pts = border(cam)?;
     let (mut outer_lo, mut outer_hi) = (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY));
     for (p, _) in &pts {
@@ -53,7 +56,9 @@ pub fn new_camera_matrix(cam: &CameraModel, alpha: f64) -> Result<Intrinsics, St
     let inner_hi =
         DVec2::new(side(1, |p| p.x, f64::min, f64::INFINITY), side(3, |p| p.y, f64::min, f64::INFINITY));
     if !(inner_hi.x > inner_lo.x && inner_hi.y > inner_lo.y) {
-        return Err("the undistorted image has no interior: the distortion is too strong".into());
+        return Err(
+            "the undistorted image has no interior: the distortion folds the image border over itself".into(),
+        );
     }
     let (w, h) = (cam.width as f64 - 1.0, cam.height as f64 - 1.0);
     // Map [lo, hi] onto [0, w] × [0, h]: f = w / (hi − lo), c = −f·lo.

@@ -675,8 +675,12 @@ fn undistort_cmd(camera: &Path, alpha: f64, input: &Path, output: &Path) -> Resu
             cam.height
         );
     }
+    if !(0.0..=1.0).contains(&alpha) {
+        bail!("--alpha {alpha}: expected a value in [0, 1]");
+    }
+    // Past the range check, what fails is the camera's: its distortion or its image size.
     let new = lumen::calib::undistort::new_camera_matrix(&cam, alpha)
-        .map_err(|e| anyhow::anyhow!("--alpha: {e}"))?;
+        .map_err(|e| anyhow::anyhow!("--camera {}: {e}", camera.display()))?;
     let out = lumen::calib::undistort::undistort_image(&img, &cam, &new);
     if ext == "exr" {
         lumen::image::io::write_exr(output, &out)?;

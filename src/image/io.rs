@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 pub enum Error {
     #[error("cannot read image {path}: {message}")]
     Read { path: PathBuf, message: String },
-    #[error("cannot write image {path}: {message}")]
+    #[error("cannot write {path}: {message}")]
     Write { path: PathBuf, message: String },
     #[error("unsupported image format for {path}: expected a .exr or .png file name")]
     Format { path: PathBuf },
