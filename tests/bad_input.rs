@@ -324,3 +324,36 @@ fn values_beyond_float32_and_huge_surfaces() {
     );
     assert!(e.contains("shapes[0].segments") && e.contains("16777216 quads"), "{e}");
 }
+
+/// Textures are held to the range of the constant they stand for: an albedo or roughness
+/// texture with a NaN, a negative or a value above 1 is refused naming the file (it used to
+/// be clamped in silence), and a Blinn-Phong specular above 1 is refused as an albedo is.
+#[test]
+fn textures_and_specular_are_held_to_their_constants_range() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, bad) in [("nan.exr", f32::NAN), ("negative.exr", -0.1), ("bright.exr", 3.0)] {
+        let mut img = lumen::image::Image::new(4, 4, 3);
+        img.data.iter_mut().for_each(|v| *v = 0.5);
+        img.data[5] = bad;
+        lumen::image::io::write_exr(&dir.path().join(name), &img).unwrap();
+        for material in [
+            format!("type = \"lambertian\"\nalbedo = {{ texture = \"{name}\" }}"),
+            format!("type = \"conductor\"\nalbedo = [0.9, 0.9, 0.9]\nalpha = {{ texture = \"{name}\" }}"),
+        ] {
+            let text = format!("{CAMERA}[[materials]]\nname = \"t\"\n{material}\n");
+            let e = match common::scene(&text, dir.path()) {
+                Ok(_) => panic!("accepted: {material}"),
+                Err(e) => e.to_string(),
+            };
+            assert!(
+                e.contains(name) && e.contains("outside [0, 1]") && e.contains("materials[1] (t)"),
+                "{e}"
+            );
+        }
+    }
+    let e = scene_error(
+        "[[materials]]\nname = \"g\"\nalbedo = [0.3, 0.3, 0.3]\ntype = \"blinn-phong\"\nspecular = [1e30, 0.2, 0.2]\nexponent = 10.0\n",
+        &[],
+    );
+    assert!(e.contains("materials[1] (g).specular") && e.contains("[0, 1]"), "{e}");
+}

@@ -46,7 +46,8 @@ fn default_noise_size() -> u32 {
 }
 
 /// A roughness: a number, a greyscale image `{ texture = "alpha.png" }` (first channel, taken
-/// as data: 8-bit values are v/255 with no sRGB decoding, and clamped to [0.001, 1]), or a
+/// as data: 8-bit values are v/255 with no sRGB decoding; values must lie in [0, 1], and those
+/// below 0.001 are raised to it), or a
 /// checkerboard `{ checker = { squares = [nu, nv], even = a, odd = b } }`.
 #[derive(Debug, Deserialize)]
 #[serde(untagged)]
@@ -145,6 +146,7 @@ impl Texture {
             TextureSpec::Image { texture } => {
                 let file = dir.join(texture);
                 let img = crate::image::io::read(&file)?;
+                texels_within(&img.data, 0.0, 1.0, &file, path, field, "an albedo")?;
                 let eight_bit = is_eight_bit(&file);
                 let c = img.channels as usize;
                 let texels = img
@@ -183,7 +185,11 @@ impl Texture {
                 odd: check(checker.odd, format!("{field}.checker.odd"))?,
             },
             RoughnessSpec::Image { texture } => {
-                let img = crate::image::io::read(&dir.join(texture))?;
+                let file = dir.join(texture);
+                let img = crate::image::io::read(&file)?;
+                // Within [0, 1] as a constant must be; values below 0.001 (a black texel) are
+                // raised to it, as documented.
+                texels_within(&img.data, 0.0, 1.0, &file, path, field, "a roughness")?;
                 let c = img.channels as usize;
                 let texels = img.data.chunks_exact(c).map(|p| Vec3A::splat(p[0].clamp(0.001, 1.0))).collect();
                 Texture::Image { width: img.width, height: img.height, texels }
@@ -217,6 +223,35 @@ impl Texture {
             }
         }
     }
+}
+
+/// A texture's values must lie in [lo, hi] and be finite, as the constant they stand for must:
+/// refused naming the file otherwise, never clamped silently.
+fn texels_within(
+    data: &[f32],
+    lo: f32,
+    hi: f32,
+    file: &Path,
+    path: &Path,
+    field: &str,
+    what: &str,
+) -> Result<(), Error> {
+    let bad = data.iter().filter(|v| !(v.is_finite() && (lo..=hi).contains(*v))).count();
+    if bad == 0 {
+        return Ok(());
+    }
+    let (mn, mx) = data
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), v| (a.min(*v), b.max(*v)));
+    Err(Error::Invalid {
+        path: path.into(),
+        field: field.into(),
+        message: format!(
+            "{}: {bad} values are not finite or outside [{lo}, {hi}] (finite ones from {mn} to {mx}); {what} must lie in [{lo}, {hi}]",
+            file.display()
+        ),
+    })
 }
 
 /// `NoiseSpec`'s texture, evaluated into a `size`² image (each channel its own noise).

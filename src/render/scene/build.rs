@@ -553,6 +553,14 @@ fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error>
                 ));
             };
             let specular = non_negative3(path, &format!("{field}.specular"), ks)?;
+            if specular.max_element() > 1.0 {
+                // ks is the lobe's reflectance, bounded as an albedo is.
+                return Err(field_err(
+                    path,
+                    &format!("{field}.specular"),
+                    format!("{ks:?}: each value must be in [0, 1] (more would create energy)"),
+                ));
+            }
             if !(e.is_finite() && e > 0.0 && e <= 1e5) {
                 return Err(field_err(
                     path,
