@@ -51,7 +51,7 @@ pub fn read_list(list: &Path) -> Result<Vec<(PathBuf, f64)>, Error> {
 fn read_codes(path: &Path) -> Result<(u32, u32, usize, Vec<u16>), Error> {
     use ::image::DynamicImage as D;
     let file_err = |message: String| Error::File { path: path.into(), message };
-    let img = ::image::open(path).map_err(|e| file_err(format!("cannot read: {e}")))?;
+    let img = crate::image::io::open_limited(path)?;
     let (w, h) = (img.width(), img.height());
     let (levels, codes) = match img {
         D::ImageLuma8(_) | D::ImageLumaA8(_) | D::ImageRgb8(_) | D::ImageRgba8(_) => {

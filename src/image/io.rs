@@ -227,11 +227,31 @@ pub fn write_png_raw(path: &Path, w: u32, h: u32, c: u32, values: &[u16], bits: 
     })
 }
 
+/// Most pixels an image file may have: 2²⁷ (134 million, 16384 × 8192), checked from the
+/// header before decoding. Its floats (3 channels) take 1.6 GB; the `image` crate's own limit
+/// (512 MB of decoded bytes) alone let a 16384² grey PNG through, to several GB of copies.
+pub const MAX_PIXELS: u64 = 1 << 27;
+
+/// Opens a PNG, JPEG or TIFF, refusing from its header one above `MAX_PIXELS`.
+pub fn open_limited(path: &Path) -> Result<image::DynamicImage, Error> {
+    let err = |message: String| Error::Read { path: path.to_path_buf(), message };
+    let reader = image::ImageReader::open(path)
+        .and_then(|r| r.with_guessed_format())
+        .map_err(|e| err(e.to_string()))?;
+    let (w, h) = reader.into_dimensions().map_err(|e| err(e.to_string()))?;
+    if w as u64 * h as u64 > MAX_PIXELS {
+        return Err(err(format!(
+            "{w}×{h} pixels, above the limit of {} million ({MAX_PIXELS} pixels)",
+            MAX_PIXELS / 1_000_000
+        )));
+    }
+    image::open(path).map_err(|e| err(e.to_string()))
+}
+
 /// Reads a PNG or JPEG as linear floats in [0, 1] without any transfer function (raw code
 /// values / max code value), keeping 16-bit depth. Colour images give 3 channels, grey 1.
 pub fn read_raw(path: &Path) -> Result<Image, Error> {
-    let err = |message: String| Error::Read { path: path.to_path_buf(), message };
-    let dynimg = image::open(path).map_err(|e| err(e.to_string()))?;
+    let dynimg = open_limited(path)?;
     let (w, h) = (dynimg.width(), dynimg.height());
     let grey = !dynimg.color().has_color();
     Ok(if grey {
@@ -294,6 +314,35 @@ mod tests {
         }
         assert_eq!(std::fs::read_dir(&root).unwrap().count(), 1);
         std::fs::remove_dir_all(&root).unwrap();
+    }
+
+    /// A PNG whose header claims 20000 × 10000 pixels (a 70-byte file) is refused from its
+    /// header, naming the size, before anything is decoded.
+    #[test]
+    fn png_above_the_pixel_limit_is_refused_from_its_header() {
+        let chunk = |kind: &[u8], data: &[u8]| {
+            let mut crc = flate2::Crc::new();
+            crc.update(kind);
+            crc.update(data);
+            let mut c = (data.len() as u32).to_be_bytes().to_vec();
+            c.extend(kind);
+            c.extend(data);
+            c.extend(crc.sum().to_be_bytes());
+            c
+        };
+        let mut ihdr = 20000u32.to_be_bytes().to_vec();
+        ihdr.extend(10000u32.to_be_bytes());
+        ihdr.extend([8, 0, 0, 0, 0]);
+        let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+        png.extend(chunk(b"IHDR", &ihdr));
+        let z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::fast());
+        png.extend(chunk(b"IDAT", &z.finish().unwrap()));
+        png.extend(chunk(b"IEND", &[]));
+        let p = std::env::temp_dir().join(format!("lumen-io-big-{}.png", std::process::id()));
+        std::fs::write(&p, &png).unwrap();
+        let e = read(&p).unwrap_err().to_string();
+        std::fs::remove_file(&p).unwrap();
+        assert!(e.contains("20000×10000 pixels") && e.contains("limit"), "{e}");
     }
 
     /// A small file whose header claims 100000 × 100000 pixels: refused from the header.
