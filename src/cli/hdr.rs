@@ -141,37 +141,42 @@ pub fn run(a: &HdrArgs) -> Result<()> {
     let fusion = a.fusion.then(hdr::fusion::Mertens::default);
     let out = hdr::run(&input, &hdr::Config { method, weights, fusion })?;
 
-    let dir = a.out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    let radiance = Image { width: w, height: h, channels: 3, data: out.radiance.clone() };
-    image::io::write_exr(&a.out, &radiance)?;
-    let write = |name: &str, bytes: Vec<u8>| -> Result<()> {
-        let p = dir.join(name);
-        image::io::write_atomically(&p, |tmp| std::fs::write(tmp, &bytes).map_err(|e| e.to_string()))?;
-        Ok(())
-    };
-    write("response.csv", response::to_csv(&out.response).into_bytes())?;
-    write(
-        "response.svg",
-        response::plot_svg(&out.response, &format!("response ({})", out.summary.method)).into_bytes(),
-    )?;
-    let mut mask = Image::new(w, h, 3);
-    for (i, m) in out.mask.iter().enumerate() {
-        let v: [f32; 3] = match *m {
-            merge::SATURATED => [1.0, 0.0, 0.0],
-            merge::DARK => [0.0, 0.0, 1.0],
-            _ => [0.0, 0.0, 0.0],
+    // Everything written together: on an error none of it is left beside --out.
+    let target = a.out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let Some(file_name) = a.out.file_name() else { bail!("--out {}: expected a file name", a.out.display()) };
+    image::io::write_together(target, |dir| -> Result<()> {
+        let exr = dir.join(file_name);
+        let radiance = Image { width: w, height: h, channels: 3, data: out.radiance.clone() };
+        image::io::write_exr(&exr, &radiance)?;
+        let write = |name: &str, bytes: Vec<u8>| -> Result<()> {
+            let p = dir.join(name);
+            image::io::write_atomically(&p, |tmp| std::fs::write(tmp, &bytes).map_err(|e| e.to_string()))?;
+            Ok(())
         };
-        mask.data[3 * i..3 * i + 3].copy_from_slice(&v);
-    }
-    image::io::write_png_srgb(&dir.join("mask.png"), &mask)?;
-    image::io::write_png_srgb(&dir.join("preview.png"), &hdr::tonemap::reinhard(&radiance))?;
-    if let Some(f) = &out.fusion {
-        // Already in the frames' encoding: written as it is, not sRGB-encoded again.
-        let codes: Vec<u16> = f.iter().map(|v| (v * 255.0 + 0.5) as u16).collect();
-        image::io::write_png_raw(&dir.join("fusion.png"), w, h, 3, &codes, 8)?;
-    }
-    write("summary.json", serde_json::to_string_pretty(&out.summary)?.into_bytes())?;
+        write("response.csv", response::to_csv(&out.response).into_bytes())?;
+        write(
+            "response.svg",
+            response::plot_svg(&out.response, &format!("response ({})", out.summary.method)).into_bytes(),
+        )?;
+        let mut mask = Image::new(w, h, 3);
+        for (i, m) in out.mask.iter().enumerate() {
+            let v: [f32; 3] = match *m {
+                merge::SATURATED => [1.0, 0.0, 0.0],
+                merge::DARK => [0.0, 0.0, 1.0],
+                _ => [0.0, 0.0, 0.0],
+            };
+            mask.data[3 * i..3 * i + 3].copy_from_slice(&v);
+        }
+        image::io::write_png_srgb(&dir.join("mask.png"), &mask)?;
+        image::io::write_png_srgb(&dir.join("preview.png"), &hdr::tonemap::reinhard(&radiance))?;
+        if let Some(f) = &out.fusion {
+            // Already in the frames' encoding: written as it is, not sRGB-encoded again.
+            let codes: Vec<u16> = f.iter().map(|v| (v * 255.0 + 0.5) as u16).collect();
+            image::io::write_png_raw(&dir.join("fusion.png"), w, h, 3, &codes, 8)?;
+        }
+        write("summary.json", serde_json::to_string_pretty(&out.summary)?.into_bytes())?;
+        Ok(())
+    })?;
     let s = &out.summary;
     eprintln!(
         "{} frames {w}×{h} ({} levels): response by {} in {:.3} s ({} samples), merged in {:.3} s ({:.0} Mpixel-frames/s); {:.1} stops well exposed; {} pixels saturated in every frame (lower bounds), {} dark in every frame (upper bounds); read {read_s:.2} s; wrote {} and response.csv, response.svg, mask.png (red: saturated, blue: dark), preview.png, summary.json{} beside it",

@@ -49,7 +49,6 @@ pub fn run(a: &SfmArgs) -> Result<()> {
     eprintln!("extracting features and matching {} images …", input.images.len());
     let out = sfm::run(&input, &config)?;
     let rec = &out.reconstruction;
-    std::fs::create_dir_all(&a.out).with_context(|| format!("--out {}: cannot create", a.out.display()))?;
     let (cameras, images_txt, points) = colmap::text_model(&input, &out);
     let registered = rec.registered_count();
     let (kept, observations) = rec.seen_points().fold((0, 0), |(k, o), (_, _, obs)| (k + 1, o + obs.len()));
@@ -77,10 +76,13 @@ pub fn run(a: &SfmArgs) -> Result<()> {
         ("points.ply", colmap::ply(&out)),
         ("summary.json", serde_json::to_string_pretty(&summary)? + "\n"),
     ];
-    for (name, text) in files {
-        let p = a.out.join(name);
-        image::io::write_atomically(&p, |tmp| std::fs::write(tmp, &text).map_err(|e| e.to_string()))?;
-    }
+    image::io::write_together(&a.out, |dir| -> Result<()> {
+        for (name, text) in files {
+            let p = dir.join(name);
+            image::io::write_atomically(&p, |tmp| std::fs::write(tmp, &text).map_err(|e| e.to_string()))?;
+        }
+        Ok(())
+    })?;
     println!(
         "registered {registered} of {} images, {kept} points, reprojection RMS {:.3} px; wrote {}",
         input.images.len(),
