@@ -273,30 +273,33 @@ fn spectral(camera: &str, illuminant: &str, out: &Path) -> Result<()> {
     let ill = spectra::illuminant(illuminant).with_context(|| {
         format!("--illuminant {illuminant}: expected one of {}", spectra::ILLUMINANTS.join(", "))
     })?;
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     let chart = spectra::chart();
     let rgb: Vec<[f64; 3]> = chart.iter().map(|(_, r)| spectra::camera_rgb(r, &ill, &cam)).collect();
     let xyz: Vec<[f64; 3]> = chart.iter().map(|(_, r)| spectra::xyz(r, &ill)).collect();
     let white = spectra::white(&ill);
     let what = format!("ColorChecker 24 (BabelColor average) under {illuminant}, camera {camera}");
-    color::write_table(
-        &out.join("rgb.csv"),
-        ["R", "G", "B"],
-        &rgb,
-        &format!("{what}: camera RGB, a perfect white's strongest channel = 1"),
-    )?;
-    color::write_table(
-        &out.join("xyz.csv"),
-        ["X", "Y", "Z"],
-        &xyz,
-        &format!("{what}: CIE 1931 2° XYZ, Y = 1 for a perfect white"),
-    )?;
-    let text = format!(
-        "# the white of {illuminant} (CIE 1931 2°)\nX,Y,Z\n{:e},{:e},{:e}\n",
-        white[0], white[1], white[2]
-    );
-    image::io::write_atomically(&out.join("white.csv"), |tmp| {
-        std::fs::write(tmp, text).map_err(|e| e.to_string())
+    // The three tables are written together: on an error none is left behind.
+    image::io::write_together(out, |dir| -> Result<()> {
+        color::write_table(
+            &dir.join("rgb.csv"),
+            ["R", "G", "B"],
+            &rgb,
+            &format!("{what}: camera RGB, a perfect white's strongest channel = 1"),
+        )?;
+        color::write_table(
+            &dir.join("xyz.csv"),
+            ["X", "Y", "Z"],
+            &xyz,
+            &format!("{what}: CIE 1931 2° XYZ, Y = 1 for a perfect white"),
+        )?;
+        let text = format!(
+            "# the white of {illuminant} (CIE 1931 2°)\nX,Y,Z\n{:e},{:e},{:e}\n",
+            white[0], white[1], white[2]
+        );
+        image::io::write_atomically(&dir.join("white.csv"), |tmp| {
+            std::fs::write(tmp, text).map_err(|e| e.to_string())
+        })?;
+        Ok(())
     })?;
     eprintln!(
         "{what}: wrote rgb.csv, xyz.csv and white.csv to {}; white {:.6},{:.6},{:.6}",
