@@ -87,7 +87,7 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth,
     let mut images = Vec::new();
     let mut poses = Vec::new();
     for k in 0..c.views {
-        let f = if c.views == 1 { 0.5 } else { k as f64 / (c.views - 1) as f64 };
+        let f = k as f64 / (c.views - 1) as f64;
         let phi = (-90.0 + c.arc_deg * (f - 0.5)).to_radians();
         let origin = DVec3::new(target.x + c.radius * phi.cos(), target.y + c.radius * phi.sin(), c.height);
         let Some(world_from_cam) = CameraPose::look_at(origin, target, DVec3::Z) else {
