@@ -73,7 +73,7 @@ impl Stage {
             Stage::Photometric(_) | Stage::PhotometricData(_) => "mean_angular_error_deg",
             Stage::Color(_) => "loo_mean_de2000",
             Stage::Hdr(_) => "radiance_median_rel_err",
-            Stage::HdrData(_) => "loo_rms_codes",
+            Stage::HdrData(_) => "loo_median_abs_ln",
             Stage::Sfm(_) | Stage::SfmRender(_) => "rotation_err_median_deg",
         }
     }
