@@ -261,7 +261,7 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
 /// The side of a square, in any unit from micrometres to kilometres (in metres: 10⁻⁶ to 10³;
 /// in millimetres up to 10⁶): beyond that the board's coordinates lose the precision the
 /// homographies need, or overflow.
-fn check_square(square: f64) -> Result<(), Error> {
+pub fn check_square(square: f64) -> Result<(), Error> {
     if square.is_finite() && (1e-6..=1e6).contains(&square) {
         Ok(())
     } else {

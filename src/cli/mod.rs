@@ -409,16 +409,18 @@ fn render_cmd(a: &RenderArgs) -> Result<()> {
             written.push(out.to_path_buf());
         }
         if aov.iter().any(|a| a == "variance") {
-            lumen::image::io::write_exr(&sibling(out, "variance"), &film.variance)?;
-            written.push(sibling(out, "variance"));
+            let path = sibling(out, "variance");
+            lumen::image::io::write_exr(&path, &film.variance)?;
+            written.push(path);
         }
         let truth_names: Vec<&String> = aov.iter().filter(|a| *a != "variance").collect();
         if !truth_names.is_empty() {
             let truth = render::truth(&scene, None);
             for name in truth_names {
                 if let Some(img) = truth.get(name) {
-                    lumen::image::io::write_exr(&sibling(out, name), img)?;
-                    written.push(sibling(out, name));
+                    let path = sibling(out, name);
+                    lumen::image::io::write_exr(&path, img)?;
+                    written.push(path);
                 }
             }
             if aov.iter().any(|a| a == "id") {
@@ -541,9 +543,7 @@ fn calibrate_cmd(
     debug: Option<&Path>,
 ) -> Result<()> {
     let board = parse_board(board)?;
-    if !(square.is_finite() && (1e-6..=1e6).contains(&square)) {
-        bail!("--square {square:?}: expected a square size from 1e-6 to 1e6 (in the unit translations should come out in)");
-    }
+    lumen::calib::check_square(square).map_err(|e| anyhow::anyhow!("--square: {e}"))?;
     let ext = out.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     if !["yaml", "yml", "json"].contains(&ext.as_str()) {
         bail!("--out {}: expected a file name ending in .yaml, .yml or .json", out.display());

@@ -56,8 +56,7 @@ pub fn write_together<T, E: From<Error>>(
     dir: &Path,
     write: impl FnOnce(&Path) -> Result<T, E>,
 ) -> Result<T, E> {
-    let err =
-        |path: &Path, e: std::io::Error| Error::Write { path: path.to_path_buf(), message: e.to_string() };
+    let err = write_error;
     let name = dir.file_name().and_then(|n| n.to_str()).unwrap_or("out");
     let parent = dir.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     std::fs::create_dir_all(parent).map_err(|e| err(parent, e))?;
@@ -72,10 +71,13 @@ pub fn write_together<T, E: From<Error>>(
     result
 }
 
+fn write_error(path: &Path, e: std::io::Error) -> Error {
+    Error::Write { path: path.to_path_buf(), message: e.to_string() }
+}
+
 /// Moves the files of `from` into `to`, subfolders merged into existing ones.
 fn move_into(from: &Path, to: &Path) -> Result<(), Error> {
-    let err =
-        |path: &Path, e: std::io::Error| Error::Write { path: path.to_path_buf(), message: e.to_string() };
+    let err = write_error;
     std::fs::create_dir_all(to).map_err(|e| err(to, e))?;
     for entry in std::fs::read_dir(from).map_err(|e| err(from, e))? {
         let source = entry.map_err(|e| err(from, e))?.path();

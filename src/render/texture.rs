@@ -22,8 +22,9 @@ pub enum TextureSpec {
 /// Coloured value noise over the texture domain: `octaves` layers of random values on
 /// lattices of 4, 8, 16 … cells across, each 0.7 times the amplitude of the one before, smoothly
 /// interpolated and wrapping at the domain's edges, through a steep contrast curve, with
-/// values between `low` and `high` per channel. Blobs of every size with no repeat: what feature detectors need, as a
-/// photographed wall or ground has it (a checkerboard's corners all look alike).
+/// values between `low` and `high` per channel. Blobs of every size with no repeat: what
+/// feature detectors need, as a photographed wall or ground has it (a checkerboard's corners
+/// all look alike).
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct NoiseSpec {
@@ -146,7 +147,7 @@ impl Texture {
             TextureSpec::Image { texture } => {
                 let file = dir.join(texture);
                 let img = crate::image::io::read(&file)?;
-                texels_within(&img.data, 0.0, 1.0, &file, path, field, "an albedo")?;
+                texels_in_unit_range(&img.data, &file, path, field, "an albedo")?;
                 let eight_bit = is_eight_bit(&file);
                 let c = img.channels as usize;
                 let texels = img
@@ -189,7 +190,7 @@ impl Texture {
                 let img = crate::image::io::read(&file)?;
                 // Within [0, 1] as a constant must be; values below 0.001 (a black texel) are
                 // raised to it, as documented.
-                texels_within(&img.data, 0.0, 1.0, &file, path, field, "a roughness")?;
+                texels_in_unit_range(&img.data, &file, path, field, "a roughness")?;
                 let c = img.channels as usize;
                 let texels = img.data.chunks_exact(c).map(|p| Vec3A::splat(p[0].clamp(0.001, 1.0))).collect();
                 Texture::Image { width: img.width, height: img.height, texels }
@@ -225,18 +226,16 @@ impl Texture {
     }
 }
 
-/// A texture's values must lie in [lo, hi] and be finite, as the constant they stand for must:
+/// A texture's values must be finite and lie in [0, 1], as the constant they stand for must:
 /// refused naming the file otherwise, never clamped silently.
-fn texels_within(
+fn texels_in_unit_range(
     data: &[f32],
-    lo: f32,
-    hi: f32,
     file: &Path,
     path: &Path,
     field: &str,
     what: &str,
 ) -> Result<(), Error> {
-    let bad = data.iter().filter(|v| !(v.is_finite() && (lo..=hi).contains(*v))).count();
+    let bad = data.iter().filter(|v| !(v.is_finite() && (0.0..=1.0).contains(*v))).count();
     if bad == 0 {
         return Ok(());
     }
@@ -248,13 +247,13 @@ fn texels_within(
         path: path.into(),
         field: field.into(),
         message: format!(
-            "{}: {bad} values are not finite or outside [{lo}, {hi}] (finite ones from {mn} to {mx}); {what} must lie in [{lo}, {hi}]",
+            "{}: {bad} values are not finite or outside [0, 1] (finite ones from {mn} to {mx}); {what} must lie in [0, 1]",
             file.display()
         ),
     })
 }
 
-/// `NoiseSpec`'s texture, evaluated into a `size`² image (each channel its own noise).
+/// `NoiseSpec`'s texture, evaluated into a `size`² image.
 fn value_noise(seed: u64, octaves: u32, size: u32, low: Vec3A, high: Vec3A) -> Texture {
     use super::sampler::mix64;
     let n = size as usize;

@@ -78,14 +78,6 @@ pub fn read_images(
     for (n, f) in files.iter().enumerate() {
         on_image(n, files.len(), f);
         let img = crate::image::io::read(f)?;
-        let grey = Grey::from_image(&img);
-        let c = img.channels as usize;
-        let q = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
-        let rgb8 = img
-            .data
-            .chunks_exact(c)
-            .map(|p| if c >= 3 { [q(p[0]), q(p[1]), q(p[2])] } else { [q(p[0]); 3] })
-            .collect();
         let camera = match camera {
             Some(mut cam) if cam.width == 0 => {
                 cam.width = img.width;
@@ -96,9 +88,23 @@ pub fn read_images(
             None => assumed_camera(img.width, img.height),
         };
         let name = f.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-        images.push(Image { name, grey, rgb8, camera });
+        images.push(image(name, &img, camera));
     }
     Ok(Input { images })
+}
+
+/// An image as the solver takes it, from code values in [0, 1] (as `image::io::read` gives a
+/// photograph's): its grey levels, and its colours as 8-bit for the point cloud.
+pub fn image(name: String, img: &crate::image::Image, camera: CameraModel) -> Image {
+    let grey = Grey::from_image(img);
+    let c = img.channels as usize;
+    let q = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+    let rgb8 = img
+        .data
+        .chunks_exact(c)
+        .map(|p| if c >= 3 { [q(p[0]), q(p[1]), q(p[2])] } else { [q(p[0]); 3] })
+        .collect();
+    Image { name, grey, rgb8, camera }
 }
 
 /// K, the camera-to-world rotation R and the centre C.

@@ -117,17 +117,10 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth,
         else {
             return Err(StageError::Config(format!("{name}: the cached render has the wrong size")));
         };
-        // As a photograph: 8-bit sRGB codes, read back as the photograph reader reads them.
-        let q = |v: f32| (crate::image::srgb_encode(v.max(0.0)) * 255.0).round().clamp(0.0, 255.0) as u8;
-        let rgb8: Vec<[u8; 3]> = img.data.chunks_exact(3).map(|p| [q(p[0]), q(p[1]), q(p[2])]).collect();
-        let coded = crate::image::Image {
-            width: img.width,
-            height: img.height,
-            channels: 3,
-            data: rgb8.iter().flat_map(|p| p.map(|v| v as f32 / 255.0)).collect(),
-        };
-        let grey = crate::image::filter::Grey::from_image(&coded);
-        images.push(sfm::Image { name, grey, rgb8, camera });
+        // As a photograph: 8-bit sRGB codes, read as the photograph reader reads them.
+        let code = |v: f32| (crate::image::srgb_encode(v.max(0.0)) * 255.0).round().clamp(0.0, 255.0) / 255.0;
+        let coded = crate::image::Image { data: img.data.iter().map(|&v| code(v)).collect(), ..img };
+        images.push(sfm::input::image(name, &coded, camera));
         // World to camera: R = R_wcᵀ, t = −R C.
         let r = world_from_cam.rotation.transpose();
         let m = Matrix3::from_fn(|i, j| r.col(j)[i]);
