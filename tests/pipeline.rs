@@ -550,3 +550,76 @@ fn stress_suite_declares_every_outcome() {
         );
     }
 }
+
+/// The small pipeline run as one process, and as 3 shards (each writing its fragment) joined by
+/// `lumen merge`, gives the same numbers; a missing fragment, or one from another pipeline file,
+/// is an error naming it; a shard run again replaces its fragment.
+#[test]
+fn shards_merge_into_the_one_process_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = common::root().join("pipelines/scenes");
+    let text = format!(
+        "name = \"small\"\nseed = 5\n\
+         [[stages]]\nstage = \"render\"\ncase = \"furnace\"\nscene = \"{0}/furnace.toml\"\nexpect_uniform = [1.0, 1.0, 1.0]\nsweep = {{ spp = [4, 16] }}\n\
+         [[stages]]\nstage = \"calibrate\"\ncase = \"board\"\nscene = \"{0}/calib-board.toml\"\nspp = 4\nsweep = {{ views = [4, 5] }}\nbounds = {{ views_missed = 0 }}\n\
+         [[stages]]\nstage = \"photometric\"\ncase = \"sphere\"\nscene = \"{0}/ps-sphere.toml\"\nspp = 4\nlights = 8\nbounds = {{ masked_pixels = 0 }}\n",
+        root.display()
+    );
+    let (code, err, one) = run_with(&text, dir.path(), "one", &["--no-cache"]);
+    assert_eq!(code, 0, "{err}");
+    let out = dir.path().join("sharded");
+    let cache = dir.path().join("cache");
+    let shard = |k: usize, text: &str| {
+        let (code, err, _) = run_with(
+            text,
+            dir.path(),
+            "sharded",
+            &["--shard", &format!("{k}/3"), "--cache", cache.to_str().unwrap()],
+        );
+        assert_eq!(code, 0, "{err}");
+        serde_json::from_str::<serde_json::Value>(
+            &std::fs::read_to_string(out.join(format!("shards/{k}-of-3/report.json"))).unwrap(),
+        )
+        .unwrap()
+    };
+    let merge = || {
+        let o = Command::new(env!("CARGO_BIN_EXE_lumen"))
+            .args(["merge", out.to_str().unwrap()])
+            .output()
+            .unwrap();
+        (o.status.code().unwrap_or(-1), String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    // Cases 0 and 3 (furnace[spp=4], board[views=5]) are shard 1's.
+    let first = shard(1, &text);
+    let cases: Vec<&str> =
+        first["stages"].as_array().unwrap().iter().map(|s| s["case"].as_str().unwrap()).collect();
+    assert_eq!(cases, ["furnace[spp=4]", "board[views=5]"]);
+    assert!(!out.join("report.json").exists(), "a shard writes only its fragment");
+    assert_eq!(first["fragment"]["indices"], serde_json::json!([0, 3]));
+    shard(2, &text);
+    let (code, err) = merge();
+    assert_eq!(code, 1);
+    assert!(err.contains("missing fragment(s) 3-of-3"), "{err}");
+    shard(3, &text);
+    let (code, err) = merge();
+    assert_eq!(code, 0, "{err}");
+    let merged: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(numbers(&one), numbers(&merged));
+    let order = |r: &serde_json::Value| -> Vec<serde_json::Value> {
+        r["stages"].as_array().unwrap().iter().map(|s| s["case"].clone()).collect()
+    };
+    assert_eq!(order(&one), order(&merged));
+    assert_eq!(merged["passed"], true);
+    assert!(merged.get("fragment").is_none());
+    assert!(out.join("plots/board.svg").exists() && out.join("report.md").exists());
+    // Shard 2 run from another pipeline file replaces its fragment, and the merge refuses it.
+    shard(2, &text.replace("lights = 8", "lights = 9"));
+    let (code, err) = merge();
+    assert_eq!(code, 1);
+    assert!(err.contains("2-of-3") && err.contains("pipeline file"), "{err}");
+    // Run again from the right file, it replaces that fragment and the merge holds again.
+    shard(2, &text);
+    let (code, err) = merge();
+    assert_eq!(code, 0, "{err}");
+}

@@ -42,6 +42,17 @@ enum Command {
         /// Render everything afresh and store nothing.
         #[arg(long)]
         no_cache: bool,
+        /// Run only shard K of N (case i goes to shard i mod N + 1) and write its fragment to
+        /// OUT/shards/K-of-N; `lumen merge OUT` joins the fragments (default: every case).
+        #[arg(long, value_name = "K/N", value_parser = lumen::pipeline::shard::Shard::parse)]
+        shard: Option<lumen::pipeline::shard::Shard>,
+    },
+    /// Join the fragments in OUT/shards (from `lumen run --shard K/N --out OUT`) into one
+    /// report.json, report.md and plots in OUT, checking that they are one pipeline's and cover
+    /// every case once.
+    Merge {
+        /// The output folder the shards wrote to.
+        out: PathBuf,
     },
     /// Render a scene file to an image: .exr (linear float) or .png (sRGB, or raw sensor values
     /// when the scene has a [sensor]).
@@ -238,11 +249,16 @@ pub fn main() -> i32 {
         }
     };
     let result = match cli.command {
-        Command::Run { pipeline, out, threads, cache, no_cache } => {
+        Command::Run { pipeline, out, threads, cache, no_cache, shard } => {
             let cache =
                 if no_cache { None } else { Some(cache.unwrap_or_else(|| PathBuf::from("out/cache"))) };
-            run_pipeline(&pipeline, out, threads, cache)
+            run_pipeline(
+                &pipeline,
+                out,
+                pipeline::RunOptions { threads, progress: true, cache_dir: cache, shard },
+            )
         }
+        Command::Merge { out } => merge_cmd(&out),
         Command::Render(args) => render_cmd(&args).map(|_| 0),
         Command::Preview { files, kind } => preview_cmd(&files, kind.as_deref()).map(|_| 0),
         Command::Calibrate {
@@ -296,19 +312,34 @@ pub fn main() -> i32 {
 /// Exit code of `lumen run` when a metric missed its bound without a declared expected miss.
 const EXIT_METRIC_MISSED: i32 = 3;
 
-fn run_pipeline(
-    path: &Path,
-    out: Option<PathBuf>,
-    threads: Option<usize>,
-    cache: Option<PathBuf>,
-) -> Result<i32> {
+fn run_pipeline(path: &Path, out: Option<PathBuf>, opts: pipeline::RunOptions) -> Result<i32> {
     let file = pipeline::load(path)?;
     let name = pipeline::pipeline_name(&file, path);
     let out = out.unwrap_or_else(|| Path::new("out").join(&name));
-    let opts = pipeline::RunOptions { threads, progress: true, cache_dir: cache };
     let report = pipeline::run(path, &file, &opts)?;
-    report.write(&out)?;
+    let dir = opts.shard.map_or_else(|| out.clone(), |s| s.dir(&out));
+    report.write(&dir)?;
+    eprintln!("wrote {} and {}", dir.join("report.json").display(), dir.join("report.md").display());
+    if let Some(s) = opts.shard {
+        eprintln!(
+            "this is shard {}/{}: once every shard has run, `lumen merge {}` joins them",
+            s.k,
+            s.n,
+            out.display()
+        );
+    }
+    Ok(summarize(&report))
+}
+
+fn merge_cmd(out: &Path) -> Result<i32> {
+    let report = pipeline::shard::merge(out)?;
+    report.write(out)?;
     eprintln!("wrote {} and {}", out.join("report.json").display(), out.join("report.md").display());
+    Ok(summarize(&report))
+}
+
+/// One line per case and per failure on stderr; the exit code the report earns.
+fn summarize(report: &pipeline::report::Report) -> i32 {
     let width = report.stages.iter().map(|s| s.case.chars().count()).max().unwrap_or(0);
     for s in &report.stages {
         if let Some(why) = &s.skipped {
@@ -331,12 +362,12 @@ fn run_pipeline(
     }
     let failures = report.failures();
     if failures.is_empty() {
-        return Ok(0);
+        return 0;
     }
     for f in failures {
         eprintln!("error: metric {f}");
     }
-    Ok(EXIT_METRIC_MISSED)
+    EXIT_METRIC_MISSED
 }
 
 /// `NAME.ext` → `NAME.<suffix>.exr`.

@@ -2,16 +2,16 @@
 //! verdict. A value that could not be measured is `None` with the reason, never a sentinel
 //! such as NaN or infinity: a missing or non-finite value misses any bound it has.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
-#[derive(Clone, Copy, Debug, Serialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
 pub enum Better {
     Lower,
     Higher,
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Metric {
     pub name: String,
     /// `None` when the quantity could not be measured (`missing` says why).

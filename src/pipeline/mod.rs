@@ -7,6 +7,7 @@ pub mod cache;
 pub mod file;
 pub mod metric;
 pub mod report;
+pub mod shard;
 pub mod stages;
 
 pub use file::{load, PipelineFile};
@@ -32,6 +33,8 @@ pub enum Error {
     Pool(usize, String),
     #[error("cannot write {path}: {message}")]
     Write { path: PathBuf, message: String },
+    #[error("cannot merge: {path}: {message}")]
+    Merge { path: PathBuf, message: String },
 }
 
 impl From<crate::image::io::Error> for Error {
@@ -57,6 +60,8 @@ pub struct RunOptions {
     pub progress: bool,
     /// Where renders are cached (`None`: not cached).
     pub cache_dir: Option<PathBuf>,
+    /// Run only this shard's cases; the report is then a fragment (`shard`).
+    pub shard: Option<shard::Shard>,
 }
 
 /// The name a pipeline's outputs go under: `name`, or the file's stem.
@@ -89,8 +94,10 @@ fn run_cases(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Repo
     let start_time = humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
     let mut stages = Vec::new();
     let mut files = Vec::new();
-    let n = file.cases.len();
-    for (k, case) in file.cases.iter().enumerate() {
+    let taken: Vec<usize> =
+        (0..file.cases.len()).filter(|&i| opts.shard.is_none_or(|s| s.takes(i))).collect();
+    let n = taken.len();
+    for (k, case) in taken.iter().map(|&i| &file.cases[i]).enumerate() {
         let seed = case.common.seed.unwrap_or(file.seed);
         let ctx = Context { dir: &dir, case: &case.common.case, seed, cache: &cache, progress: bars };
         if opts.progress {
@@ -173,6 +180,16 @@ fn run_cases(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Repo
     }
     let mut report =
         Report::new(pipeline_name(file, path), file.seed, stages, started.elapsed().as_secs_f64());
+    if let Some(s) = opts.shard {
+        report.fragment = Some(shard::Fragment {
+            shard: s.k,
+            shards: s.n,
+            pipeline_digest: shard::digest(path)?,
+            cases: file.cases.len(),
+            indices: taken,
+            kept: files.iter().map(|(name, _)| name.clone()).collect(),
+        });
+    }
     report.files = files;
     report.started = start_time;
     report.warnings = cache.warnings();

@@ -4,13 +4,13 @@
 
 use super::cache::Event;
 use super::metric::{Better, Metric};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// What a case declared it would end with, and what it did.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Outcome {
     /// `result` (metrics within their bounds) or `error: KIND`.
     pub declared: String,
@@ -19,14 +19,14 @@ pub struct Outcome {
 }
 
 /// A stage's error as the report shows it.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct StageFailure {
     pub kind: String,
     pub message: String,
 }
 
 /// Renders a case asked for: how many were rendered and how many read back from the cache.
-#[derive(Clone, Debug, Default, Serialize)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct Renders {
     pub rendered: usize,
     pub reused: usize,
@@ -51,7 +51,7 @@ impl Renders {
     }
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct StageReport {
     pub stage: String,
     pub case: String,
@@ -86,7 +86,7 @@ impl StageReport {
     }
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Report {
     pub pipeline: String,
     pub seed: u64,
@@ -106,6 +106,9 @@ pub struct Report {
     pub passed: bool,
     /// Problems that did not stop the run (e.g. the render cache could not be written).
     pub warnings: Vec<String>,
+    /// Set in a shard's fragment (`lumen run --shard K/N`): which part of the pipeline it holds.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fragment: Option<super::shard::Fragment>,
     /// Files cases asked to keep, written with the report.
     #[serde(skip)]
     pub files: Vec<(PathBuf, super::stages::Kept)>,
@@ -126,6 +129,7 @@ impl Report {
             stages,
             passed,
             warnings: Vec::new(),
+            fragment: None,
             files: Vec::new(),
         }
     }
