@@ -385,20 +385,26 @@ fn case<'a>(report: &'a serde_json::Value, name: &str) -> &'a serde_json::Value 
         .unwrap_or_else(|| panic!("no case {name}"))
 }
 
+/// A small pipeline of every kind of case: two sweeps (the second sharing renders) and one
+/// case alone.
+fn small_pipeline() -> String {
+    let root = common::root().join("pipelines/scenes");
+    format!(
+        "name = \"small\"\nseed = 5\n\
+         [[stages]]\nstage = \"render\"\ncase = \"furnace\"\nscene = \"{0}/furnace.toml\"\nexpect_uniform = [1.0, 1.0, 1.0]\nsweep = {{ spp = [4, 16] }}\n\
+         [[stages]]\nstage = \"calibrate\"\ncase = \"board\"\nscene = \"{0}/calib-board.toml\"\nspp = 4\nsweep = {{ views = [4, 5] }}\nbounds = {{ views_missed = 0 }}\n\
+         [[stages]]\nstage = \"photometric\"\ncase = \"sphere\"\nscene = \"{0}/ps-sphere.toml\"\nspp = 4\nlights = 8\nbounds = {{ masked_pixels = 0 }}\n",
+        root.display()
+    )
+}
+
 /// A small pipeline of every stage, two of them swept: the sweep's cases share renders
 /// through the cache, the report plots them, and the numbers are the same on 1 and 2 threads,
 /// with a fresh cache or a full one.
 #[test]
 fn sweeps_share_renders_and_numbers_do_not_depend_on_threads() {
     let dir = tempfile::tempdir().unwrap();
-    let root = common::root().join("pipelines/scenes");
-    let text = format!(
-        "name = \"small\"\nseed = 5\n\
-         [[stages]]\nstage = \"render\"\ncase = \"furnace\"\nscene = \"{0}/furnace.toml\"\nexpect_uniform = [1.0, 1.0, 1.0]\nsweep = {{ spp = [4, 16] }}\n\
-         [[stages]]\nstage = \"calibrate\"\ncase = \"board\"\nscene = \"{0}/calib-board.toml\"\nspp = 4\nsweep = {{ views = [4, 5] }}\nbounds = {{ views_missed = 0 }}\n\
-         [[stages]]\nstage = \"photometric\"\ncase = \"sphere\"\nscene = \"{0}/ps-sphere.toml\"\nspp = 4\nlights = 8\nbounds = {{ masked_pixels = 0 }}\n",
-        root.display()
-    );
+    let text = small_pipeline();
     let cache = dir.path().join("cache");
     let c = cache.to_str().unwrap();
     let (code, err, one) = run_with(&text, dir.path(), "one", &["--threads", "1", "--cache", c]);
@@ -557,14 +563,7 @@ fn stress_suite_declares_every_outcome() {
 #[test]
 fn shards_merge_into_the_one_process_report() {
     let dir = tempfile::tempdir().unwrap();
-    let root = common::root().join("pipelines/scenes");
-    let text = format!(
-        "name = \"small\"\nseed = 5\n\
-         [[stages]]\nstage = \"render\"\ncase = \"furnace\"\nscene = \"{0}/furnace.toml\"\nexpect_uniform = [1.0, 1.0, 1.0]\nsweep = {{ spp = [4, 16] }}\n\
-         [[stages]]\nstage = \"calibrate\"\ncase = \"board\"\nscene = \"{0}/calib-board.toml\"\nspp = 4\nsweep = {{ views = [4, 5] }}\nbounds = {{ views_missed = 0 }}\n\
-         [[stages]]\nstage = \"photometric\"\ncase = \"sphere\"\nscene = \"{0}/ps-sphere.toml\"\nspp = 4\nlights = 8\nbounds = {{ masked_pixels = 0 }}\n",
-        root.display()
-    );
+    let text = small_pipeline();
     let (code, err, one) = run_with(&text, dir.path(), "one", &["--no-cache"]);
     assert_eq!(code, 0, "{err}");
     let out = dir.path().join("sharded");
@@ -622,4 +621,45 @@ fn shards_merge_into_the_one_process_report() {
     shard(2, &text);
     let (code, err) = merge();
     assert_eq!(code, 0, "{err}");
+}
+
+/// `lumen slurm` writes a job array's script and a merge script; run as Slurm would run them
+/// (one task per SLURM_ARRAY_TASK_ID, then the merge), they give the one-process numbers.
+#[test]
+fn slurm_scripts_run_the_shards_and_the_merge() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = small_pipeline();
+    let (code, err, one) = run_with(&text, dir.path(), "one", &["--no-cache"]);
+    assert_eq!(code, 0, "{err}");
+    let p = dir.path().join("p.toml");
+    let out = dir.path().join("cluster");
+    let slurm = |extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_lumen"))
+            .args(["slurm", p.to_str().unwrap(), "--shards", "3", "--out", out.to_str().unwrap()])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let o = slurm(&["--time", "0:10:00 --mem=1T"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--time"), "{o:?}");
+    let o = slurm(&["--time", "0:10:00", "--cpus-per-task", "1"]);
+    assert!(o.status.success(), "{o:?}");
+    let script = std::fs::read_to_string(out.join("slurm/run.sbatch")).unwrap();
+    assert!(script.contains("#SBATCH --array=0-2") && script.contains("#SBATCH --time=0:10:00"), "{script}");
+    for task in 0..3 {
+        let o = Command::new("bash")
+            .arg(out.join("slurm/run.sbatch"))
+            .env("SLURM_ARRAY_TASK_ID", task.to_string())
+            .env("SLURM_CPUS_PER_TASK", "1")
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "task {task}: {}", String::from_utf8_lossy(&o.stderr));
+    }
+    let o = Command::new("bash").arg(out.join("slurm/merge.sbatch")).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let merged: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(numbers(&one), numbers(&merged));
+    assert_eq!(merged["threads"], 1);
 }

@@ -54,6 +54,34 @@ enum Command {
         /// The output folder the shards wrote to.
         out: PathBuf,
     },
+    /// Write the sbatch scripts that run a pipeline on Slurm, OUT/slurm/run.sbatch (a job array,
+    /// one task per shard) and OUT/slurm/merge.sbatch (`lumen merge OUT` after the array);
+    /// with --submit, submit both and print the job ids.
+    Slurm {
+        /// Pipeline file (TOML), e.g. pipelines/all.toml.
+        pipeline: PathBuf,
+        /// Number of shards, 1 to 1000: the array's tasks.
+        #[arg(long)]
+        shards: usize,
+        /// Output folder on storage every node sees (default: out/<pipeline name>).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Folder of the render cache the shards share (default: OUT/../cache).
+        #[arg(long)]
+        cache: Option<PathBuf>,
+        /// Slurm partition (default: the cluster's default).
+        #[arg(long)]
+        partition: Option<String>,
+        /// Time limit per task, as sbatch reads it, e.g. 1:00:00 (default: the partition's).
+        #[arg(long)]
+        time: Option<String>,
+        /// CPUs per task, also the shard's threads.
+        #[arg(long, default_value_t = 2)]
+        cpus_per_task: usize,
+        /// Submit both scripts with sbatch, the merge with --dependency=afterok on the array.
+        #[arg(long)]
+        submit: bool,
+    },
     /// Render a scene file to an image: .exr (linear float) or .png (sRGB, or raw sensor values
     /// when the scene has a [sensor]).
     Render(RenderArgs),
@@ -259,6 +287,10 @@ pub fn main() -> i32 {
             )
         }
         Command::Merge { out } => merge_cmd(&out),
+        Command::Slurm { pipeline, shards, out, cache, partition, time, cpus_per_task, submit } => {
+            let opts = SlurmArgs { shards, out, cache, partition, time, cpus_per_task, submit };
+            slurm_cmd(&pipeline, opts).map(|_| 0)
+        }
         Command::Render(args) => render_cmd(&args).map(|_| 0),
         Command::Preview { files, kind } => preview_cmd(&files, kind.as_deref()).map(|_| 0),
         Command::Calibrate {
@@ -336,6 +368,88 @@ fn merge_cmd(out: &Path) -> Result<i32> {
     report.write(out)?;
     eprintln!("wrote {} and {}", out.join("report.json").display(), out.join("report.md").display());
     Ok(summarize(&report))
+}
+
+struct SlurmArgs {
+    shards: usize,
+    out: Option<PathBuf>,
+    cache: Option<PathBuf>,
+    partition: Option<String>,
+    time: Option<String>,
+    cpus_per_task: usize,
+    submit: bool,
+}
+
+fn slurm_cmd(path: &Path, a: SlurmArgs) -> Result<()> {
+    use lumen::pipeline::{shard::MAX_SHARDS, slurm};
+    if !(1..=MAX_SHARDS).contains(&a.shards) {
+        anyhow::bail!("--shards {}: expected 1 to {MAX_SHARDS}", a.shards);
+    }
+    if !(1..=pipeline::MAX_THREADS).contains(&a.cpus_per_task) {
+        anyhow::bail!("--cpus-per-task {}: expected 1 to {}", a.cpus_per_task, pipeline::MAX_THREADS);
+    }
+    for (flag, value) in [("--partition", &a.partition), ("--time", &a.time)] {
+        if let Some(v) = value {
+            slurm::check_word(flag, v).map_err(anyhow::Error::msg)?;
+        }
+    }
+    let file = pipeline::load(path)?;
+    let name = pipeline::pipeline_name(&file, path);
+    let absolute =
+        |p: &Path| std::path::absolute(p).with_context(|| format!("cannot resolve {}", p.display()));
+    let out = absolute(&a.out.unwrap_or_else(|| Path::new("out").join(&name)))?;
+    let cache = match a.cache {
+        Some(c) => absolute(&c)?,
+        None => out.parent().unwrap_or(&out).join("cache"),
+    };
+    let job = slurm::Job {
+        lumen: std::env::current_exe().context("cannot find the lumen binary's path")?,
+        pipeline: absolute(path)?,
+        out: out.clone(),
+        cache,
+        name: pipeline::report::file_stem(&name),
+        shards: a.shards,
+        cpus_per_task: a.cpus_per_task,
+        time: a.time,
+        partition: a.partition,
+    };
+    let dir = out.join("slurm");
+    let (run, merge) = (dir.join("run.sbatch"), dir.join("merge.sbatch"));
+    lumen::image::io::write_together(&dir, |staged| -> Result<()> {
+        for (name, text) in
+            [("run.sbatch", slurm::array_script(&job)), ("merge.sbatch", slurm::merge_script(&job))]
+        {
+            let p = staged.join(name);
+            std::fs::write(&p, text).with_context(|| format!("cannot write {}", p.display()))?;
+        }
+        Ok(())
+    })?;
+    eprintln!("wrote {} and {}", run.display(), merge.display());
+    if !a.submit {
+        eprintln!(
+            "submit with: id=$(sbatch --parsable {}) && sbatch --dependency=afterok:$id {}",
+            run.display(),
+            merge.display()
+        );
+        return Ok(());
+    }
+    let sbatch = |args: &[&str]| -> Result<String> {
+        let o = std::process::Command::new("sbatch")
+            .args(args)
+            .output()
+            .context("cannot run sbatch (is Slurm installed and on PATH?)")?;
+        if !o.status.success() {
+            anyhow::bail!("sbatch {} failed: {}", args.join(" "), String::from_utf8_lossy(&o.stderr).trim());
+        }
+        // --parsable prints `ID` or `ID;CLUSTER`.
+        let text = String::from_utf8_lossy(&o.stdout);
+        Ok(text.trim().split(';').next().unwrap_or("").to_string())
+    };
+    let array = sbatch(&["--parsable", &run.to_string_lossy()])?;
+    let merge_id =
+        sbatch(&["--parsable", &format!("--dependency=afterok:{array}"), &merge.to_string_lossy()])?;
+    println!("array job {array}, merge job {merge_id}");
+    Ok(())
 }
 
 /// One line per case and per failure on stderr; the exit code the report earns.

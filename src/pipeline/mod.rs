@@ -8,6 +8,7 @@ pub mod file;
 pub mod metric;
 pub mod report;
 pub mod shard;
+pub mod slurm;
 pub mod stages;
 
 pub use file::{load, PipelineFile};

@@ -1,0 +1,111 @@
+//! `lumen slurm`: the two plain `sbatch` scripts that run a pipeline on a Slurm cluster, a job
+//! array with one task per shard (`lumen run --shard K/N`) and a merge job that depends on it.
+//! lumen never talks to Slurm except through `sbatch`; users read and adapt the scripts.
+
+use std::path::{Path, PathBuf};
+
+/// What the scripts run and ask Slurm for. Paths are absolute: the jobs start on other nodes,
+/// in whatever folder Slurm gives them.
+#[derive(Clone, Debug)]
+pub struct Job {
+    /// The lumen binary the tasks run.
+    pub lumen: PathBuf,
+    pub pipeline: PathBuf,
+    pub out: PathBuf,
+    /// The render cache every shard shares.
+    pub cache: PathBuf,
+    pub name: String,
+    pub shards: usize,
+    pub cpus_per_task: usize,
+    /// `--time`, as Slurm reads it (e.g. `1:00:00`), when given.
+    pub time: Option<String>,
+    pub partition: Option<String>,
+}
+
+/// Refuses a value that would break a script line (`--partition`, `--time`): it must be a
+/// plain word of letters, digits and `-_:.,+`.
+pub fn check_word(flag: &str, value: &str) -> Result<(), String> {
+    let plain = |c: char| c.is_ascii_alphanumeric() || "-_:.,+".contains(c);
+    if value.is_empty() || !value.chars().all(plain) {
+        return Err(format!("{flag} {value:?}: expected letters, digits and -_:.,+ only"));
+    }
+    Ok(())
+}
+
+/// A path for a shell line, in single quotes.
+fn quoted(p: &Path) -> String {
+    format!("'{}'", p.display().to_string().replace('\'', r"'\''"))
+}
+
+fn header(job: &Job, what: &str, log: &str) -> String {
+    let mut s = format!(
+        "#!/bin/bash\n# {what}\n#SBATCH --job-name=lumen-{}\n#SBATCH --cpus-per-task={}\n#SBATCH --output={}\n",
+        job.name,
+        job.cpus_per_task,
+        job.out.join("slurm").join(log).display()
+    );
+    if let Some(t) = &job.time {
+        s += &format!("#SBATCH --time={t}\n");
+    }
+    if let Some(p) = &job.partition {
+        s += &format!("#SBATCH --partition={p}\n");
+    }
+    s
+}
+
+/// The job array's script: task i runs shard i + 1. A shard whose metrics miss a bound (exit 3)
+/// still counts as done, so the merge runs and its report shows the miss (the merge exits 3).
+pub fn array_script(job: &Job) -> String {
+    let mut s = header(
+        job,
+        &format!("lumen: {} as {} shards, one array task each", job.pipeline.display(), job.shards),
+        "shard-%a.log",
+    );
+    s += &format!("#SBATCH --array=0-{}\n", job.shards - 1);
+    s += &format!(
+        "set -u\nshard=$((SLURM_ARRAY_TASK_ID + 1))/{n}\n{lumen} run {pipeline} --shard \"$shard\" --out {out} --cache {cache} --threads \"${{SLURM_CPUS_PER_TASK:-{c}}}\"\ncode=$?\n# 3: a metric missed its bound, which the merged report shows\nif [ \"$code\" -eq 3 ]; then exit 0; fi\nexit \"$code\"\n",
+        n = job.shards,
+        lumen = quoted(&job.lumen),
+        pipeline = quoted(&job.pipeline),
+        out = quoted(&job.out),
+        cache = quoted(&job.cache),
+        c = job.cpus_per_task,
+    );
+    s
+}
+
+/// The merge job's script (submitted with `--dependency=afterok:ARRAY_JOB`).
+pub fn merge_script(job: &Job) -> String {
+    let mut s = header(job, "lumen: joins the shards' fragments into one report", "merge.log");
+    s += &format!("set -u\nexec {} merge {}\n", quoted(&job.lumen), quoted(&job.out));
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scripts_name_every_shard_and_quote_paths() {
+        let job = Job {
+            lumen: "/opt/lumen".into(),
+            pipeline: "/data/it's.toml".into(),
+            out: "/scratch/out".into(),
+            cache: "/scratch/cache".into(),
+            name: "all".into(),
+            shards: 3,
+            cpus_per_task: 2,
+            time: Some("1:00:00".into()),
+            partition: None,
+        };
+        let a = array_script(&job);
+        assert!(a.contains("#SBATCH --array=0-2\n") && a.contains("#SBATCH --time=1:00:00\n"), "{a}");
+        assert!(a.contains("'/data/it'\\''s.toml'") && a.contains("$((SLURM_ARRAY_TASK_ID + 1))/3"), "{a}");
+        assert!(!a.contains("--partition"));
+        assert!(merge_script(&job).contains("exec '/opt/lumen' merge '/scratch/out'"));
+        assert!(check_word("--partition", "gpu,debug").is_ok());
+        for bad in ["", "a b", "x\n#SBATCH --mem=1T", "$(rm)"] {
+            assert!(check_word("--partition", bad).is_err(), "{bad:?}");
+        }
+    }
+}
