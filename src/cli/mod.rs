@@ -383,10 +383,10 @@ struct SlurmArgs {
 fn slurm_cmd(path: &Path, a: SlurmArgs) -> Result<()> {
     use lumen::pipeline::{shard::MAX_SHARDS, slurm};
     if !(1..=MAX_SHARDS).contains(&a.shards) {
-        anyhow::bail!("--shards {}: expected 1 to {MAX_SHARDS}", a.shards);
+        bail!("--shards {}: expected 1 to {MAX_SHARDS}", a.shards);
     }
     if !(1..=pipeline::MAX_THREADS).contains(&a.cpus_per_task) {
-        anyhow::bail!("--cpus-per-task {}: expected 1 to {}", a.cpus_per_task, pipeline::MAX_THREADS);
+        bail!("--cpus-per-task {}: expected 1 to {}", a.cpus_per_task, pipeline::MAX_THREADS);
     }
     for (flag, value) in [("--partition", &a.partition), ("--time", &a.time)] {
         if let Some(v) = value {
@@ -439,7 +439,7 @@ fn slurm_cmd(path: &Path, a: SlurmArgs) -> Result<()> {
             .output()
             .context("cannot run sbatch (is Slurm installed and on PATH?)")?;
         if !o.status.success() {
-            anyhow::bail!("sbatch {} failed: {}", args.join(" "), String::from_utf8_lossy(&o.stderr).trim());
+            bail!("sbatch {} failed: {}", args.join(" "), String::from_utf8_lossy(&o.stderr).trim());
         }
         // --parsable prints `ID` or `ID;CLUSTER`.
         let text = String::from_utf8_lossy(&o.stdout);
