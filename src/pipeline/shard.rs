@@ -59,8 +59,9 @@ pub struct Fragment {
 
 /// The digest a fragment records for the pipeline file at `path`.
 pub fn digest(path: &Path) -> Result<String, Error> {
-    let bytes =
-        std::fs::read(path).map_err(|e| Error::Merge { path: path.into(), message: e.to_string() })?;
+    // Read when a shard's report is made, not merged: a failure is the pipeline file's.
+    let bytes = std::fs::read(path)
+        .map_err(|e| super::file::Error::Io { path: path.into(), message: e.to_string() })?;
     Ok(format!("{:032x}", super::cache::fnv128(&bytes)))
 }
 
