@@ -3,10 +3,10 @@
 //! CLI runs on the images, and compares with the truth.
 //!
 //! Poses: view k puts the board's centre on a point of a 4×4 grid spanning 12 %–88 % of the
-//! image (so boards reach the image corners, where distortion is strongest), tilted by 30°–40°
-//! (`tilt_deg`)
-//! about an in-board axis that turns from view to view, rolled by up to ±20°, drawn from the
-//! stage's seed, as close as the whole board fits in the image.
+//! image (`spread`; so boards reach the image corners, where distortion is strongest), tilted
+//! by 30°–40° (`tilt_deg`) from the line of sight to its centre about an in-board axis that
+//! turns from view to view, rolled by up to ±20°, drawn from the stage's seed, as close as the
+//! whole board fits in the image.
 //!
 //! The solver is `calib::run`, the function `lumen calibrate` calls, with the entry's
 //! `fix_*` and `max_iterations` settings.
@@ -54,11 +54,18 @@ pub struct Config {
     pub views: usize,
     /// Samples per pixel (default: the scene's).
     pub spp: Option<u32>,
-    /// Range of the board's tilt away from the camera, in degrees (default [30, 40]); views
-    /// tilted by less than a few degrees leave the focal length unobservable, boards beyond
-    /// about 80° are nearly edge-on.
+    /// Range of the board's tilt away from the line of sight to its centre, in degrees
+    /// (default [30, 40]); boards centred in the image (`spread = 0`) and tilted by less than a
+    /// few degrees leave the focal length unobservable, boards beyond about 80° are nearly
+    /// edge-on.
     #[serde(default = "default_tilt")]
     pub tilt_deg: [f64; 2],
+    /// Fraction of the image's width and height over which the views' board centres are spread
+    /// (default 0.76: centres from 12 % to 88 %, so boards reach the image corners, where
+    /// distortion is strongest). A board whose centre is near a corner must be small to fit;
+    /// steep boards, long in one direction, are better seen with a smaller spread.
+    #[serde(default = "default_spread")]
+    pub spread: f64,
     /// Inner corners [cols, rows] (default [9, 6]) and square side in scene units (default 0.025).
     #[serde(default = "default_board")]
     pub board: [usize; 2],
@@ -110,6 +117,11 @@ fn default_views() -> usize {
 fn default_tilt() -> [f64; 2] {
     [30.0, 40.0]
 }
+
+fn default_spread() -> f64 {
+    0.76
+}
+
 fn default_board() -> [usize; 2] {
     [9, 6]
 }
@@ -167,6 +179,7 @@ pub fn poses(
     square: f64,
     n: usize,
     tilt_deg: [f64; 2],
+    spread: f64,
     seed: u64,
 ) -> Vec<(DMat3, DVec3)> {
     let (tilt_mid, tilt_half) = ((tilt_deg[0] + tilt_deg[1]) / 2.0, (tilt_deg[1] - tilt_deg[0]) / 2.0);
@@ -186,15 +199,26 @@ pub fn poses(
             let mut s = Sampler::new(seed ^ 0xca1b, k as u64, 0);
             let mut u = || s.next() as f64 * 2.0 - 1.0;
             let (gx, gy) = ((k % 4) as f64, ((k / 4) % 4) as f64);
-            let target = DVec2::new((0.12 + 0.76 * gx / 3.0) * w, (0.12 + 0.76 * gy / 3.0) * h);
+            let (first, step) = (0.5 - spread / 2.0, spread / 3.0);
+            let target = DVec2::new((first + step * gx) * w, (first + step * gy) * h);
             // A strong tilt (by default 30°–40°) constrains the focal length through
             // foreshortening, where frontal views hardly do; its axis lies in the board and
             // turns by 3/8 of a turn from view to view, so the tilts point every way.
             let phi = 2.356 * k as f64 + 0.3 * u();
             let tilt = (tilt_mid + tilt_half * u()).to_radians();
-            let r = Pose::rotation_from_rvec(DVec3::new(0.0, 0.0, 0.35 * u()))
-                * Pose::rotation_from_rvec(DVec3::new(phi.cos(), phi.sin(), 0.0) * tilt);
             let ray = cam.pixel_ray(target).unwrap_or(DVec3::Z);
+            // The tilt is measured from the line of sight to the board's centre, not from the
+            // optical axis: a board 70° from the axis at an image corner, where the line of
+            // sight is itself 30° off the axis, would be seen edge-on or from behind.
+            let across = DVec3::Z.cross(ray);
+            let to_sight = if across.length() > 0.0 {
+                Pose::rotation_from_rvec(across.normalize() * across.length().atan2(ray.z))
+            } else {
+                DMat3::IDENTITY
+            };
+            let r = to_sight
+                * Pose::rotation_from_rvec(DVec3::new(0.0, 0.0, 0.35 * u()))
+                * Pose::rotation_from_rvec(DVec3::new(phi.cos(), phi.sin(), 0.0) * tilt);
             let mut dist = 0.2;
             for _ in 0..60 {
                 let t = ray * dist - r * centre;
@@ -247,6 +271,12 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Fin
             c.tilt_deg
         )));
     }
+    if !(0.0..=0.9).contains(&c.spread) {
+        return Err(StageError::Config(format!(
+            "spread = {}: expected a fraction of the image from 0 to 0.9",
+            c.spread
+        )));
+    }
     let origin = DVec3::from_array(c.board_origin.unwrap_or([c.square, c.square, 0.0]));
     if !origin.is_finite() {
         return Err(StageError::Config(format!("board_origin = {origin}: expected finite numbers")));
@@ -259,7 +289,8 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Fin
     let bar = render::progress_bar(c.views as u64, &format!("{} views", ctx.case), ctx.progress);
     let mut images = Vec::new();
     let mut corners = Vec::new();
-    for (k, (r, t)) in poses(&camera, board, c.square, c.views, c.tilt_deg, ctx.seed).into_iter().enumerate()
+    for (k, (r, t)) in
+        poses(&camera, board, c.square, c.views, c.tilt_deg, c.spread, ctx.seed).into_iter().enumerate()
     {
         let name = format!("view{k:02}");
         let true_corners = board_pts.iter().map(|x| camera.project(r * *x + t)).collect::<Option<Vec<_>>>();
