@@ -265,6 +265,29 @@ fn cli_pipeline_errors() {
     assert!(!out.exists(), "a failed pipeline wrote output");
 }
 
+/// Counts of renders beyond their limit (found by `tests/mutations.rs`: `lights = 4294967296`
+/// allocated 103 GB and aborted): refused before anything is rendered, naming the field.
+#[test]
+fn pipeline_counts_beyond_their_limit_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("p.toml");
+    let scenes = common::root().join("pipelines/scenes");
+    let out = dir.path().join("out");
+    for (stage, scene, field) in
+        [("photometric", "ps-sphere", "lights = 4294967296"), ("calibrate", "calib-board", "views = 1001")]
+    {
+        let text = format!(
+            "seed = 1\n[[stages]]\nstage = \"{stage}\"\ncase = \"c\"\nscene = \"{}/{scene}.toml\"\n{field}\n",
+            scenes.display()
+        );
+        std::fs::write(&p, text).unwrap();
+        let (code, err) = lumen(&["run", p.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-cache"]);
+        assert_eq!(code, 1, "{err}");
+        assert!(err.contains(field) && err.contains("to 1000"), "{err}");
+        assert!(!out.exists(), "a refused pipeline wrote output");
+    }
+}
+
 /// The Cornell box with its light off: rendered black with a warning by `lumen render`,
 /// `lumen bench render` and `lumen run`, never a crash (the eight-lane tracer once gathered
 /// from an empty light table).

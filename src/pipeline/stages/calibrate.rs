@@ -48,7 +48,7 @@ pub struct Config {
     /// Scene file with the board (its inner corner (0, 0) at `board_origin`, in the z = 0
     /// plane), relative to the pipeline file.
     pub scene: String,
-    /// Number of views (default 16). View k's pose does not depend on the count, so a sweep
+    /// Number of views (default 16, 2 to 1000). View k's pose does not depend on the count, so a sweep
     /// over `views` renders each view once.
     #[serde(default = "default_views")]
     pub views: usize,
@@ -255,8 +255,11 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Fin
     let scene_path = ctx.dir.join(&c.scene);
     let mut scene = render::load(&scene_path)?;
     let digest = scene_digest(&scene_path)?;
-    if c.views < 2 {
-        return Err(StageError::Config(format!("views = {}: calibration needs at least 2", c.views)));
+    if !(2..=1000).contains(&c.views) {
+        return Err(StageError::Config(format!(
+            "views = {}: expected 2 to 1000 (calibration needs at least 2; each is a render)",
+            c.views
+        )));
     }
     let board = BoardSize { cols: c.board[0], rows: c.board[1] };
     if board.cols < 2 || board.rows < 2 || !(c.square.is_finite() && c.square > 0.0) {

@@ -45,7 +45,7 @@ pub struct Config {
     /// Scene file with the object and camera, relative to the pipeline file; its own point and
     /// directional lights are replaced by the stage's.
     pub scene: String,
-    /// Number of distant lights (default 24, at least 3).
+    /// Number of distant lights (default 24, 3 to 1000).
     #[serde(default = "default_lights")]
     pub lights: usize,
     /// Lowest and highest light elevation in degrees above the plane facing the camera
@@ -152,9 +152,9 @@ struct LightRecipe<'a> {
 
 pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Truth, Findings), StageError> {
     let model: Model = c.model.parse().map_err(StageError::Config)?;
-    if c.lights < 3 {
+    if !(3..=1000).contains(&c.lights) {
         return Err(StageError::Config(format!(
-            "lights = {}: photometric stereo needs at least 3",
+            "lights = {}: expected 3 to 1000 (photometric stereo needs at least 3; each is a render)",
             c.lights
         )));
     }
