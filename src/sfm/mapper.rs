@@ -218,7 +218,8 @@ pub fn reconstruct(features: &[Features], k: &[Matrix3<f64>], opts: &Options) ->
         })
         .max_by_key(|(_, _, tv)| tv.inliers.len());
     let Some((a, b, tv)) = first else {
-        out.unregistered = (0..n).map(|i| (i, "no pair of images with a baseline: every verified pair is planar, a pure rotation, too narrow or has too few matches".to_string())).collect();
+        let why = no_first_pair(out.pairs.len(), &geometry, opts.init_min_angle_deg);
+        out.unregistered = (0..n).map(|i| (i, why.clone())).collect();
         return out;
     };
     out.poses[*a] = Some(Pose { r: Matrix3::identity(), t: Vector3::zeros() });
@@ -389,4 +390,20 @@ fn adjust_all(
             None => true,
         });
     }
+}
+
+/// Why no pair can start the reconstruction, counted over the `pairs` matched: how many of the
+/// verified ones are planar, a pure rotation or too narrow, the rest having too few matches.
+fn no_first_pair(pairs: usize, verified: &[(usize, usize, two_view::TwoView)], min_angle_deg: f64) -> String {
+    let count =
+        |c: two_view::Configuration| verified.iter().filter(|(_, _, tv)| tv.configuration == c).count();
+    let (planar, rotation) =
+        (count(two_view::Configuration::Planar), count(two_view::Configuration::PureRotation));
+    let narrow = verified.len() - planar - rotation;
+    format!(
+        "no pair of images with a baseline: of {pairs} pair(s), {planar} planar (a homography explains them), \
+         {rotation} a pure rotation, {narrow} with a median triangulation angle below {min_angle_deg}°, \
+         {} with too few matches",
+        pairs - verified.len()
+    )
 }
