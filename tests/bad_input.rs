@@ -19,6 +19,13 @@ type = "lambertian"
 albedo = [0.5, 0.5, 0.5]
 "#;
 
+/// Writes `text` as `dir/p.toml` and runs it: `lumen run … --out dir/out --no-cache`.
+fn run_pipeline(dir: &std::path::Path, text: &str) -> (i32, String) {
+    let p = dir.join("p.toml");
+    std::fs::write(&p, text).unwrap();
+    lumen(&["run", p.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap(), "--no-cache"])
+}
+
 fn scene_error(extra: &str, files: &[(&str, &str)]) -> String {
     let dir = tempfile::tempdir().unwrap();
     for (name, text) in files {
@@ -241,13 +248,9 @@ fn cli_render_errors_leave_no_output() {
 #[test]
 fn cli_pipeline_errors() {
     let dir = tempfile::tempdir().unwrap();
-    let p = dir.path().join("p.toml");
     let scene = common::root().join("pipelines/scenes/furnace.toml");
     let out = dir.path().join("out");
-    let run = |text: &str| {
-        std::fs::write(&p, text).unwrap();
-        lumen(&["run", p.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-cache"])
-    };
+    let run = |text: &str| run_pipeline(dir.path(), text);
     let head = format!(
         "seed = 1\n[[stages]]\nstage = \"render\"\ncase = \"f\"\nscene = \"{}\"\nspp = 2\n",
         scene.display()
@@ -270,9 +273,7 @@ fn cli_pipeline_errors() {
 #[test]
 fn pipeline_counts_beyond_their_limit_are_refused() {
     let dir = tempfile::tempdir().unwrap();
-    let p = dir.path().join("p.toml");
     let scenes = common::root().join("pipelines/scenes");
-    let out = dir.path().join("out");
     for (stage, scene, field) in
         [("photometric", "ps-sphere", "lights = 4294967296"), ("calibrate", "calib-board", "views = 1001")]
     {
@@ -280,11 +281,10 @@ fn pipeline_counts_beyond_their_limit_are_refused() {
             "seed = 1\n[[stages]]\nstage = \"{stage}\"\ncase = \"c\"\nscene = \"{}/{scene}.toml\"\n{field}\n",
             scenes.display()
         );
-        std::fs::write(&p, text).unwrap();
-        let (code, err) = lumen(&["run", p.to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-cache"]);
+        let (code, err) = run_pipeline(dir.path(), &text);
         assert_eq!(code, 1, "{err}");
         assert!(err.contains(field) && err.contains("to 1000"), "{err}");
-        assert!(!out.exists(), "a refused pipeline wrote output");
+        assert!(!dir.path().join("out").exists(), "a refused pipeline wrote output");
     }
 }
 
@@ -306,14 +306,10 @@ fn a_scene_without_light_renders_black() {
         lumen(&["render", scene.to_str().unwrap(), "--spp", "2", "--out", out.to_str().unwrap()]);
     let (bench_code, bench_err) =
         lumen(&["bench", "render", "--scene", scene.to_str().unwrap(), "--spp", "1", "--repeat", "1"]);
-    let p = dir.path().join("p.toml");
-    std::fs::write(
-        &p,
-        format!("[[stages]]\nstage = \"render\"\ncase = \"dark\"\nscene = \"{}\"\nspp = 2\nbounds = {{ nonfinite_samples = 0 }}\n", scene.display()),
-    )
-    .unwrap();
-    let (run_code, run_err) =
-        lumen(&["run", p.to_str().unwrap(), "--out", dir.path().join("o").to_str().unwrap(), "--no-cache"]);
+    let (run_code, run_err) = run_pipeline(
+        dir.path(),
+        &format!("[[stages]]\nstage = \"render\"\ncase = \"dark\"\nscene = \"{}\"\nspp = 2\nbounds = {{ nonfinite_samples = 0 }}\n", scene.display()),
+    );
     let _ = std::fs::remove_file(&scene);
     assert_eq!(code, 0, "{err}");
     assert!(err.contains("has no light"), "{err}");
@@ -321,7 +317,7 @@ fn a_scene_without_light_renders_black() {
     assert!(img.data.iter().all(|&v| v == 0.0));
     assert_eq!(bench_code, 0, "{bench_err}");
     assert_eq!(run_code, 0, "{run_err}");
-    let md = std::fs::read_to_string(dir.path().join("o/report.md")).unwrap();
+    let md = std::fs::read_to_string(dir.path().join("out/report.md")).unwrap();
     assert!(md.contains("no light"), "{md}");
 }
 

@@ -32,7 +32,7 @@
 //! numbers) and the estimate, to be bounded by a peer's figure on the same photographs. When
 //! the folder is absent (no `../shared` beside a fresh clone) the case is skipped.
 
-use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError};
+use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError, MAX_RENDERS};
 use crate::calib::{self, detect::BoardSize};
 use crate::image::{filter::Grey, Image};
 use crate::math::{CameraModel, Pose};
@@ -48,8 +48,8 @@ pub struct Config {
     /// Scene file with the board (its inner corner (0, 0) at `board_origin`, in the z = 0
     /// plane), relative to the pipeline file.
     pub scene: String,
-    /// Number of views (default 16, 2 to 1000). View k's pose does not depend on the count, so a sweep
-    /// over `views` renders each view once.
+    /// Number of views (default 16, 2 to 1000). View k's pose does not depend on the count,
+    /// so a sweep over `views` renders each view once.
     #[serde(default = "default_views")]
     pub views: usize,
     /// Samples per pixel (default: the scene's).
@@ -255,9 +255,9 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Fin
     let scene_path = ctx.dir.join(&c.scene);
     let mut scene = render::load(&scene_path)?;
     let digest = scene_digest(&scene_path)?;
-    if !(2..=1000).contains(&c.views) {
+    if !(2..=MAX_RENDERS).contains(&c.views) {
         return Err(StageError::Config(format!(
-            "views = {}: expected 2 to 1000 (calibration needs at least 2; each is a render)",
+            "views = {}: expected 2 to {MAX_RENDERS} (calibration needs at least 2; each is a render)",
             c.views
         )));
     }

@@ -163,6 +163,9 @@ pub fn run_case<I, T, O>(
     Ok(CaseResult { metrics: found.metrics, notes: found.notes, timings_s, files: found.files })
 }
 
+/// Most views (calibrate, sfm) or lights (photometric) one case may ask for: each is a render.
+pub const MAX_RENDERS: usize = 1000;
+
 /// The one rule for an entry's render overrides: `spp` and `max_depth` replace the scene's
 /// when given and must be at least 1 (as `lumen render` requires).
 pub fn apply_overrides(

@@ -30,7 +30,7 @@
 //! note with the mean error after each Gauss-Newton iteration (from the solver's trace of
 //! normals, compared with truth here).
 
-use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError};
+use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError, MAX_RENDERS};
 use crate::image::Image;
 use crate::photometric::{self, Model, Observations};
 use crate::pipeline::cache::scene_digest;
@@ -152,9 +152,9 @@ struct LightRecipe<'a> {
 
 pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Truth, Findings), StageError> {
     let model: Model = c.model.parse().map_err(StageError::Config)?;
-    if !(3..=1000).contains(&c.lights) {
+    if !(3..=MAX_RENDERS).contains(&c.lights) {
         return Err(StageError::Config(format!(
-            "lights = {}: expected 3 to 1000 (photometric stereo needs at least 3; each is a render)",
+            "lights = {}: expected 3 to {MAX_RENDERS} (photometric stereo needs at least 3; each is a render)",
             c.lights
         )));
     }

@@ -17,7 +17,7 @@
 //! `reprojection_rms_px`, `rotation_err_median_deg`, `rotation_err_max_deg`,
 //! `centre_err_max_rel`; and the phases' times as a note.
 
-use super::{apply_overrides, Context, Findings, SettingsKey, StageError};
+use super::{apply_overrides, Context, Findings, SettingsKey, StageError, MAX_RENDERS};
 use crate::math::Pose as CameraPose;
 use crate::pipeline::cache::scene_digest;
 use crate::pipeline::metric::{Better, Metric};
@@ -63,8 +63,8 @@ struct ViewRecipe<'a> {
 }
 
 pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), StageError> {
-    if c.views < 2 || c.views > 1000 {
-        return Err(StageError::Config(format!("views = {}: expected 2 to 1000", c.views)));
+    if !(2..=MAX_RENDERS).contains(&c.views) {
+        return Err(StageError::Config(format!("views = {}: expected 2 to {MAX_RENDERS}", c.views)));
     }
     if c.max_features < 16 {
         return Err(StageError::Config(format!("max_features = {}: expected at least 16", c.max_features)));
