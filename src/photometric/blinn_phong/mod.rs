@@ -33,6 +33,8 @@
 //! lies where the lobe reaches 1 % of its peak, σ and e are reported as 0: the data say
 //! nothing about them (the normal and ρ still come from the fit).
 
+mod lanes;
+
 use super::lambertian;
 use glam::DVec3;
 use nalgebra::{Matrix4, SMatrix, SVector, Vector4};
@@ -75,10 +77,11 @@ struct Fit<'a> {
     halves: &'a [DVec3],
     obs: &'a [[f32; 3]],
     used: &'a [usize],
+    /// The same observations in lanes, for the cost and the normal equations.
+    lanes: lanes::Observations,
     n0: DVec3,
     t: DVec3,
     s: DVec3,
-    p0: Param,
 }
 
 impl<'a> Fit<'a> {
@@ -88,9 +91,9 @@ impl<'a> Fit<'a> {
         obs: &'a [[f32; 3]],
         used: &'a [usize],
         (n0, t, s): (DVec3, DVec3, DVec3),
-        p0: &Param,
     ) -> Fit<'a> {
-        Fit { lights, halves, obs, used, n0, t, s, p0: *p0 }
+        let lanes = lanes::Observations::new(lights, halves, obs, used);
+        Fit { lights, halves, obs, used, lanes, n0, t, s }
     }
 
     fn normal(&self, p: &Param) -> (DVec3, f64) {
@@ -99,21 +102,27 @@ impl<'a> Fit<'a> {
         (m / len, len)
     }
 
+    /// The model's quantities at `p` for the lanes.
+    fn point(&self, p: &Param) -> lanes::Point {
+        let (n, len) = self.normal(p);
+        lanes::Point {
+            n,
+            // ∂n/∂a and ∂n/∂b.
+            dna: (self.t - n * n.dot(self.t)) / len,
+            dnb: (self.s - n * n.dot(self.s)) / len,
+            rho: [p[2], p[3], p[4]],
+            sigma: p[5],
+            e: p[6].clamp(0.0, LN_E_MAX).exp(),
+            ln_e_free: p[6] > 0.0 && p[6] < LN_E_MAX,
+        }
+    }
+
     /// Calls `each(residuals, Jacobian rows)` for every used observation in order (the rows
     /// only when `jacobian` and the light reaches the surface: an unlit observation's rows are
-    /// zero), then returns the prior's seven residuals √μ·(p − p₀).
-    fn visit(
-        &self,
-        p: &Param,
-        jacobian: bool,
-        mut each: impl FnMut([f64; 3], Option<[[f64; 7]; 3]>),
-    ) -> Param {
-        let (n, len) = self.normal(p);
-        let (sigma, t) = (p[5], p[6].clamp(0.0, LN_E_MAX));
-        let e = t.exp();
-        // ∂n/∂a and ∂n/∂b.
-        let dna = (self.t - n * n.dot(self.t)) / len;
-        let dnb = (self.s - n * n.dot(self.s)) / len;
+    /// zero). The model and Jacobian written out once, observation by observation; `lanes`
+    /// computes the same sums eight observations at a time.
+    fn visit(&self, p: &Param, jacobian: bool, mut each: impl FnMut([f64; 3], Option<[[f64; 7]; 3]>)) {
+        let lanes::Point { n, dna, dnb, sigma, e, ln_e_free, .. } = self.point(p);
         for &j in self.used {
             let (l, h) = (self.lights[j], self.halves[j]);
             let c = n.dot(l);
@@ -133,11 +142,8 @@ impl<'a> Fit<'a> {
             let rows = (jacobian && c > 0.0).then(|| {
                 // ∂spec/∂n = σ·lobe·e·dᵉ⁻¹·h; ∂spec/∂ln e = e·σ·dᵉ·(1/8 + lobe·ln d).
                 let dspec_dn = if d > 0.0 { h * (sigma * lobe * e * de / d) } else { DVec3::ZERO };
-                let dspec_dt = if d > 0.0 && p[6] > 0.0 && p[6] < LN_E_MAX {
-                    e * sigma * de * (0.125 + lobe * ln_d)
-                } else {
-                    0.0
-                };
+                let dspec_dt =
+                    if d > 0.0 && ln_e_free { e * sigma * de * (0.125 + lobe * ln_d) } else { 0.0 };
                 std::array::from_fn(|ch| {
                     let dn = l * (p[2 + ch] + spec) + dspec_dn * c;
                     let mut row = [0.0; 7];
@@ -151,46 +157,26 @@ impl<'a> Fit<'a> {
             });
             each(r, rows);
         }
-        (p - self.p0) * PRIOR
     }
 
-    /// The residuals, three per used observation then the prior's seven.
+    /// The residuals, three per used observation.
     fn residuals(&self, p: &Param) -> Vec<f64> {
-        let mut r = Vec::with_capacity(3 * self.used.len() + 7);
-        let prior = self.visit(p, false, |res, _| r.extend(res));
-        r.extend(prior.iter());
+        let mut r = Vec::with_capacity(3 * self.used.len());
+        self.visit(p, false, |res, _| r.extend(res));
         r
     }
 
-    /// ‖r‖.
-    fn cost(&self, p: &Param) -> f64 {
-        let mut sum = 0.0;
-        let prior = self.visit(p, false, |r, _| sum += r.iter().map(|v| v * v).sum::<f64>());
-        (sum + prior.norm_squared()).sqrt()
+    /// ‖r‖ with the prior's seven residuals √μ·(p − p₀).
+    fn cost(&self, p: &Param, p0: &Param) -> f64 {
+        (lanes::squares(&self.lanes, &self.point(p)) + ((p - p0) * PRIOR).norm_squared()).sqrt()
     }
 
-    /// ‖r‖, JᵀJ and Jᵀr, accumulated observation by observation (no Jacobian matrix).
-    fn normal_equations(&self, p: &Param) -> (f64, SMatrix<f64, 7, 7>, Param) {
-        let (mut sum, mut jtj, mut jtr) = (0.0, SMatrix::<f64, 7, 7>::zeros(), Param::zeros());
-        let prior = self.visit(p, true, |r, rows| {
-            for (ch, row) in rows.into_iter().flatten().enumerate() {
-                // A row is zero but at a, b, ρ_ch, σ and ln e: the upper triangle of its
-                // outer product over those five, 15 products instead of 49.
-                let idx = [0, 1, 2 + ch, 5, 6];
-                for (u, &i) in idx.iter().enumerate() {
-                    jtr[i] += row[i] * r[ch];
-                    for &k in &idx[u..] {
-                        jtj[(i, k)] += row[i] * row[k];
-                    }
-                }
-            }
-            sum += r.iter().map(|v| v * v).sum::<f64>();
-        });
+    /// ‖r‖, JᵀJ and Jᵀr with the prior (no Jacobian matrix is formed).
+    fn normal_equations(&self, p: &Param, p0: &Param) -> (f64, SMatrix<f64, 7, 7>, Param) {
+        let (sum, mut jtj, mut jtr) = lanes::normal_equations(&self.lanes, &self.point(p));
+        let prior = (p - p0) * PRIOR;
         for i in 0..7 {
             jtj[(i, i)] += PRIOR * PRIOR;
-            for k in 0..i {
-                jtj[(i, k)] = jtj[(k, i)];
-            }
         }
         jtr += prior * PRIOR;
         ((sum + prior.norm_squared()).sqrt(), jtj, jtr)
@@ -240,13 +226,13 @@ fn lobe_seen(n: DVec3, e: f64, halves: &[DVec3], used: &[usize]) -> bool {
 /// observation (15 products per row: a row is zero but at five parameters), so an iteration
 /// allocates nothing; argmin builds the (3m + 7) × 7 Jacobian and JᵀJ as dynamic matrices
 /// each time, which was most of the fit's time.
-fn gauss_newton(fit: &Fit, p: &Param, iterations: u64) -> Option<(Param, f64, Vec<DVec3>)> {
-    let mut p = *p;
+fn gauss_newton(fit: &Fit, p0: &Param, iterations: u64) -> Option<(Param, f64, Vec<DVec3>)> {
+    let mut p = *p0;
     let mut history = Vec::with_capacity(iterations as usize);
     let mut previous = f64::INFINITY;
     let mut cost = f64::INFINITY;
     for _ in 0..iterations {
-        let (c0, jtj, jtr) = fit.normal_equations(&p);
+        let (c0, jtj, jtr) = fit.normal_equations(&p, p0);
         let step = jtj.cholesky().map(|ch| ch.solve(&-jtr)).or_else(|| jtj.lu().solve(&-jtr))?;
         // Armijo: ‖r(p + α·step)‖ ≤ c₀ + 10⁻⁴·α·(Jᵀr)·step, α halved from 1.
         let slope = jtr.dot(&step);
@@ -254,7 +240,7 @@ fn gauss_newton(fit: &Fit, p: &Param, iterations: u64) -> Option<(Param, f64, Ve
         let mut accepted = None;
         for _ in 0..MAX_HALVINGS {
             let q = p + step * alpha;
-            let c = fit.cost(&q);
+            let c = fit.cost(&q, p0);
             if c <= c0 + 1e-4 * alpha * slope {
                 accepted = Some((q, c));
                 break;
@@ -271,7 +257,7 @@ fn gauss_newton(fit: &Fit, p: &Param, iterations: u64) -> Option<(Param, f64, Ve
         previous = cost;
     }
     if !cost.is_finite() {
-        cost = fit.cost(&p);
+        cost = fit.cost(&p, p0);
     }
     (cost.is_finite() && p.iter().all(|v| v.is_finite())).then_some((p, cost, history))
 }
@@ -294,9 +280,7 @@ pub fn solve(lights: &[DVec3], view: DVec3, obs: &[[f32; 3]], valid: &[bool]) ->
     let lit = |n: DVec3| -> Vec<usize> {
         (0..lights.len()).filter(|&j| valid[j] && n.dot(lights[j]) > 0.02).collect()
     };
-    let fit = |used: &[usize], p: &Param, iterations| -> Option<(Param, f64, Vec<DVec3>)> {
-        gauss_newton(&Fit::new(lights, &halves, obs, used, (n0, t, s), p), p, iterations)
-    };
+    let basis = (n0, t, s);
     // The starts all fit the same observations, so that their costs compare: every
     // unsaturated one except clear cast shadows, lit under n₀ yet far darker than the
     // Lambertian solution predicts (a highlight only adds light to that floor).
@@ -313,13 +297,14 @@ pub fn solve(lights: &[DVec3], view: DVec3, obs: &[[f32; 3]], valid: &[bool]) ->
     // A few iterations from each start (module docs); the lowest cost goes on.
     let plain = lambertian::solve_plain(lights, obs).map(|p| p.normal).filter(|n| n.dot(n0) > 0.5);
     let starts = std::iter::once(n0).chain(plain);
+    let fit = Fit::new(lights, &halves, obs, &used, basis);
     let Some((mut p, _, steps)) = starts
         .flat_map(|n| START_SHININESS.iter().map(move |&e| (n, e)))
         .filter_map(|(n, e)| {
             let mut p = start_at(n, e, lights, &halves, obs, &used)?;
             // n in the (a, b) parameters around n₀.
             (p[0], p[1]) = (n.dot(t) / n.dot(n0), n.dot(s) / n.dot(n0));
-            fit(&used, &p, START_ITERATIONS)
+            gauss_newton(&fit, &p, START_ITERATIONS)
         })
         .min_by(|a, b| a.1.total_cmp(&b.1))
     else {
@@ -328,7 +313,8 @@ pub fn solve(lights: &[DVec3], view: DVec3, obs: &[[f32; 3]], valid: &[bool]) ->
     let mut history = vec![n0];
     history.extend(steps);
     for round in 0..ROUNDS {
-        let Some((q, _, steps)) = fit(&used, &p, MAX_ITERATIONS) else { return Some(lambertian()) };
+        let fit = Fit::new(lights, &halves, obs, &used, basis);
+        let Some((q, _, steps)) = gauss_newton(&fit, &p, MAX_ITERATIONS) else { return Some(lambertian()) };
         p = q;
         history.extend(steps);
         if round + 1 == ROUNDS {
@@ -336,7 +322,7 @@ pub fn solve(lights: &[DVec3], view: DVec3, obs: &[[f32; 3]], valid: &[bool]) ->
         }
         // Keep the observations the fit explains.
         let lit_now = lit(normal_of(n0, t, s, &p));
-        let r = Fit::new(lights, &halves, obs, &lit_now, (n0, t, s), &p).residuals(&p);
+        let r = Fit::new(lights, &halves, obs, &lit_now, basis).residuals(&p);
         // Per observation: the largest channel residual, and the mean prediction.
         let judged: Vec<(f64, f64)> = (0..lit_now.len())
             .map(|k| {
