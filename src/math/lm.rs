@@ -10,7 +10,9 @@
 //! Written here rather than taken from argmin: the calibration and the homography refinement
 //! need the normal equations at the optimum for their covariance, a manifold update, and a
 //! stopping rule on the relative change of the cost, and the loop is thirty lines. The
-//! Blinn-Phong fit keeps argmin's Gauss-Newton with a line search (`photometric::blinn_phong`).
+//! Blinn-Phong fit has its own loop (`photometric::blinn_phong`): its normal equations are
+//! summed in lanes without a Jacobian matrix, and one pass at the trial point gives both the
+//! cost that accepts the step and the next step's system.
 //! Sparse problems (bundle adjustment) need the Schur complement and belong elsewhere.
 
 use nalgebra::{DMatrix, DVector};

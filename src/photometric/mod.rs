@@ -134,7 +134,7 @@ pub struct Input {
 #[derive(Clone, Copy, Debug, Serialize, Deserialize)]
 pub struct Config {
     pub model: Model,
-    /// Keep every pixel's normal after each Gauss-Newton iteration (Blinn-Phong), so the
+    /// Keep every pixel's normal after each iteration (Blinn-Phong), so the
     /// error after k iterations can be measured against truth outside the solver. Costs
     /// about 24 bytes per pixel and iteration (default false).
     pub trace: bool,
@@ -201,7 +201,8 @@ pub struct Accuracy {
     /// Solved pixels left out of the error because their truth normal is zero or not finite
     /// (a mask wider than the object).
     pub pixels_without_truth: usize,
-    /// With a trace: the mean angular error of the normals after k Gauss-Newton iterations,
+    /// With a trace: the mean angular error of the normals after k iterations (the winning
+    /// start's Gauss-Newton iterations, then each round's accepted Levenberg-Marquardt steps),
     /// k = 0 (the robust Lambertian start), 1, 2, …; a pixel that stopped earlier counts with
     /// its final normal.
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -275,7 +275,8 @@ fn gauss_newton(fit: &Fit, p0: &Param, iterations: u64) -> Option<(Param, f64, V
 /// costs one pass over the observations where Gauss-Newton with a line search spends one and
 /// then one per tried step length. At most `evaluations` passes (the one at p₀ included);
 /// stops when an accepted step changes ‖r‖ by less than `TOLERANCE`. The solution, its cost
-/// ‖r‖, and the normal after each accepted step.
+/// ‖r‖, and the normal after each accepted step. Not `math::lm`, which forms J as a matrix
+/// and evaluates the cost apart from it.
 fn levenberg_marquardt(fit: &Fit, p0: &Param, evaluations: u64) -> Option<(Param, f64, Vec<DVec3>)> {
     let mut p = *p0;
     let (mut cost, mut jtj, mut jtr) = fit.normal_equations(&p, p0);

@@ -27,7 +27,7 @@
 //! `time_per_megapixel_s`; with `model = "blinn-phong"` also the robust Lambertian model's
 //! error on the same images (`robust_lambertian_mean_angular_error_deg`), the ratio of the
 //! two (`improvement_over_lambertian`, higher is better), `pixels_without_specular`, and a
-//! note with the mean error after each Gauss-Newton iteration (from the solver's trace of
+//! note with the mean error after each iteration (from the solver's trace of
 //! normals, compared with truth here).
 
 use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError, MAX_RENDERS};
@@ -431,7 +431,7 @@ pub fn validate(out: &Output, truth: &Truth) -> Findings {
                 .map(|(k, e)| format!("{k}: {e:.4}°"))
                 .collect();
             f.notes
-                .push(format!("Mean angular error after k Gauss-Newton iterations: {}.", shown.join(", ")));
+                .push(format!("Mean angular error after k iterations: {}.", shown.join(", ")));
         }
     }
     f
