@@ -102,7 +102,8 @@ fn glossy_sphere(size: usize, lights: &[DVec3], albedo: f64, sigma: f64, e: f64)
 
 /// The solver as the CLI and the pipeline call it, with the iteration trace kept.
 fn solve(ds: &Dataset, model: Model) -> photometric::Output {
-    photometric::run(&ds.input, &photometric::Config { model, trace: true }).unwrap()
+    photometric::run(&ds.input, &photometric::Config { trace: true, ..photometric::Config::new(model) })
+        .unwrap()
 }
 
 /// The output against the dataset's truth, computed outside the solver.
@@ -296,6 +297,13 @@ fn bad_input() {
     let (code, err) = lumen(&["ps", "--dataset", d.to_str().unwrap(), "--model", "phong", "--out", "x"]);
     assert_eq!(code, 1);
     assert!(err.contains("--model") && err.contains("phong"), "{err}");
+    for k in ["0", "101"] {
+        let args =
+            ["ps", "--dataset", d.to_str().unwrap(), "--model", "blinn-phong", "--start-iterations", k];
+        let (code, err) = lumen(&[&args[..], &["--out", "x"]].concat());
+        assert_eq!(code, 1, "{err}");
+        assert!(err.contains("--start-iterations") && err.contains("1 to 100"), "{err}");
+    }
     assert!(!out.exists());
 }
 

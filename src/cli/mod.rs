@@ -141,6 +141,10 @@ enum Command {
         /// shininess per pixel).
         #[arg(long, default_value = "robust")]
         model: String,
+        /// blinn-phong: Gauss-Newton iterations from each start before the lowest cost goes
+        /// on, 1 to 100 (default 8): fewer are faster and can choose a worse start.
+        #[arg(long)]
+        start_iterations: Option<u64>,
         /// Output folder: normals.exr/.png, albedo.exr/.png, error.png (with ground truth: the
         /// angular error in colour, its scale on a colour bar), depth.exr and surface.obj (the integrated surface), summary.json; with blinn-phong
         /// also specular.exr and shininess.exr.
@@ -312,7 +316,9 @@ pub fn main() -> i32 {
             };
             calibrate_cmd(&images, &board, square, &out, flags, debug.as_deref()).map(|_| 0)
         }
-        Command::Ps { dataset, model, out } => ps_cmd(&dataset, &model, &out).map(|_| 0),
+        Command::Ps { dataset, model, start_iterations, out } => {
+            ps_cmd(&dataset, &model, start_iterations, &out).map(|_| 0)
+        }
         Command::Undistort { camera, alpha, input, output } => {
             undistort_cmd(&camera, alpha, &input, &output).map(|_| 0)
         }
@@ -765,13 +771,21 @@ fn write_overlays(
     Ok(())
 }
 
-fn ps_cmd(dir: &Path, model: &str, out: &Path) -> Result<()> {
+fn ps_cmd(dir: &Path, model: &str, start_iterations: Option<u64>, out: &Path) -> Result<()> {
     let model: lumen::photometric::Model =
         model.parse().map_err(|e: String| anyhow::anyhow!("--model: {e}"))?;
+    let mut config = lumen::photometric::Config::new(model);
+    if let Some(k) = start_iterations {
+        let range = lumen::photometric::START_ITERATIONS;
+        if !range.contains(&k) {
+            anyhow::bail!("--start-iterations {k}: expected {} to {}", range.start(), range.end());
+        }
+        config.start_iterations = k;
+    }
     let t = std::time::Instant::now();
     let data = lumen::photometric::dataset::read(dir)?;
     let read_s = t.elapsed().as_secs_f64();
-    let result = lumen::photometric::run(&data.input, &lumen::photometric::Config::new(model))
+    let result = lumen::photometric::run(&data.input, &config)
         .with_context(|| format!("--dataset {}", dir.display()))?;
     let truth = data.truth.as_deref();
     lumen::photometric::write(out, &data.input, &result, truth)?;

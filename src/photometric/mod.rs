@@ -138,11 +138,19 @@ pub struct Config {
     /// error after k iterations can be measured against truth outside the solver. Costs
     /// about 24 bytes per pixel and iteration (default false).
     pub trace: bool,
+    /// Gauss-Newton iterations from each Blinn-Phong start before the lowest cost goes on
+    /// (`blinn_phong` module docs; default 8, 1 to 100): the fit's time against its accuracy.
+    /// Fewer are faster and choose among the starts earlier, which on the renders can pick the
+    /// narrow-lobe basin the starts are there to avoid.
+    pub start_iterations: u64,
 }
+
+/// The range of `Config::start_iterations`.
+pub const START_ITERATIONS: std::ops::RangeInclusive<u64> = 1..=100;
 
 impl Config {
     pub fn new(model: Model) -> Config {
-        Config { model, trace: false }
+        Config { model, trace: false, start_iterations: blinn_phong::START_ITERATIONS }
     }
 }
 
@@ -246,6 +254,14 @@ impl From<lambertian::Pixel> for Solved {
 /// pixel unsolved (coplanar lights, all in shadow) are `Error::Unsolvable`.
 pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     let bad = |message: String| Error::Input { message };
+    if !START_ITERATIONS.contains(&config.start_iterations) {
+        return Err(bad(format!(
+            "start_iterations = {}: expected {} to {}",
+            config.start_iterations,
+            START_ITERATIONS.start(),
+            START_ITERATIONS.end()
+        )));
+    }
     if input.lights.len() < 3 {
         return Err(bad(format!("{} light(s): photometric stereo needs at least 3", input.lights.len())));
     }
@@ -280,12 +296,15 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
                 }
                 Model::BlinnPhong => {
                     let view = input.views.as_ref().map_or(DVec3::Z, |v| v[p]);
-                    blinn_phong::solve(&input.lights, view, obs, input.obs.valid(p)).map(|b| Solved {
-                        normal: b.normal,
-                        albedo: b.albedo,
-                        used: b.used,
-                        specular: [b.specular, b.exponent],
-                        history: if config.trace { b.history } else { Vec::new() },
+                    let valid = input.obs.valid(p);
+                    blinn_phong::solve(&input.lights, view, obs, valid, config.start_iterations).map(|b| {
+                        Solved {
+                            normal: b.normal,
+                            albedo: b.albedo,
+                            used: b.used,
+                            specular: [b.specular, b.exponent],
+                            history: if config.trace { b.history } else { Vec::new() },
+                        }
                     })
                 }
             }

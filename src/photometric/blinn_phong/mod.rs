@@ -17,7 +17,8 @@
 //!
 //! Starts: the robust Lambertian normal (`lambertian::solve_robust`) and the plain
 //! least-squares one, each with shininess 4 and 64 and the linear least squares for (ρ, σ) at
-//! that normal; 8 Gauss-Newton iterations with a backtracking line search from each
+//! that normal; 8 Gauss-Newton iterations (`photometric::Config::start_iterations`) with a
+//! backtracking line search from each
 //! (`gauss_newton`), all over the same observations (every unsaturated one except clear cast
 //! shadows: n₀·l > 0.1 yet darker than half the Lambertian prediction), and the lowest cost
 //! goes on. One start is not enough: where a Lambertian normal leans towards a highlight, a
@@ -50,8 +51,9 @@ pub const MAX_ITERATIONS: u64 = 15;
 const ROUNDS: usize = 3;
 /// Shininess values the starts take.
 const START_SHININESS: [f64; 2] = [4.0, 64.0];
-/// Gauss-Newton iterations from each of them before the best goes on.
-const START_ITERATIONS: u64 = 8;
+/// Gauss-Newton iterations from each of them before the best goes on (the default of
+/// `photometric::Config::start_iterations`).
+pub const START_ITERATIONS: u64 = 8;
 const PRIOR: f64 = 1e-5; // √μ
 const TOLERANCE: f64 = 1e-6;
 const LN_E_MAX: f64 = 9.210_340_371_976_184; // ln 10⁴
@@ -73,7 +75,7 @@ pub struct Pixel {
     pub specular: f64,
     pub exponent: f64,
     pub used: usize,
-    /// The normal after each Gauss-Newton iteration, the start first.
+    /// The normal after each iteration, the start first.
     pub history: Vec<DVec3>,
 }
 
@@ -228,10 +230,9 @@ fn lobe_seen(n: DVec3, e: f64, halves: &[DVec3], used: &[usize]) -> bool {
 /// halving from 1) line search on ‖r‖ along the Gauss-Newton step, the Armijo slope taken as
 /// Jᵀr·step, stopping after `iterations` or when ‖r‖ changes by less than `TOLERANCE`, as
 /// argmin's `GaussNewtonLS` with `BacktrackingLineSearch` does: the solution, its cost ‖r‖,
-/// and the normal after each iteration. Hand-written on 7×7 normal equations accumulated per
-/// observation (15 products per row: a row is zero but at five parameters), so an iteration
-/// allocates nothing; argmin builds the (3m + 7) × 7 Jacobian and JᵀJ as dynamic matrices
-/// each time, which was most of the fit's time.
+/// and the normal after each iteration. Hand-written on the 7×7 normal equations summed in
+/// lanes, so an iteration allocates nothing; argmin builds the (3m + 7) × 7 Jacobian and JᵀJ
+/// as dynamic matrices each time, which was most of the fit's time.
 fn gauss_newton(fit: &Fit, p0: &Param, iterations: u64) -> Option<(Param, f64, Vec<DVec3>)> {
     let mut p = *p0;
     let mut history = Vec::with_capacity(iterations as usize);
@@ -312,8 +313,15 @@ fn levenberg_marquardt(fit: &Fit, p0: &Param, evaluations: u64) -> Option<(Param
 }
 
 /// Fits one pixel (module docs). `view` points from the surface towards the camera; `valid`
-/// flags the unsaturated observations.
-pub fn solve(lights: &[DVec3], view: DVec3, obs: &[[f32; 3]], valid: &[bool]) -> Option<Pixel> {
+/// flags the unsaturated observations; `start_iterations` Gauss-Newton iterations run from
+/// each start.
+pub fn solve(
+    lights: &[DVec3],
+    view: DVec3,
+    obs: &[[f32; 3]],
+    valid: &[bool],
+    start_iterations: u64,
+) -> Option<Pixel> {
     let start = lambertian::solve_robust(lights, obs, valid)?;
     let lambertian = || Pixel {
         normal: start.normal,
@@ -353,7 +361,7 @@ pub fn solve(lights: &[DVec3], view: DVec3, obs: &[[f32; 3]], valid: &[bool]) ->
             let mut p = start_at(n, e, lights, &halves, obs, &used)?;
             // n in the (a, b) parameters around n₀.
             (p[0], p[1]) = (n.dot(t) / n.dot(n0), n.dot(s) / n.dot(n0));
-            gauss_newton(&fit, &p, START_ITERATIONS)
+            gauss_newton(&fit, &p, start_iterations)
         })
         .min_by(|a, b| a.1.total_cmp(&b.1))
     else {
@@ -454,7 +462,7 @@ mod tests {
             let obs = render(&l, v, n, [0.15, 0.12, 0.1], 0.12, e);
             let valid = vec![true; l.len()];
             let start = lambertian::solve_robust(&l, &obs, &valid).unwrap();
-            let p = solve(&l, v, &obs, &valid).unwrap();
+            let p = solve(&l, v, &obs, &valid, START_ITERATIONS).unwrap();
             let err = p.normal.angle_between(n).to_degrees();
             assert!(
                 err < 1e-3,
@@ -518,7 +526,7 @@ mod tests {
         let l = lights();
         let n = DVec3::new(0.3, 0.2, 1.0).normalize();
         let obs = render(&l, DVec3::Z, n, [0.3, 0.2, 0.1], 0.0, 10.0);
-        let p = solve(&l, DVec3::Z, &obs, &vec![true; l.len()]).unwrap();
+        let p = solve(&l, DVec3::Z, &obs, &vec![true; l.len()], START_ITERATIONS).unwrap();
         assert!(p.normal.angle_between(n).to_degrees() < 1e-3);
         assert!(p.specular < 1e-4, "{p:?}");
     }

@@ -63,6 +63,10 @@ pub struct Config {
     /// `lambertian`, `robust` or `blinn-phong` (default robust).
     #[serde(default = "default_model")]
     pub model: String,
+    /// Blinn-Phong: Gauss-Newton iterations from each start (default 8, 1 to 100;
+    /// `photometric::Config::start_iterations`), the fit's time against its accuracy.
+    #[serde(default = "default_start_iterations")]
+    pub start_iterations: u64,
     /// Overrides the shininess (exponent) of every Blinn-Phong material in the scene.
     pub shininess: Option<f64>,
     /// Scales every material's diffuse albedo (default 1): 0.01 makes a nearly black object.
@@ -93,6 +97,13 @@ pub struct DataConfig {
     /// `lambertian`, `robust` or `blinn-phong` (default robust).
     #[serde(default = "default_model")]
     pub model: String,
+    /// As the rendered cases' `start_iterations`.
+    #[serde(default = "default_start_iterations")]
+    pub start_iterations: u64,
+}
+
+fn default_start_iterations() -> u64 {
+    photometric::blinn_phong::START_ITERATIONS
 }
 
 fn one() -> f64 {
@@ -347,16 +358,16 @@ pub fn read(c: &DataConfig, ctx: &Context) -> Result<(photometric::Input, Truth,
 }
 
 pub fn solve(c: &Config, input: &photometric::Input) -> Result<Output, StageError> {
-    solve_model(&c.model, input)
+    solve_model(&c.model, c.start_iterations, input)
 }
 
 pub fn solve_data(c: &DataConfig, input: &photometric::Input) -> Result<Output, StageError> {
-    solve_model(&c.model, input)
+    solve_model(&c.model, c.start_iterations, input)
 }
 
-fn solve_model(model: &str, input: &photometric::Input) -> Result<Output, StageError> {
+fn solve_model(model: &str, start_iterations: u64, input: &photometric::Input) -> Result<Output, StageError> {
     let model: Model = model.parse().map_err(StageError::Config)?;
-    let config = photometric::Config { model, trace: model == Model::BlinnPhong };
+    let config = photometric::Config { model, trace: model == Model::BlinnPhong, start_iterations };
     let main = photometric::run(input, &config)?;
     // The Lambertian baseline on the same images, for the improvement the glossy model buys.
     let baseline = (model == Model::BlinnPhong)
@@ -430,8 +441,7 @@ pub fn validate(out: &Output, truth: &Truth) -> Findings {
                 .filter(|&(k, _)| k <= 8 || k.is_power_of_two() || k + 1 == curve.len())
                 .map(|(k, e)| format!("{k}: {e:.4}°"))
                 .collect();
-            f.notes
-                .push(format!("Mean angular error after k iterations: {}.", shown.join(", ")));
+            f.notes.push(format!("Mean angular error after k iterations: {}.", shown.join(", ")));
         }
     }
     f
