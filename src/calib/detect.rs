@@ -93,12 +93,7 @@ pub fn find(img: &Grey, board: BoardSize, opts: &DetectOptions) -> Result<Found,
 /// Saddle points that pass the X-junction check (steps 1 and 2).
 pub fn corner_candidates(img: &Grey, sampler: &Grey) -> Vec<DVec2> {
     let blurred = img.blur(1.5);
-    let ring: Vec<DVec2> = (0..RING)
-        .map(|k| {
-            let a = std::f64::consts::TAU * k as f64 / RING as f64;
-            4.5 * DVec2::new(a.cos(), a.sin())
-        })
-        .collect();
+    let ring = ring_offsets();
     saddle_candidates(&blurred).into_iter().filter(|p| is_x_junction(sampler, *p, &ring)).collect()
 }
 
@@ -157,6 +152,16 @@ fn saddle_candidates(b: &Grey) -> Vec<DVec2> {
 /// Samples on the circle of the X-junction check.
 const RING: usize = 48;
 
+/// The offsets of the X-junction check's circle: `RING` samples, 4.5 px out.
+fn ring_offsets() -> Vec<DVec2> {
+    (0..RING)
+        .map(|k| {
+            let a = std::f64::consts::TAU * k as f64 / RING as f64;
+            4.5 * DVec2::new(a.cos(), a.sin())
+        })
+        .collect()
+}
+
 /// Four alternating dark/light sectors on a circle around `p` (`ring`: the `RING` offsets of
 /// the circle's samples, 4.5 px out).
 fn is_x_junction(img: &Grey, p: DVec2, ring: &[DVec2]) -> bool {
@@ -213,13 +218,14 @@ fn find_grid(
     img: &Grey,
 ) -> Result<(HashMap<(i32, i32), DVec2>, Option<(usize, usize)>), String> {
     let mut largest = (0usize, 0i32, 0i32);
+    let ring = ring_offsets();
     for seed in 0..points.len().min(60) {
         let s = points[seed];
         // The axes: the nearest candidates joined to the seed by a square's edge, the second
         // not parallel to the first. Nearness alone does not tell an edge from a diagonal: on
         // a steep board whose squares are foreshortened to a third along a diagonal, the
         // neighbour across a square's diagonal is nearer than the one along its long side.
-        let contrast = local_contrast(img, s);
+        let contrast = local_contrast(img, s, &ring);
         let mut near: Vec<usize> = (0..points.len()).filter(|&i| i != seed).collect();
         near.sort_by(|&a, &b| points[a].distance(s).total_cmp(&points[b].distance(s)));
         let mut edges = near.into_iter().take(12).filter(|&i| is_edge(img, s, points[i], contrast));
@@ -350,11 +356,10 @@ fn ring_score(at: &dyn Fn(i32, i32) -> DVec2, i0: i32, j0: i32, wi: i32, wj: i32
     ok as f64 / total.max(1) as f64
 }
 
-/// The range of brightness on the X-junction check's circle around `p`.
-fn local_contrast(img: &Grey, p: DVec2) -> f64 {
-    let (lo, hi) = (0..RING).fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), k| {
-        let a = std::f64::consts::TAU * k as f64 / RING as f64;
-        let v = img.sample(p.x + 4.5 * a.cos(), p.y + 4.5 * a.sin());
+/// The range of brightness on the X-junction check's circle (`ring`) around `p`.
+fn local_contrast(img: &Grey, p: DVec2, ring: &[DVec2]) -> f64 {
+    let (lo, hi) = ring.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), o| {
+        let v = img.sample(p.x + o.x, p.y + o.y);
         (l.min(v), h.max(v))
     });
     hi - lo
