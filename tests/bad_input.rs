@@ -288,6 +288,24 @@ fn pipeline_counts_beyond_their_limit_are_refused() {
     }
 }
 
+/// A Blinn-Phong `start_iterations` outside 1 to 100: refused, naming the field (the stage
+/// checks it before it renders the lights).
+#[test]
+fn pipeline_start_iterations_out_of_range_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = common::root().join("pipelines/scenes/ps-sphere-glossy.toml");
+    for field in ["start_iterations = 0", "start_iterations = 101"] {
+        let text = format!(
+            "seed = 1\n[[stages]]\nstage = \"photometric\"\ncase = \"c\"\nscene = \"{}\"\nmodel = \"blinn-phong\"\n{field}\n",
+            scene.display()
+        );
+        let (code, err) = run_pipeline(dir.path(), &text);
+        assert_eq!(code, 1, "{err}");
+        assert!(err.contains(field) && err.contains("expected 1 to 100"), "{err}");
+        assert!(!dir.path().join("out").exists(), "a refused pipeline wrote output");
+    }
+}
+
 /// The Cornell box with its light off: rendered black with a warning by `lumen render`,
 /// `lumen bench render` and `lumen run`, never a crash (the eight-lane tracer once gathered
 /// from an empty light table).

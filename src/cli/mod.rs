@@ -776,11 +776,8 @@ fn ps_cmd(dir: &Path, model: &str, start_iterations: Option<u64>, out: &Path) ->
         model.parse().map_err(|e: String| anyhow::anyhow!("--model: {e}"))?;
     let mut config = lumen::photometric::Config::new(model);
     if let Some(k) = start_iterations {
-        let range = lumen::photometric::START_ITERATIONS;
-        if !range.contains(&k) {
-            anyhow::bail!("--start-iterations {k}: expected {} to {}", range.start(), range.end());
-        }
-        config.start_iterations = k;
+        config.start_iterations = lumen::photometric::check_start_iterations(k)
+            .map_err(|e| anyhow::anyhow!("--start-iterations {e}"))?;
     }
     let t = std::time::Instant::now();
     let data = lumen::photometric::dataset::read(dir)?;

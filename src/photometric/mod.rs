@@ -148,6 +148,16 @@ pub struct Config {
 /// The range of `Config::start_iterations`.
 pub const START_ITERATIONS: std::ops::RangeInclusive<u64> = 1..=100;
 
+/// `k` if it is a valid `Config::start_iterations`, else "k: expected 1 to 100", for the
+/// caller to prefix with the name the user gave it.
+pub fn check_start_iterations(k: u64) -> Result<u64, String> {
+    if START_ITERATIONS.contains(&k) {
+        Ok(k)
+    } else {
+        Err(format!("{k}: expected {} to {}", START_ITERATIONS.start(), START_ITERATIONS.end()))
+    }
+}
+
 impl Config {
     pub fn new(model: Model) -> Config {
         Config { model, trace: false, start_iterations: blinn_phong::START_ITERATIONS }
@@ -254,14 +264,7 @@ impl From<lambertian::Pixel> for Solved {
 /// pixel unsolved (coplanar lights, all in shadow) are `Error::Unsolvable`.
 pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     let bad = |message: String| Error::Input { message };
-    if !START_ITERATIONS.contains(&config.start_iterations) {
-        return Err(bad(format!(
-            "start_iterations = {}: expected {} to {}",
-            config.start_iterations,
-            START_ITERATIONS.start(),
-            START_ITERATIONS.end()
-        )));
-    }
+    check_start_iterations(config.start_iterations).map_err(|e| bad(format!("start_iterations = {e}")))?;
     if input.lights.len() < 3 {
         return Err(bad(format!("{} light(s): photometric stereo needs at least 3", input.lights.len())));
     }

@@ -106,6 +106,11 @@ fn default_start_iterations() -> u64 {
     photometric::blinn_phong::START_ITERATIONS
 }
 
+/// The `start_iterations` field checked before anything is rendered or read.
+fn check_start_iterations(k: u64) -> Result<u64, StageError> {
+    photometric::check_start_iterations(k).map_err(|e| StageError::Config(format!("start_iterations = {e}")))
+}
+
 fn one() -> f64 {
     1.0
 }
@@ -163,6 +168,7 @@ struct LightRecipe<'a> {
 
 pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Truth, Findings), StageError> {
     let model: Model = c.model.parse().map_err(StageError::Config)?;
+    check_start_iterations(c.start_iterations)?;
     if !(3..=MAX_RENDERS).contains(&c.lights) {
         return Err(StageError::Config(format!(
             "lights = {}: expected 3 to {MAX_RENDERS} (photometric stereo needs at least 3; each is a render)",
@@ -335,6 +341,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Trut
 /// Reads a real dataset (`DataConfig`), keeping its ground truth apart from the input.
 pub fn read(c: &DataConfig, ctx: &Context) -> Result<(photometric::Input, Truth, Findings), StageError> {
     let model: Model = c.model.parse().map_err(StageError::Config)?;
+    check_start_iterations(c.start_iterations)?;
     let dir = super::dataset_path(ctx, &c.dataset)?;
     let data = photometric::dataset::read(&dir)?;
     let Some(normals) = data.truth else {
