@@ -663,3 +663,48 @@ fn slurm_scripts_run_the_shards_and_the_merge() {
     assert_eq!(numbers(&one), numbers(&merged));
     assert_eq!(merged["threads"], 1);
 }
+
+/// The same small pipeline through a live Slurm: `lumen slurm --submit --wait` submits the
+/// 3-task array and the merge job that depends on it, waits for the merge, and its report
+/// equals the one-process run's; a shard that fails makes Slurm cancel the merge, which
+/// `lumen slurm` reports instead of exiting 0. It runs where `LUMEN_SLURM_TEST` is set, as
+/// `.ci/run` sets it once `.ci/slurm-up` has started a one-node Slurm (with `SLURM_CONF`);
+/// elsewhere it is skipped, and the skip is listed.
+#[test]
+fn live_slurm_runs_the_array_and_the_merge() {
+    if std::env::var_os("LUMEN_SLURM_TEST").is_none() {
+        common::skip_needing("Slurm", "LUMEN_SLURM_TEST is not set (.ci/slurm-up starts a one-node Slurm)");
+        return;
+    }
+    let sinfo = Command::new("sinfo").args(["-h", "-o", "%a %t"]).output().expect("sinfo runs");
+    assert!(sinfo.status.success(), "LUMEN_SLURM_TEST is set but sinfo fails: {sinfo:?}");
+    let dir = tempfile::tempdir().unwrap();
+    let text = small_pipeline();
+    let (code, err, one) = run_with(&text, dir.path(), "one", &["--no-cache"]);
+    assert_eq!(code, 0, "{err}");
+    let submit = |pipeline: &str, out: &str| {
+        let p = dir.path().join(pipeline);
+        let out = dir.path().join(out);
+        let o = Command::new(env!("CARGO_BIN_EXE_lumen"))
+            .args(["slurm", p.to_str().unwrap(), "--shards", "3", "--out", out.to_str().unwrap()])
+            .args(["--cpus-per-task", "1", "--time", "0:20:00", "--submit", "--wait"])
+            .output()
+            .unwrap();
+        (o.status.code(), String::from_utf8_lossy(&o.stderr).into_owned(), out)
+    };
+    let (code, err, out) = submit("p.toml", "cluster");
+    assert_eq!(code, Some(0), "{err}");
+    for task in 0..3 {
+        assert!(out.join(format!("slurm/shard-{task}.log")).is_file(), "no log of array task {task}");
+    }
+    let merged: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(numbers(&one), numbers(&merged));
+    assert_eq!(merged["threads"], 1);
+    // A scene no shard can read: the two tasks holding its cases fail, so the merge never runs.
+    let bad = text.replace("furnace.toml", "missing.toml");
+    std::fs::write(dir.path().join("bad.toml"), bad).unwrap();
+    let (code, err, out) = submit("bad.toml", "bad");
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("cancelled the merge") && !out.join("report.json").exists(), "{err}");
+}

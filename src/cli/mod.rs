@@ -56,7 +56,8 @@ enum Command {
     },
     /// Write the sbatch scripts that run a pipeline on Slurm, OUT/slurm/run.sbatch (a job array,
     /// one task per shard) and OUT/slurm/merge.sbatch (`lumen merge OUT` after the array);
-    /// with --submit, submit both and print the job ids.
+    /// with --submit, submit both and print the job ids; with --wait, also wait for the merge
+    /// and exit as it does (0 all bounds met, 3 a bound missed, 1 a failure).
     Slurm {
         /// Pipeline file (TOML), e.g. pipelines/all.toml.
         pipeline: PathBuf,
@@ -81,6 +82,9 @@ enum Command {
         /// Submit both scripts with sbatch, the merge with --dependency=afterok on the array.
         #[arg(long)]
         submit: bool,
+        /// With --submit: wait until the merge job ends (sbatch --wait) and exit with its code.
+        #[arg(long, requires = "submit")]
+        wait: bool,
     },
     /// Render a scene file to an image: .exr (linear float) or .png (sRGB, or raw sensor values
     /// when the scene has a [sensor]).
@@ -291,9 +295,9 @@ pub fn main() -> i32 {
             )
         }
         Command::Merge { out } => merge_cmd(&out),
-        Command::Slurm { pipeline, shards, out, cache, partition, time, cpus_per_task, submit } => {
-            let opts = SlurmArgs { shards, out, cache, partition, time, cpus_per_task, submit };
-            slurm_cmd(&pipeline, opts).map(|_| 0)
+        Command::Slurm { pipeline, shards, out, cache, partition, time, cpus_per_task, submit, wait } => {
+            let opts = SlurmArgs { shards, out, cache, partition, time, cpus_per_task, submit, wait };
+            slurm_cmd(&pipeline, opts)
         }
         Command::Render(args) => render_cmd(&args).map(|_| 0),
         Command::Preview { files, kind } => preview_cmd(&files, kind.as_deref()).map(|_| 0),
@@ -384,9 +388,12 @@ struct SlurmArgs {
     time: Option<String>,
     cpus_per_task: usize,
     submit: bool,
+    wait: bool,
 }
 
-fn slurm_cmd(path: &Path, a: SlurmArgs) -> Result<()> {
+/// Writes the scripts and, when asked, submits them; the exit code is the merge job's when
+/// waiting for it, else 0.
+fn slurm_cmd(path: &Path, a: SlurmArgs) -> Result<i32> {
     use lumen::pipeline::{shard::MAX_SHARDS, slurm};
     if !(1..=MAX_SHARDS).contains(&a.shards) {
         bail!("--shards {}: expected 1 to {MAX_SHARDS}", a.shards);
@@ -431,31 +438,65 @@ fn slurm_cmd(path: &Path, a: SlurmArgs) -> Result<()> {
         Ok(())
     })?;
     eprintln!("wrote {} and {}", run.display(), merge.display());
+    // A shard that fails leaves the merge's dependency unmet: Slurm then cancels the merge
+    // instead of holding it pending for ever.
+    let after = "--kill-on-invalid-dep=yes";
     if !a.submit {
         eprintln!(
-            "submit with: id=$(sbatch --parsable {}) && sbatch --dependency=afterok:$id {}",
+            "submit with: id=$(sbatch --parsable {}) && sbatch --dependency=afterok:$id {after} {}",
             run.display(),
             merge.display()
         );
-        return Ok(());
+        return Ok(0);
     }
-    let sbatch = |args: &[&str]| -> Result<String> {
+    let sbatch = |args: &[&str]| -> Result<(String, Option<i32>)> {
         let o = std::process::Command::new("sbatch")
             .args(args)
             .output()
             .context("cannot run sbatch (is Slurm installed and on PATH?)")?;
-        if !o.status.success() {
-            bail!("sbatch {} failed: {}", args.join(" "), String::from_utf8_lossy(&o.stderr).trim());
-        }
         // --parsable prints `ID` or `ID;CLUSTER`.
         let text = String::from_utf8_lossy(&o.stdout);
-        Ok(text.trim().split(';').next().unwrap_or("").to_string())
+        let id = text.trim().split(';').next().unwrap_or("").to_string();
+        // With --wait, sbatch exits with the job's own code once it has been submitted.
+        if !o.status.success() && (id.is_empty() || !args.contains(&"--wait")) {
+            bail!("sbatch {} failed: {}", args.join(" "), String::from_utf8_lossy(&o.stderr).trim());
+        }
+        Ok((id, o.status.code()))
     };
-    let array = sbatch(&["--parsable", &run.to_string_lossy()])?;
-    let merge_id =
-        sbatch(&["--parsable", &format!("--dependency=afterok:{array}"), &merge.to_string_lossy()])?;
+    // sbatch --wait exits 0 for a merge Slurm cancelled (a shard failed): only a report.json
+    // the merge wrote anew says it ran.
+    let report = out.join("report.json");
+    let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+    let before = modified(&report);
+    let (array, _) = sbatch(&["--parsable", &run.to_string_lossy()])?;
+    let dependency = format!("--dependency=afterok:{array}");
+    let mut args = vec!["--parsable", &dependency, after];
+    if a.wait {
+        eprintln!("array job {array} submitted; waiting for the merge job");
+        args.push("--wait");
+    }
+    let script = merge.to_string_lossy();
+    args.push(&script);
+    let (merge_id, code) = sbatch(&args)?;
     println!("array job {array}, merge job {merge_id}");
-    Ok(())
+    if !a.wait {
+        return Ok(0);
+    }
+    let logs = dir.join("shard-*.log");
+    match code {
+        Some(c @ (0 | 3)) if modified(&report).is_some_and(|m| Some(m) != before) => Ok(c),
+        Some(0 | 3) => bail!(
+            "merge job {merge_id} ended without writing {}: a shard failed and Slurm cancelled the merge (see {})",
+            report.display(),
+            logs.display()
+        ),
+        Some(c) => bail!(
+            "merge job {merge_id} ended with exit code {c}: see {} and {}",
+            dir.join("merge.log").display(),
+            logs.display()
+        ),
+        None => bail!("sbatch --wait for merge job {merge_id} was stopped by a signal"),
+    }
 }
 
 /// One line per case and per failure on stderr; the exit code the report earns.

@@ -40,11 +40,18 @@ pub fn skip_list() -> PathBuf {
     Path::new(env!("CARGO_TARGET_TMPDIR")).join("skipped-tests.txt")
 }
 
-/// Records that the running test skipped its comparison, and why.
+/// Records that the running test skipped its comparison for want of `../shared`, and why.
 pub fn skip(reason: &str) {
+    skip_needing("../shared", reason);
+}
+
+/// Records that the running test skipped its comparison for want of `what` (`../shared`, or
+/// something the machine lacks, such as a running Slurm), and why: one line
+/// `TEST: needs WHAT: REASON`, which `.ci/run` counts by what was missing.
+pub fn skip_needing(what: &str, reason: &str) {
     let test = std::thread::current().name().unwrap_or("?").to_string();
-    eprintln!("skipped: {reason}");
-    let line = format!("{test}: {reason}\n");
+    eprintln!("skipped (needs {what}): {reason}");
+    let line = format!("{test}: needs {what}: {reason}\n");
     let _ = std::fs::OpenOptions::new()
         .create(true)
         .append(true)
