@@ -647,14 +647,17 @@ fn slurm_scripts_run_the_shards_and_the_merge() {
     assert!(o.status.success(), "{o:?}");
     let script = std::fs::read_to_string(out.join("slurm/run.sbatch")).unwrap();
     assert!(script.contains("#SBATCH --array=0-2") && script.contains("#SBATCH --time=0:10:00"), "{script}");
-    for task in 0..3 {
-        let o = Command::new("bash")
-            .arg(out.join("slurm/run.sbatch"))
-            .env("SLURM_ARRAY_TASK_ID", task.to_string())
-            .env("SLURM_CPUS_PER_TASK", "1")
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "task {task}: {}", String::from_utf8_lossy(&o.stderr));
+    // The render array, then the run array (which then finds every render in the cache).
+    for array in ["render", "run"] {
+        for task in 0..3 {
+            let o = Command::new("bash")
+                .arg(out.join(format!("slurm/{array}.sbatch")))
+                .env("SLURM_ARRAY_TASK_ID", task.to_string())
+                .env("SLURM_CPUS_PER_TASK", "1")
+                .output()
+                .unwrap();
+            assert!(o.status.success(), "{array} task {task}: {}", String::from_utf8_lossy(&o.stderr));
+        }
     }
     let o = Command::new("bash").arg(out.join("slurm/merge.sbatch")).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -662,6 +665,74 @@ fn slurm_scripts_run_the_shards_and_the_merge() {
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     assert_eq!(numbers(&one), numbers(&merged));
     assert_eq!(merged["threads"], 1);
+    assert_eq!(rendered(&merged), 0, "the render array made every render");
+}
+
+/// Renders the cases of a report made, summed.
+fn rendered(report: &serde_json::Value) -> u64 {
+    report["stages"].as_array().unwrap().iter().map(|s| s["renders"]["rendered"].as_u64().unwrap()).sum()
+}
+
+/// Render shares split the renders, not the cases: 3 shares each make a disjoint part of the
+/// small pipeline's renders (entries two cases share made once, the 8 lights of the one
+/// photometric case spread), together every render the one-process run makes, after which
+/// the shards run every case from the cache; a share run again makes nothing.
+#[test]
+fn render_shares_split_the_renders_inside_cases() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = small_pipeline();
+    let (code, err, one) =
+        run_with(&text, dir.path(), "one", &["--cache", dir.path().join("c1").to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let cache = dir.path().join("c3");
+    let p = dir.path().join("p.toml");
+    let share = |k: usize| {
+        let o = Command::new(env!("CARGO_BIN_EXE_lumen"))
+            .args(["run", p.to_str().unwrap(), "--shard", &format!("{k}/3"), "--renders-only"])
+            .args(["--cache", cache.to_str().unwrap(), "--threads", "1"])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert!(o.status.success(), "{err}");
+        // "... requests are this share's, R rendered into ..."
+        let made = err.split(" rendered into").next().and_then(|s| s.rsplit(' ').next()).unwrap();
+        (made.parse::<u64>().unwrap(), err)
+    };
+    let (made, lights): (Vec<u64>, Vec<usize>) = (1..=3)
+        .map(|k| {
+            let (m, err) = share(k);
+            let line = err.lines().find(|l| l.contains("photometric sphere")).unwrap().to_string();
+            let own = line.split(": ").nth(1).and_then(|s| s.split(' ').next()).unwrap();
+            (m, own.parse::<usize>().unwrap())
+        })
+        .unzip();
+    let entries = std::fs::read_dir(&cache).unwrap().count() as u64;
+    assert_eq!(made.iter().sum::<u64>(), entries);
+    assert_eq!(entries, rendered(&one), "{made:?}");
+    assert_eq!(lights.iter().sum::<usize>(), 8);
+    assert!(lights.iter().filter(|&&l| l > 0).count() >= 2, "one case's lights on one share: {lights:?}");
+    assert_eq!(share(2).0, 0, "a share run again makes nothing");
+    for k in 1..=3 {
+        let (code, err, frag) = run_with(
+            &text,
+            dir.path(),
+            "sharded",
+            &["--shard", &format!("{k}/3"), "--cache", cache.to_str().unwrap()],
+        );
+        assert_eq!(code, 0, "{err}");
+        assert!(frag.is_null(), "a shard writes only its fragment");
+        let frag = dir.path().join(format!("sharded/shards/{k}-of-3/report.json"));
+        let frag: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(frag).unwrap()).unwrap();
+        assert_eq!(rendered(&frag), 0, "shard {k}");
+    }
+    // --renders-only needs a shard and a cache.
+    let (code, err) = common::lumen(&["run", p.to_str().unwrap(), "--renders-only"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--shard"), "{err}");
+    let (code, err) =
+        common::lumen(&["run", p.to_str().unwrap(), "--shard", "1/2", "--renders-only", "--no-cache"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--no-cache"), "{err}");
 }
 
 /// The same small pipeline through a live Slurm: `lumen slurm --submit --wait` submits the
@@ -695,12 +766,15 @@ fn live_slurm_runs_the_array_and_the_merge() {
     let (code, err, out) = submit("p.toml", "cluster");
     assert_eq!(code, Some(0), "{err}");
     for task in 0..3 {
-        assert!(out.join(format!("slurm/shard-{task}.log")).is_file(), "no log of array task {task}");
+        for log in ["render", "shard"] {
+            assert!(out.join(format!("slurm/{log}-{task}.log")).is_file(), "no {log} log of task {task}");
+        }
     }
     let merged: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     assert_eq!(numbers(&one), numbers(&merged));
     assert_eq!(merged["threads"], 1);
+    assert_eq!(rendered(&merged), 0, "the render array made every render");
     // A scene no shard can read: the two tasks holding its cases fail, so the merge never runs.
     let bad = text.replace("furnace.toml", "missing.toml");
     std::fs::write(dir.path().join("bad.toml"), bad).unwrap();

@@ -46,6 +46,11 @@ enum Command {
         /// OUT/shards/K-of-N; `lumen merge OUT` joins the fragments (default: every case).
         #[arg(long, value_name = "K/N", value_parser = lumen::pipeline::shard::Shard::parse)]
         shard: Option<lumen::pipeline::shard::Shard>,
+        /// With --shard K/N: only make this shard's share of every case's renders in the cache
+        /// (an entry goes to share K when its key is K − 1 mod N), so the views or lights of
+        /// one large case are spread over all shards; then run the shards from the full cache.
+        #[arg(long, requires = "shard", conflicts_with = "no_cache")]
+        renders_only: bool,
     },
     /// Join the fragments in OUT/shards (from `lumen run --shard K/N --out OUT`) into one
     /// report.json, report.md and plots in OUT, checking that they are one pipeline's and cover
@@ -54,10 +59,12 @@ enum Command {
         /// The output folder the shards wrote to.
         out: PathBuf,
     },
-    /// Write the sbatch scripts that run a pipeline on Slurm, OUT/slurm/run.sbatch (a job array,
-    /// one task per shard) and OUT/slurm/merge.sbatch (`lumen merge OUT` after the array);
-    /// with --submit, submit both and print the job ids; with --wait, also wait for the merge
-    /// and exit as it does (0 all bounds met, 3 a bound missed, 1 a failure).
+    /// Write the sbatch scripts that run a pipeline on Slurm: OUT/slurm/render.sbatch (a job
+    /// array, each task making its share of every case's renders), OUT/slurm/run.sbatch (a job
+    /// array after it, one task per shard of cases) and OUT/slurm/merge.sbatch (`lumen merge
+    /// OUT` after that); with --submit, submit all three and print the job ids; with --wait,
+    /// also wait for the merge and exit as it does (0 all bounds met, 3 a bound missed, 1 a
+    /// failure).
     Slurm {
         /// Pipeline file (TOML), e.g. pipelines/all.toml.
         pipeline: PathBuf,
@@ -79,7 +86,7 @@ enum Command {
         /// CPUs per task, also the shard's threads.
         #[arg(long, default_value_t = 2)]
         cpus_per_task: usize,
-        /// Submit both scripts with sbatch, the merge with --dependency=afterok on the array.
+        /// Submit the three scripts with sbatch, each after the one before (--dependency=afterok).
         #[arg(long)]
         submit: bool,
         /// With --submit: wait until the merge job ends (sbatch --wait) and exit with its code.
@@ -285,14 +292,17 @@ pub fn main() -> i32 {
         }
     };
     let result = match cli.command {
-        Command::Run { pipeline, out, threads, cache, no_cache, shard } => {
+        Command::Run { pipeline, out, threads, cache, no_cache, shard, renders_only } => {
             let cache =
                 if no_cache { None } else { Some(cache.unwrap_or_else(|| PathBuf::from("out/cache"))) };
-            run_pipeline(
-                &pipeline,
-                out,
-                pipeline::RunOptions { threads, progress: true, cache_dir: cache, shard },
-            )
+            match (renders_only, shard, cache) {
+                (true, Some(share), Some(cache)) => render_share(&pipeline, cache, share, threads),
+                (_, shard, cache) => run_pipeline(
+                    &pipeline,
+                    out,
+                    pipeline::RunOptions { threads, progress: true, cache_dir: cache, shard },
+                ),
+            }
         }
         Command::Merge { out } => merge_cmd(&out),
         Command::Slurm { pipeline, shards, out, cache, partition, time, cpus_per_task, submit, wait } => {
@@ -373,6 +383,27 @@ fn run_pipeline(path: &Path, out: Option<PathBuf>, opts: pipeline::RunOptions) -
     Ok(summarize(&report))
 }
 
+fn render_share(
+    path: &Path,
+    cache: PathBuf,
+    share: lumen::pipeline::shard::Shard,
+    threads: Option<usize>,
+) -> Result<i32> {
+    let file = pipeline::load(path)?;
+    let c = pipeline::render_share(path, &file, cache.clone(), share, threads, true)?;
+    eprintln!(
+        "render share {}/{}: {} of the pipeline's render requests are this share's, {} rendered into {} ({} already there); {} are other shares'",
+        share.k,
+        share.n,
+        c.owned,
+        c.rendered,
+        cache.display(),
+        c.owned - c.rendered,
+        c.others
+    );
+    Ok(0)
+}
+
 fn merge_cmd(out: &Path) -> Result<i32> {
     let report = pipeline::shard::merge(out)?;
     report.write(out)?;
@@ -427,23 +458,26 @@ fn slurm_cmd(path: &Path, a: SlurmArgs) -> Result<i32> {
         partition: a.partition,
     };
     let dir = out.join("slurm");
-    let (run, merge) = (dir.join("run.sbatch"), dir.join("merge.sbatch"));
+    let (render, run, merge) = (dir.join("render.sbatch"), dir.join("run.sbatch"), dir.join("merge.sbatch"));
     lumen::image::io::write_together(&dir, |staged| -> Result<()> {
-        for (name, text) in
-            [("run.sbatch", slurm::array_script(&job)), ("merge.sbatch", slurm::merge_script(&job))]
-        {
+        for (name, text) in [
+            ("render.sbatch", slurm::render_script(&job)),
+            ("run.sbatch", slurm::array_script(&job)),
+            ("merge.sbatch", slurm::merge_script(&job)),
+        ] {
             let p = staged.join(name);
             std::fs::write(&p, text).with_context(|| format!("cannot write {}", p.display()))?;
         }
         Ok(())
     })?;
-    eprintln!("wrote {} and {}", run.display(), merge.display());
-    // A shard that fails leaves the merge's dependency unmet: Slurm then cancels the merge
+    eprintln!("wrote {}, {} and {}", render.display(), run.display(), merge.display());
+    // A task that fails leaves the next job's dependency unmet: Slurm then cancels that job
     // instead of holding it pending for ever.
     let after = "--kill-on-invalid-dep=yes";
     if !a.submit {
         eprintln!(
-            "submit with: id=$(sbatch --parsable {}) && sbatch --dependency=afterok:$id {after} {}",
+            "submit with: r=$(sbatch --parsable {}) && s=$(sbatch --parsable --dependency=afterok:$r {after} {}) && sbatch --dependency=afterok:$s {after} {}",
+            render.display(),
             run.display(),
             merge.display()
         );
@@ -468,21 +502,23 @@ fn slurm_cmd(path: &Path, a: SlurmArgs) -> Result<i32> {
     let report = out.join("report.json");
     let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
     let before = modified(&report);
-    let (array, _) = sbatch(&["--parsable", &run.to_string_lossy()])?;
+    let (renders, _) = sbatch(&["--parsable", &render.to_string_lossy()])?;
+    let (array, _) =
+        sbatch(&["--parsable", &format!("--dependency=afterok:{renders}"), after, &run.to_string_lossy()])?;
     let dependency = format!("--dependency=afterok:{array}");
     let mut args = vec!["--parsable", &dependency, after];
     if a.wait {
-        eprintln!("array job {array} submitted; waiting for the merge job");
+        eprintln!("render job {renders} and array job {array} submitted; waiting for the merge job");
         args.push("--wait");
     }
     let script = merge.to_string_lossy();
     args.push(&script);
     let (merge_id, code) = sbatch(&args)?;
-    println!("array job {array}, merge job {merge_id}");
+    println!("render job {renders}, array job {array}, merge job {merge_id}");
     if !a.wait {
         return Ok(0);
     }
-    let logs = dir.join("shard-*.log");
+    let logs = dir.join("{render,shard}-*.log");
     match code {
         Some(c @ (0 | 3)) if modified(&report).is_some_and(|m| Some(m) != before) => Ok(c),
         Some(0 | 3) => bail!(

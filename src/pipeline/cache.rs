@@ -9,6 +9,12 @@
 //! that cannot be read back whole is rendered again and replaced. The cache never changes a
 //! number: an entry holds the exact f32 values the renderer produced.
 //!
+//! A render share (`Cache::share`, `lumen run --shard K/N --renders-only`) splits the renders
+//! of a whole pipeline, not its cases, over N processes: each renders only the entries whose
+//! key is K − 1 modulo N, whatever case asks for them, and hands no image back, so the work
+//! inside one large case (its views, lights or wavelength bands) is spread and an entry two
+//! cases share is made once. The stages then run their cases from a full cache.
+//!
 //! The key is FNV-1a over 128 bits of the recipe's JSON, written here rather than taken from a
 //! crate because it must stay the same across toolchains and crate versions (std's hasher
 //! does not promise that) and is ten lines.
@@ -33,8 +39,20 @@ pub struct Event {
 pub struct Cache {
     /// `None`: nothing is stored (every image is rendered).
     dir: Option<PathBuf>,
+    /// A render share: (K, N), this process makes only the entries whose key is K − 1 mod N.
+    share: Option<(usize, usize)>,
+    shared: Mutex<ShareCount>,
     events: Mutex<Vec<Event>>,
     warnings: Mutex<Vec<String>>,
+}
+
+/// What a render share did: entries it owns, of them those it rendered, and the requests it
+/// left to other shares.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ShareCount {
+    pub owned: usize,
+    pub rendered: usize,
+    pub others: usize,
 }
 
 /// FNV-1a, 128 bits.
@@ -80,37 +98,79 @@ const MAGIC: &[u8; 8] = b"LUMENC01";
 
 impl Cache {
     pub fn new(dir: Option<PathBuf>) -> Cache {
-        Cache { dir, events: Mutex::new(Vec::new()), warnings: Mutex::new(Vec::new()) }
+        Cache {
+            dir,
+            share: None,
+            shared: Mutex::new(ShareCount::default()),
+            events: Mutex::new(Vec::new()),
+            warnings: Mutex::new(Vec::new()),
+        }
+    }
+
+    /// A render share K of N (1 ≤ K ≤ N) over the cache in `dir` (module docs).
+    pub fn share(dir: PathBuf, k: usize, n: usize) -> Cache {
+        Cache { share: Some((k, n)), ..Cache::new(Some(dir)) }
+    }
+
+    /// A render share hands no images back: the stages stop after asking for their renders.
+    pub fn renders_only(&self) -> bool {
+        self.share.is_some()
     }
 
     /// The images `recipe` describes: read back when the cache holds them, otherwise made by
-    /// `make` and stored. `case` and `what` only label the event in the report.
+    /// `make` and stored. `case` and `what` only label the event in the report. In a render
+    /// share, `None`: the entry is made if this share owns it and the cache lacks it.
     pub fn images<E>(
         &self,
         case: &str,
         what: &str,
         recipe: &impl Serialize,
         make: impl FnOnce() -> Result<Vec<Image>, E>,
-    ) -> Result<Vec<Image>, E> {
+    ) -> Result<Option<Vec<Image>>, E> {
         let t = std::time::Instant::now();
-        let path = self.dir.as_ref().and_then(|dir| {
-            let json = serde_json::to_string(&(env!("CARGO_PKG_VERSION"), recipe)).ok()?;
-            Some(dir.join(format!("{:032x}.bin", fnv128(json.as_bytes()))))
-        });
+        let key =
+            serde_json::to_string(&(env!("CARGO_PKG_VERSION"), recipe)).ok().map(|j| fnv128(j.as_bytes()));
+        let path = self.dir.as_ref().zip(key).map(|(dir, key)| dir.join(format!("{key:032x}.bin")));
+        if let Some((k, n)) = self.share {
+            let owned = key.is_some_and(|key| key % n as u128 == (k - 1) as u128);
+            // Present entries were renamed into place whole; a damaged one is remade when a
+            // case reads it.
+            let present = path.as_deref().is_some_and(Path::is_file);
+            let make_it = owned && !present;
+            if make_it {
+                let images = make()?;
+                self.store(path.as_deref(), &images);
+            }
+            if let Ok(mut c) = self.shared.lock() {
+                c.owned += usize::from(owned);
+                c.rendered += usize::from(make_it);
+                c.others += usize::from(!owned);
+            }
+            return Ok(None);
+        }
         if let Some(images) = path.as_deref().and_then(read_entry) {
             self.log(case, what, true, t.elapsed().as_secs_f64());
-            return Ok(images);
+            return Ok(Some(images));
         }
         let images = make()?;
         self.log(case, what, false, t.elapsed().as_secs_f64());
-        if let Some(path) = &path {
-            if let Err(e) = write_entry(path, &images) {
+        self.store(path.as_deref(), &images);
+        Ok(Some(images))
+    }
+
+    fn store(&self, path: Option<&Path>, images: &[Image]) {
+        if let Some(path) = path {
+            if let Err(e) = write_entry(path, images) {
                 if let Ok(mut w) = self.warnings.lock() {
                     w.push(format!("render cache: cannot write {}: {e}", path.display()));
                 }
             }
         }
-        Ok(images)
+    }
+
+    /// What this render share did so far (zero outside a share).
+    pub fn share_count(&self) -> ShareCount {
+        self.shared.lock().map(|c| *c).unwrap_or_default()
     }
 
     fn log(&self, case: &str, what: &str, reused: bool, seconds: f64) {

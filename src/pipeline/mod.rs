@@ -75,7 +75,15 @@ pub fn pipeline_name(file: &PipelineFile, path: &Path) -> String {
 /// Runs every case of a pipeline file in one thread pool and returns the report (not yet
 /// written). A case whose error it did not declare stops the run with that error.
 pub fn run(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Report, Error> {
-    let threads = match opts.threads {
+    in_pool(opts.threads, || run_cases(path, file, opts))
+}
+
+/// Runs `f` in a pool of `threads` workers (default: all cores).
+fn in_pool<T>(threads: Option<usize>, f: impl FnOnce() -> Result<T, Error> + Send) -> Result<T, Error>
+where
+    T: Send,
+{
+    let threads = match threads {
         Some(n) if n == 0 || n > MAX_THREADS => return Err(Error::Threads(n)),
         Some(n) => n,
         None => std::thread::available_parallelism().map_or(1, |n| n.get()),
@@ -84,7 +92,66 @@ pub fn run(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Report
         .num_threads(threads)
         .build()
         .map_err(|e| Error::Pool(threads, e.to_string()))?;
-    pool.install(|| run_cases(path, file, opts))
+    pool.install(f)
+}
+
+/// A render share of a pipeline (`lumen run --shard K/N --renders-only`): every case's
+/// renders, whichever shard runs the case, are requested in file order through a cache that
+/// makes only the entries share K owns (`cache` module docs). Nothing else runs and no report
+/// is written: once every share has run, the shards run their cases from the full cache.
+/// A case whose synthesis fails (a setting out of range, a declared error) is left to the
+/// shard that runs it, which reports it; here it is only named on stderr with `progress`.
+pub fn render_share(
+    path: &Path,
+    file: &PipelineFile,
+    cache_dir: PathBuf,
+    share: shard::Shard,
+    threads: Option<usize>,
+    progress: bool,
+) -> Result<cache::ShareCount, Error> {
+    in_pool(threads, || {
+        let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        let cache = cache::Cache::share(cache_dir.clone(), share.k, share.n);
+        let n = file.cases.len();
+        for (k, case) in file.cases.iter().enumerate() {
+            let seed = case.common.seed.unwrap_or(file.seed);
+            let ctx = Context { dir: &dir, case: &case.common.case, seed, cache: &cache, progress: false };
+            let before = cache.share_count();
+            let result = match &case.stage {
+                Stage::Calibrate(c) => stages::calibrate::synthesize(c, &ctx).map(|_| ()),
+                Stage::Photometric(c) => stages::photometric::synthesize(c, &ctx).map(|_| ()),
+                Stage::Color(c) => stages::color::synthesize(c, &ctx).map(|_| ()),
+                Stage::Hdr(c) => stages::hdr::synthesize(c, &ctx).map(|_| ()),
+                Stage::SfmRender(c) => stages::sfm::synthesize(c, &ctx).map(|_| ()),
+                // Renders timed afresh (never cached) and real data: nothing to share.
+                Stage::Render(_)
+                | Stage::CalibrateData(_)
+                | Stage::PhotometricData(_)
+                | Stage::HdrData(_)
+                | Stage::Sfm(_) => continue,
+            };
+            if progress {
+                let now = cache.share_count();
+                let what = match result {
+                    Ok(()) | Err(StageError::RendersOnly) => String::new(),
+                    Err(e) => format!(" (stopped: {e})"),
+                };
+                eprintln!(
+                    "[{}/{n}] {} {}: {} of its renders are this share's, {} rendered{what}",
+                    k + 1,
+                    case.stage.name(),
+                    case.common.case,
+                    now.owned - before.owned,
+                    now.rendered - before.rendered,
+                );
+            }
+        }
+        // The share exists to fill the cache: an entry it could not write fails it.
+        if let Some(w) = cache.warnings().into_iter().next() {
+            return Err(Error::Write { path: cache_dir, message: w });
+        }
+        Ok(cache.share_count())
+    })
 }
 
 fn run_cases(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Report, Error> {

@@ -1,5 +1,11 @@
-//! `lumen slurm`: the two plain `sbatch` scripts that run a pipeline on a Slurm cluster, a job
-//! array with one task per shard (`lumen run --shard K/N`) and a merge job that depends on it.
+//! `lumen slurm`: the three plain `sbatch` scripts that run a pipeline on a Slurm cluster:
+//! - `render.sbatch`, a job array with one task per shard, each making its share of every
+//!   case's renders in the shared cache (`lumen run --shard K/N --renders-only`), so the views
+//!   or lights of one large case are spread over all tasks;
+//! - `run.sbatch`, a second array after it, each task running its shard's cases from the full
+//!   cache (`lumen run --shard K/N`);
+//! - `merge.sbatch`, the merge job after that (`lumen merge OUT`).
+//!
 //! lumen never talks to Slurm except through `sbatch`; users read and adapt the scripts.
 
 use std::path::{Path, PathBuf};
@@ -53,7 +59,30 @@ fn header(job: &Job, what: &str, log: &str) -> String {
     s
 }
 
-/// The job array's script: task i runs shard i + 1. A shard whose metrics miss a bound (exit 3)
+/// The render array's script: task i makes share i + 1 of every case's renders.
+pub fn render_script(job: &Job) -> String {
+    let mut s = header(
+        job,
+        &format!(
+            "lumen: the renders of {} in {} shares, one array task each",
+            job.pipeline.display(),
+            job.shards
+        ),
+        "render-%a.log",
+    );
+    s += &format!("#SBATCH --array=0-{}\n", job.shards - 1);
+    s += &format!(
+        "set -u\nshard=$((SLURM_ARRAY_TASK_ID + 1))/{n}\nexec {lumen} run {pipeline} --shard \"$shard\" --renders-only --cache {cache} --threads \"${{SLURM_CPUS_PER_TASK:-{c}}}\"\n",
+        n = job.shards,
+        lumen = quoted(&job.lumen),
+        pipeline = quoted(&job.pipeline),
+        cache = quoted(&job.cache),
+        c = job.cpus_per_task,
+    );
+    s
+}
+
+/// The run array's script: task i runs shard i + 1. A shard whose metrics miss a bound (exit 3)
 /// still counts as done, so the merge runs and its report shows the miss (the merge exits 3).
 pub fn array_script(job: &Job) -> String {
     let mut s = header(
@@ -103,6 +132,11 @@ mod tests {
         assert!(a.contains("'/data/it'\\''s.toml'") && a.contains("$((SLURM_ARRAY_TASK_ID + 1))/3"), "{a}");
         assert!(!a.contains("--partition"));
         assert!(merge_script(&job).contains("exec '/opt/lumen' merge '/scratch/out'"));
+        let r = render_script(&job);
+        assert!(
+            r.contains("#SBATCH --array=0-2\n") && r.contains("--renders-only --cache '/scratch/cache'"),
+            "{r}"
+        );
         assert!(check_word("--partition", "gpu,debug").is_ok());
         for bad in ["", "a b", "x\n#SBATCH --mem=1T", "$(rm)"] {
             assert!(check_word("--partition", bad).is_err(), "{bad:?}");

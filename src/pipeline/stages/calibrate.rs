@@ -318,7 +318,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Fin
             settings: SettingsKey::from(&settings),
             sensor: sensor.is_some(),
         };
-        let mut grey = ctx.cache.images(ctx.case, &name, &recipe, || {
+        let grey = ctx.cache.images(ctx.case, &name, &recipe, || {
             let film = render::render(&scene, &settings);
             let grey = match &sensor {
                 Some(sn) => {
@@ -338,6 +338,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Fin
                 data: grey,
             }])
         })?;
+        let Some(mut grey) = grey else { continue };
         let img =
             grey.pop().filter(|g| g.channels == 1 && g.data.len() == (camera.width * camera.height) as usize);
         let img =
@@ -350,6 +351,9 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Fin
         bar.inc(1);
     }
     bar.finish_and_clear();
+    if ctx.cache.renders_only() {
+        return Err(StageError::RendersOnly);
+    }
     let mut found = Findings::default();
     if c.save_views {
         for (name, g) in &images {

@@ -256,6 +256,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(color::Input, Truth, Fin
         let film = ctx.cache.images(ctx.case, &format!("wavelengths {}", b), &recipe, || {
             Ok::<_, StageError>(vec![render::render(&scene, &settings).mean])
         })?;
+        let Some(film) = film else { continue };
         let Some(img) = film.first().filter(|f: &&Image| f.data.len() == 3 * w * h) else {
             return Err(StageError::Config(format!("band {b}: the cached render has the wrong size")));
         };
@@ -269,6 +270,9 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(color::Input, Truth, Fin
         bar.inc(1);
     }
     bar.finish_and_clear();
+    if ctx.cache.renders_only() {
+        return Err(StageError::RendersOnly);
+    }
 
     let radiance = Image {
         width: w as u32,

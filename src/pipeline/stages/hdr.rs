@@ -169,6 +169,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(hdr::Input, Truth, Findi
     let film = ctx.cache.images(ctx.case, "radiance", &recipe, || {
         Ok::<_, StageError>(vec![render::render(&scene, &settings).mean])
     })?;
+    let film = film.ok_or(StageError::RendersOnly)?;
     let Some(radiance) = film.into_iter().next() else {
         return Err(StageError::Config("the cached render is empty".into()));
     };

@@ -58,6 +58,9 @@ pub enum StageError {
     Hdr(#[from] crate::hdr::Error),
     #[error(transparent)]
     Sfm(#[from] crate::sfm::Error),
+    /// A render share (`Cache::share`) asked for the case's renders and stops there.
+    #[error("the case's renders were requested in a render share")]
+    RendersOnly,
 }
 
 /// The kinds a pipeline entry can declare with `expect_error`.
@@ -95,6 +98,7 @@ impl StageError {
             StageError::Sfm(crate::sfm::Error::File { .. }) => "io",
             StageError::Sfm(crate::sfm::Error::Image(I::Read { .. } | I::Write { .. })) => "io",
             StageError::Sfm(_) => "bad-input",
+            StageError::RendersOnly => "renders-only",
         }
     }
 }

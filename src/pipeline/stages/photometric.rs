@@ -294,6 +294,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Trut
         let film = ctx.cache.images(ctx.case, &format!("light {j}"), &recipe, || {
             Ok::<_, StageError>(vec![render::render(&scene, &settings).mean])
         })?;
+        let Some(film) = film else { continue };
         let Some(img) = film.first().filter(|f: &&Image| f.data.len() == 3 * w * h) else {
             return Err(StageError::Config(format!("light {j}: the cached render has the wrong size")));
         };
@@ -308,6 +309,9 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Trut
         bar.inc(1);
     }
     bar.finish_and_clear();
+    if ctx.cache.renders_only() {
+        return Err(StageError::RendersOnly);
+    }
     let notes = vec![format!(
         "{} lights at {e0}°–{e1}° elevation, {} object pixels in the mask ({} more left out: their \
          footprint straddles an occlusion edge or crease), {}x{} px, {} spp, model {}.",

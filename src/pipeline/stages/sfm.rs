@@ -110,6 +110,7 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth,
         let rendered = ctx.cache.images(ctx.case, &name, &recipe, || {
             Ok::<_, StageError>(vec![render::render(&scene, &settings).mean])
         })?;
+        let Some(rendered) = rendered else { continue };
         let Some(img) = rendered
             .into_iter()
             .next()
@@ -129,6 +130,9 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth,
         bar.inc(1);
     }
     bar.finish_and_clear();
+    if ctx.cache.renders_only() {
+        return Err(StageError::RendersOnly);
+    }
     let notes = vec![format!(
         "{}: {} views of {}×{} px at {} spp along a {}° arc, {} from {:?} at height {}.",
         c.scene, c.views, camera.width, camera.height, settings.spp, c.arc_deg, c.radius, c.target, c.height
