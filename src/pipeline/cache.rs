@@ -254,12 +254,13 @@ mod tests {
         let a = cache.images("c", "x", &recipe, || Ok::<_, ()>(vec![img.clone(), img.clone()])).unwrap();
         let b =
             cache.images("c", "x", &recipe, || -> Result<Vec<Image>, ()> { panic!("not reused") }).unwrap();
+        assert!(a.is_some());
         assert_eq!(a, b);
         let ev = cache.events_of("c");
         assert_eq!((ev[0].reused, ev[1].reused), (false, true));
         // Another recipe is another entry.
         let c = cache.images("c", "y", &("film", 43u64), || Ok::<_, ()>(vec![])).unwrap();
-        assert!(c.is_empty());
+        assert_eq!(c, Some(vec![]));
         // A truncated entry is rendered again.
         for e in std::fs::read_dir(dir.path()).unwrap() {
             let p = e.unwrap().path();
@@ -267,8 +268,49 @@ mod tests {
             std::fs::write(&p, &bytes[..bytes.len().saturating_sub(3)]).unwrap();
         }
         let d = cache.images("c", "x", &recipe, || Ok::<_, ()>(vec![img.clone()])).unwrap();
-        assert_eq!(d.len(), 1);
+        assert_eq!(d.map(|d| d.len()), Some(1));
         assert!(!cache.events_of("c")[3].reused);
+    }
+
+    /// N shares make disjoint parts of the entries, together all of them, each entry once,
+    /// and hand no image back; a cache then reads every entry without rendering.
+    #[test]
+    fn shares_make_disjoint_parts_of_the_entries() {
+        let dir = tempfile::tempdir().unwrap();
+        let img = Image { width: 1, height: 1, channels: 1, data: vec![0.5] };
+        let made = std::sync::atomic::AtomicUsize::new(0);
+        let mut owned = Vec::new();
+        for k in 1..=3 {
+            let share = Cache::share(dir.path().to_path_buf(), k, 3);
+            for recipe in 0..30u64 {
+                let got = share
+                    .images("c", "x", &("film", recipe), || {
+                        made.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        Ok::<_, ()>(vec![img.clone()])
+                    })
+                    .unwrap();
+                assert!(got.is_none());
+            }
+            let c = share.share_count();
+            assert_eq!((c.owned + c.others, c.rendered), (30, c.owned));
+            owned.push(c.owned);
+        }
+        assert_eq!(made.into_inner(), 30);
+        assert!(owned.iter().all(|&n| n > 0), "{owned:?}");
+        // Run again, a share makes nothing.
+        let again = Cache::share(dir.path().to_path_buf(), 2, 3);
+        for recipe in 0..30u64 {
+            again
+                .images("c", "x", &("film", recipe), || -> Result<Vec<Image>, ()> { panic!("made twice") })
+                .unwrap();
+        }
+        assert_eq!(again.share_count().rendered, 0);
+        let cache = Cache::new(Some(dir.path().to_path_buf()));
+        for recipe in 0..30u64 {
+            let got = cache
+                .images("c", "x", &("film", recipe), || -> Result<Vec<Image>, ()> { panic!("not there") });
+            assert_eq!(got.unwrap(), Some(vec![img.clone()]));
+        }
     }
 
     #[test]
