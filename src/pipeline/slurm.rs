@@ -59,20 +59,13 @@ fn header(job: &Job, what: &str, log: &str) -> String {
     s
 }
 
-/// The render array's script: task i makes share i + 1 of every case's renders.
-pub fn render_script(job: &Job) -> String {
-    let mut s = header(
-        job,
-        &format!(
-            "lumen: the renders of {} in {} shares, one array task each",
-            job.pipeline.display(),
-            job.shards
-        ),
-        "render-%a.log",
-    );
+/// An array's script: its header, then task i's `lumen run` of shard i + 1 with `flags`
+/// (`--out …` or `--renders-only`), the shared cache and the task's CPUs as threads.
+fn array(job: &Job, what: &str, log: &str, flags: &str) -> String {
+    let mut s = header(job, what, log);
     s += &format!("#SBATCH --array=0-{}\n", job.shards - 1);
     s += &format!(
-        "set -u\nshard=$((SLURM_ARRAY_TASK_ID + 1))/{n}\nexec {lumen} run {pipeline} --shard \"$shard\" --renders-only --cache {cache} --threads \"${{SLURM_CPUS_PER_TASK:-{c}}}\"\n",
+        "set -u\nshard=$((SLURM_ARRAY_TASK_ID + 1))/{n}\n{lumen} run {pipeline} --shard \"$shard\" {flags} --cache {cache} --threads \"${{SLURM_CPUS_PER_TASK:-{c}}}\"\n",
         n = job.shards,
         lumen = quoted(&job.lumen),
         pipeline = quoted(&job.pipeline),
@@ -82,24 +75,28 @@ pub fn render_script(job: &Job) -> String {
     s
 }
 
+/// The render array's script: task i makes share i + 1 of every case's renders.
+pub fn render_script(job: &Job) -> String {
+    let p = job.pipeline.display();
+    array(
+        job,
+        &format!("lumen: the renders of {p} in {} shares, one array task each", job.shards),
+        "render-%a.log",
+        "--renders-only",
+    )
+}
+
 /// The run array's script: task i runs shard i + 1. A shard whose metrics miss a bound (exit 3)
 /// still counts as done, so the merge runs and its report shows the miss (the merge exits 3).
 pub fn array_script(job: &Job) -> String {
-    let mut s = header(
+    let p = job.pipeline.display();
+    let mut s = array(
         job,
-        &format!("lumen: {} as {} shards, one array task each", job.pipeline.display(), job.shards),
+        &format!("lumen: {p} as {} shards, one array task each", job.shards),
         "shard-%a.log",
+        &format!("--out {}", quoted(&job.out)),
     );
-    s += &format!("#SBATCH --array=0-{}\n", job.shards - 1);
-    s += &format!(
-        "set -u\nshard=$((SLURM_ARRAY_TASK_ID + 1))/{n}\n{lumen} run {pipeline} --shard \"$shard\" --out {out} --cache {cache} --threads \"${{SLURM_CPUS_PER_TASK:-{c}}}\"\ncode=$?\n# 3: a metric missed its bound, which the merged report shows\nif [ \"$code\" -eq 3 ]; then exit 0; fi\nexit \"$code\"\n",
-        n = job.shards,
-        lumen = quoted(&job.lumen),
-        pipeline = quoted(&job.pipeline),
-        out = quoted(&job.out),
-        cache = quoted(&job.cache),
-        c = job.cpus_per_task,
-    );
+    s += "code=$?\n# 3: a metric missed its bound, which the merged report shows\nif [ \"$code\" -eq 3 ]; then exit 0; fi\nexit \"$code\"\n";
     s
 }
 
