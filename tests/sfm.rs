@@ -127,8 +127,9 @@ fn herz_jesu_reconstruction() {
 }
 
 /// `lumen sfm` refuses malformed folders, cameras and settings with a message naming the
-/// problem, writing nothing; two unrelated images give an empty model that says why, with
-/// every file written.
+/// problem, writing nothing (also images of two sizes under one camera matrix); two
+/// unrelated images give an empty model that says why, with every file written, also when
+/// they differ in size (each then has its own assumed camera).
 #[test]
 fn cli_refusals_and_an_unreconstructable_pair() {
     let dir = tempfile::tempdir().unwrap();
@@ -139,10 +140,13 @@ fn cli_refusals_and_an_unreconstructable_pair() {
             [(v >> 56) as u8, (v >> 48) as u8, (v >> 40) as u8]
         }
     };
-    let (one, two, junk) = (d.join("one"), d.join("two"), d.join("junk"));
-    for p in [&one, &two, &junk] {
+    let (one, two, junk, sizes) = (d.join("one"), d.join("two"), d.join("junk"), d.join("sizes"));
+    for p in [&one, &two, &junk, &sizes] {
         std::fs::create_dir(p).unwrap();
     }
+    png(&sizes.join("a.png"), 160, 120, noise(1));
+    png(&sizes.join("b.png"), 120, 90, noise(2));
+    std::fs::write(d.join("k.txt"), "150 0 79.5 0 150 59.5 0 0 1").unwrap();
     png(&one.join("a.png"), 160, 120, noise(1));
     png(&two.join("a.png"), 160, 120, noise(1));
     png(&two.join("b.png"), 160, 120, noise(2));
@@ -164,6 +168,10 @@ fn cli_refusals_and_an_unreconstructable_pair() {
             "cam.yaml",
         ),
         (vec!["--images".into(), two_s.clone(), "--max-features".into(), "3".into()], "--max-features 3"),
+        (
+            vec!["--images".into(), s(&sizes), "--camera".into(), s(&d.join("k.txt"))],
+            "b.png: 120×90 pixels, but its camera is 160×120",
+        ),
     ];
     for (args, want) in cases {
         let mut all: Vec<&str> = vec!["sfm", "--out", &out_s];
@@ -184,4 +192,12 @@ fn cli_refusals_and_an_unreconstructable_pair() {
     for f in ["cameras.txt", "images.txt", "points3D.txt", "points.ply"] {
         assert!(out.join(f).exists(), "{f}");
     }
+    // Two sizes without a camera: each image its own assumed camera, in cameras.txt.
+    let (code, err) = common::lumen(&["sfm", "--images", &s(&sizes), "--out", &s(&d.join("sizes-model"))]);
+    assert_eq!(code, 0, "{err}");
+    let cameras = std::fs::read_to_string(d.join("sizes-model/cameras.txt")).unwrap();
+    assert!(
+        cameras.contains("PINHOLE 160 120 192 192") && cameras.contains("PINHOLE 120 90 144 144"),
+        "{cameras}"
+    );
 }

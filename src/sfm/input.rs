@@ -67,24 +67,27 @@ pub fn assumed_camera(width: u32, height: u32) -> CameraModel {
     CameraModel::centred(width, height, 1.2 * width.max(height) as f64)
 }
 
-/// Reads `files` with their camera (`None`: `assumed_camera`), calling `on_image(k, n, file)`
-/// before each.
+/// Reads `files` with their camera (`None`: `assumed_camera`, per image and its size),
+/// calling `on_image(k, n, file)` before each. A camera matrix without a size (K.txt) takes
+/// the first image's: one K fits one image size, so an image of another size is refused by
+/// `sfm::run`, named, rather than given a principal point off its centre.
 pub fn read_images(
     files: &[PathBuf],
-    camera: Option<CameraModel>,
+    mut camera: Option<CameraModel>,
     mut on_image: impl FnMut(usize, usize, &Path),
 ) -> Result<Input, Error> {
     let mut images = Vec::new();
     for (n, f) in files.iter().enumerate() {
         on_image(n, files.len(), f);
         let img = crate::image::io::read(f)?;
-        let camera = match camera {
-            Some(mut cam) if cam.width == 0 => {
-                cam.width = img.width;
-                cam.height = img.height;
-                cam
+        let camera = match &mut camera {
+            Some(cam) => {
+                if cam.width == 0 {
+                    cam.width = img.width;
+                    cam.height = img.height;
+                }
+                *cam
             }
-            Some(cam) => cam,
             None => assumed_camera(img.width, img.height),
         };
         let name = f.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
