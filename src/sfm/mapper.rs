@@ -12,9 +12,9 @@
 //!    as COLMAP does, the whole model only when it has grown by `global_ratio` since the last
 //!    whole adjustment (and once at the end), otherwise locally: the new image and the
 //!    `local_images − 1` registered images that share the most points with it move, with the
-//!    points they see, while the other cameras that see those points hold still. A whole
-//!    adjustment after every image costs O(n²) adjustments of growing size (52 s of 156 s
-//!    on an 80-view render);
+//!    points they see, while the other cameras that see those points hold still (a whole
+//!    adjustment after every image makes n adjustments of growing size, the mapping's
+//!    largest cost at tens of images);
 //! 4. images that cannot be registered (too few 2D–3D matches, PnP without enough inliers)
 //!    are reported with the reason; what was reconstructed is kept.
 //!
