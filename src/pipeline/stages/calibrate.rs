@@ -351,9 +351,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Fin
         bar.inc(1);
     }
     bar.finish_and_clear();
-    if ctx.cache.renders_only() {
-        return Err(StageError::RendersOnly);
-    }
+    ctx.renders_requested()?;
     let mut found = Findings::default();
     if c.save_views {
         for (name, g) in &images {

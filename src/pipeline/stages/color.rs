@@ -270,9 +270,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(color::Input, Truth, Fin
         bar.inc(1);
     }
     bar.finish_and_clear();
-    if ctx.cache.renders_only() {
-        return Err(StageError::RendersOnly);
-    }
+    ctx.renders_requested()?;
 
     let radiance = Image {
         width: w as u32,

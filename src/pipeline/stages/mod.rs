@@ -114,6 +114,17 @@ pub struct Context<'a> {
     pub progress: bool,
 }
 
+impl Context<'_> {
+    /// After a stage has asked for all its renders: in a render share (`Cache::share`), whose
+    /// requests hand no image back, the case stops here (`StageError::RendersOnly`).
+    pub fn renders_requested(&self) -> Result<(), StageError> {
+        if self.cache.renders_only() {
+            return Err(StageError::RendersOnly);
+        }
+        Ok(())
+    }
+}
+
 /// What one case produced.
 pub struct CaseResult {
     pub metrics: Vec<Metric>,

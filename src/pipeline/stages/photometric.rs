@@ -309,9 +309,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Trut
         bar.inc(1);
     }
     bar.finish_and_clear();
-    if ctx.cache.renders_only() {
-        return Err(StageError::RendersOnly);
-    }
+    ctx.renders_requested()?;
     let notes = vec![format!(
         "{} lights at {e0}°–{e1}° elevation, {} object pixels in the mask ({} more left out: their \
          footprint straddles an occlusion edge or crease), {}x{} px, {} spp, model {}.",

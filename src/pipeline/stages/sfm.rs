@@ -130,9 +130,7 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth,
         bar.inc(1);
     }
     bar.finish_and_clear();
-    if ctx.cache.renders_only() {
-        return Err(StageError::RendersOnly);
-    }
+    ctx.renders_requested()?;
     let notes = vec![format!(
         "{}: {} views of {}×{} px at {} spp along a {}° arc, {} from {:?} at height {}.",
         c.scene, c.views, camera.width, camera.height, settings.spp, c.arc_deg, c.radius, c.target, c.height
