@@ -281,11 +281,17 @@ fn pipeline_counts_beyond_their_limit_are_refused() {
             "seed = 1\n[[stages]]\nstage = \"{stage}\"\ncase = \"c\"\nscene = \"{}/{scene}.toml\"\n{field}\n",
             scenes.display()
         );
-        let (code, err) = run_pipeline(dir.path(), &text);
-        assert_eq!(code, 1, "{err}");
-        assert!(err.contains(field) && err.contains("to 1000"), "{err}");
-        assert!(!dir.path().join("out").exists(), "a refused pipeline wrote output");
+        refused_naming(dir.path(), &text, &[field, "to 1000"]);
     }
+}
+
+/// `text` run as a pipeline is refused (exit 1) with a message holding every one of `words`,
+/// and writes nothing.
+fn refused_naming(dir: &std::path::Path, text: &str, words: &[&str]) {
+    let (code, err) = run_pipeline(dir, text);
+    assert_eq!(code, 1, "{err}");
+    assert!(words.iter().all(|w| err.contains(w)), "{err}");
+    assert!(!dir.join("out").exists(), "a refused pipeline wrote output");
 }
 
 /// A Blinn-Phong `start_iterations` outside 1 to 100: refused, naming the field (the stage
@@ -299,10 +305,7 @@ fn pipeline_start_iterations_out_of_range_are_refused() {
             "seed = 1\n[[stages]]\nstage = \"photometric\"\ncase = \"c\"\nscene = \"{}\"\nmodel = \"blinn-phong\"\n{field}\n",
             scene.display()
         );
-        let (code, err) = run_pipeline(dir.path(), &text);
-        assert_eq!(code, 1, "{err}");
-        assert!(err.contains(field) && err.contains("expected 1 to 100"), "{err}");
-        assert!(!dir.path().join("out").exists(), "a refused pipeline wrote output");
+        refused_naming(dir.path(), &text, &[field, "expected 1 to 100"]);
     }
 }
 
