@@ -127,6 +127,14 @@ pub(super) fn normal_equations(obs: &Observations, at: &Point) -> (f64, SMatrix<
     (s[SQ], jtj, jtr)
 }
 
+/// The sums of the linear least squares for (ρ_r, ρ_g, ρ_b, σ) at `at.n` and `at.e` (`start_at`),
+/// with c = max(0, n·l) and g = c·(e + 8)/8·dᵉ: [Σc², Σc·g, Σg², Σc·I_r, Σc·I_g, Σc·I_b,
+/// Σg·(I_r + I_g + I_b)]. The other fields of `at` are not read.
+pub(super) fn linear_sums(obs: &Observations, at: &Point) -> [f64; 7] {
+    let s = dispatch!(linear_sums_body(obs, at));
+    std::array::from_fn(|i| s[i])
+}
+
 /// What a pass returns: its sums, indexed by the constants below.
 type Sums = [f64; SUMS];
 const SQ: usize = 0; // Σ r²
@@ -293,6 +301,32 @@ fn model(g: &Group, at: &Point, lobe: f64) -> Terms {
 }
 
 #[inline(always)]
+fn linear_sums_body(obs: &Observations, at: &Point) -> Sums {
+    let lobe = (at.e + 8.0) / 8.0;
+    let mut a = [V::splat(0.0); 7];
+    for grp in &obs.groups {
+        let c = dot(at.n, &grp.l);
+        let d = dot(at.n, &grp.h);
+        let lit = c.gt(0.0) & d.gt(0.0);
+        let c = c.max(0.0);
+        let g = exp(ln(d.max(f64::MIN_POSITIVE)) * at.e).and(lit) * c * lobe;
+        let o = [V(grp.obs[0]), V(grp.obs[1]), V(grp.obs[2])];
+        accumulate(&mut a[0], [(c, c)]);
+        accumulate(&mut a[1], [(c, g)]);
+        accumulate(&mut a[2], [(g, g)]);
+        for ch in 0..3 {
+            accumulate(&mut a[3 + ch], [(c, o[ch])]);
+        }
+        accumulate(&mut a[6], [(g, o[0] + o[1] + o[2])]);
+    }
+    let mut s = [0.0; SUMS];
+    for (s, a) in s.iter_mut().zip(a) {
+        *s = a.sum();
+    }
+    s
+}
+
+#[inline(always)]
 fn squares_body(obs: &Observations, at: &Point) -> Sums {
     let lobe = (at.e + 8.0) / 8.0;
     let mut acc = V::splat(0.0);
@@ -451,5 +485,8 @@ mod tests {
         let (a, b) = (dispatch!(normal_equations_body(&o, &at)), normal_equations_body(&o, &at));
         assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits));
         assert!(a.iter().all(|v| v.is_finite()) && a[SQ] > 0.0);
+        let (a, b) = (dispatch!(linear_sums_body(&o, &at)), linear_sums_body(&o, &at));
+        assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits));
+        assert!(a[..7].iter().all(|v| v.is_finite() && *v > 0.0));
     }
 }
