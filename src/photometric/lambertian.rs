@@ -126,8 +126,8 @@ pub fn solve_robust(lights: &[DVec3], obs: &[[f32; 3]], valid: &[bool]) -> Optio
         if res.len() < 3 {
             return None;
         }
-        res.sort_by(f64::total_cmp);
-        let mad = res[res.len() / 2];
+        let mid = res.len() / 2;
+        let mad = *res.select_nth_unstable_by(mid, f64::total_cmp).1;
         let next: Vec<bool> = lights
             .iter()
             .zip(&g)

@@ -398,8 +398,8 @@ pub fn solve(
             })
             .collect();
         let mut abs: Vec<f64> = judged.iter().map(|x| x.0).collect();
-        abs.sort_by(f64::total_cmp);
-        let mad = abs.get(abs.len() / 2).copied().unwrap_or(0.0);
+        let mid = abs.len() / 2;
+        let mad = if abs.is_empty() { 0.0 } else { *abs.select_nth_unstable_by(mid, f64::total_cmp).1 };
         let next: Vec<usize> = lit_now
             .iter()
             .zip(&judged)
