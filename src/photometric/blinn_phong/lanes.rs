@@ -403,7 +403,7 @@ fn ln(x: V) -> V {
     let s = (f - 1.0) / (f + 1.0);
     let z = s * s;
     // Σ z^k/(2k + 1) for k = 0 … 8, by Estrin's scheme (`estrin`).
-    let p = estrin(
+    let p = estrin9(
         z,
         [1.0, 1.0 / 3.0, 1.0 / 5.0, 1.0 / 7.0, 1.0 / 9.0, 1.0 / 11.0, 1.0 / 13.0, 1.0 / 15.0, 1.0 / 17.0],
     );
@@ -431,28 +431,34 @@ fn exp(x: V) -> V {
     let y = x.clamp(-708.0, 709.0);
     let k = (y * std::f64::consts::LOG2_E + ROUND) - ROUND;
     let r = (y - k * LN2_HI) - k * LN2_LO;
-    let p = estrin(r, INV_FACTORIAL);
+    let p = estrin14(r, INV_FACTORIAL);
     // 2ᵏ: k + 1023 in [1, 2046] sits in the low bits of k + 1023 + 2⁵², shifted to the exponent.
     let scale = V::from_bits((k + (1023.0 + TWO52)).bits().map(|b| b << 52));
     (p * scale).or_where(x.lt(-708.0), V::splat(0.0))
 }
 
-/// Σ c_k·x^k for k < N ≤ 16 by Estrin's scheme: pairs c_2i + c_2i+1·x, then pairs of those
-/// with x², x⁴, x⁸. The operations of Horner's rule, but a dependency chain of four fused
-/// multiply-adds instead of N: the chains of ln and exp (9 and 14 long, one after the other
-/// for each group of eight observations) bounded the passes' speed. Written out level by
-/// level so that it unrolls.
+/// Σ c_k·x^k (k = 0 … 8 and k = 0 … 13, for ln and exp) by Estrin's scheme: pairs
+/// c_2i + c_2i+1·x, then pairs of those with x², x⁴, x⁸. The operations of Horner's rule, but
+/// a dependency chain of four fused multiply-adds instead of 9 and 14: those chains, one
+/// after the other for each group of eight observations, bounded the passes' speed. Written
+/// out for the two lengths, so that it unrolls with no multiply-add by a zero.
 #[inline(always)]
-fn estrin<const N: usize>(x: V, c: [f64; N]) -> V {
-    const { assert!(N <= 16) };
-    let coef = |k: usize| V::splat(if k < N { c[k] } else { 0.0 });
-    let x2 = x * x;
-    let x4 = x2 * x2;
-    let x8 = x4 * x4;
-    let q: [V; 8] = std::array::from_fn(|i| coef(2 * i + 1).fma(x, coef(2 * i)));
-    let s: [V; 4] = std::array::from_fn(|i| q[2 * i + 1].fma(x2, q[2 * i]));
-    let t: [V; 2] = std::array::from_fn(|i| s[2 * i + 1].fma(x4, s[2 * i]));
-    t[1].fma(x8, t[0])
+fn estrin9(x: V, c: [f64; 9]) -> V {
+    let k = |i: usize| V::splat(c[i]);
+    let (x2, x4) = (x * x, x * x * (x * x));
+    let q = [k(1).fma(x, k(0)), k(3).fma(x, k(2)), k(5).fma(x, k(4)), k(7).fma(x, k(6))];
+    let s = [q[1].fma(x2, q[0]), q[3].fma(x2, q[2])];
+    k(8).fma(x4 * x4, s[1].fma(x4, s[0]))
+}
+
+#[inline(always)]
+fn estrin14(x: V, c: [f64; 14]) -> V {
+    let k = |i: usize| V::splat(c[i]);
+    let (x2, x4) = (x * x, x * x * (x * x));
+    let q: [V; 7] = std::array::from_fn(|i| k(2 * i + 1).fma(x, k(2 * i)));
+    let s = [q[1].fma(x2, q[0]), q[3].fma(x2, q[2]), q[5].fma(x2, q[4])];
+    let t = [s[1].fma(x4, s[0]), q[6].fma(x4, s[2])];
+    t[1].fma(x4 * x4, t[0])
 }
 
 #[cfg(test)]
