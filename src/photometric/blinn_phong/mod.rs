@@ -16,7 +16,8 @@
 //! highlight seen: σ ≈ 0 and e undetermined) without pulling where the data determine it.
 //!
 //! Starts: the robust Lambertian normal (`lambertian::solve_robust`) and the plain
-//! least-squares one, each with shininess 4 and 64 and the linear least squares for (ρ, σ) at
+//! least-squares one (where the two lie more than the narrowest lobe's half width apart,
+//! `SAME_START_COS`), each with shininess 4 and 64 and the linear least squares for (ρ, σ) at
 //! that normal; 8 Gauss-Newton iterations (`photometric::Config::start_iterations`) with a
 //! backtracking line search from each
 //! (`gauss_newton`), all over the same observations (every unsaturated one except clear cast
