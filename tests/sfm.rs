@@ -78,6 +78,89 @@ fn herz_jesu_consecutive_pairs() {
     assert!(errors[3] <= 0.1 && errors[6] <= 0.3, "rotation errors {errors:?}");
 }
 
+/// The same seven pairs with as many wrong matches as right ones added (each a random
+/// keypoint of one image with a random keypoint of the other, shuffled in among the real
+/// matches, so that half the correspondences are wrong): RANSAC still finds each pair general,
+/// keeps at least 90 % of the matches it keeps without them and almost none of the wrong ones
+/// (at most 1 %: a wrong match lies within 4 px of its epipolar line by chance about that
+/// often), and the rotations meet the same bounds as without them (median ≤ 0.1°, max ≤ 0.3°),
+/// each within 0.05° of the clean pair's.
+///
+/// Ignored because it fails today, and is kept as the target: pairs 0-1 and 2-3 pass (0.023°
+/// and 0.004° from the clean rotation), pair 1-2 ends 0.071° from it (0.105° from the truth
+/// against 0.036° clean), and pair 3-4, where the church's façade is one plane holding most
+/// matches, ends in a wrong model after 7807 iterations: 1655 of the 2261 right matches,
+/// 13.2° off. The 8-point samples that fall on the plane are degenerate and, among half wrong
+/// matches, the few that mix in enough off-plane points are not drawn before the adaptive count
+/// stops; the 5-point solver (Nistér 2004), which a plane does not degenerate, is the remedy.
+#[test]
+#[ignore = "fails: 50 % wrong matches drive pair 3-4 to a wrong model (13.2° off) with the 8-point sampler"]
+fn herz_jesu_pairs_with_half_the_matches_wrong() {
+    let Some(data) = common::shared_data() else { return };
+    let dir = data.join("sfm/herz-jesu-p8");
+    let feats = herz_jesu_features(&dir);
+    let random = |i: u64| lumen::render::sampler::mix64(0x5eed ^ i);
+    let mut errors = Vec::new();
+    for i in 0..7 {
+        let (a, b) = (&feats[i], &feats[i + 1]);
+        let m = matching::match_descriptors(&a.descriptors, &b.descriptors, &matching::Options::default());
+        let pos = |f: &features::Features, k: u32| {
+            let p = f.keypoints[k as usize];
+            [p.x as f64, p.y as f64]
+        };
+        let (k1, r1, c1) = camera(&dir.join(format!("gt_dense_cameras/{i:04}.jpg.camera")));
+        let (k2, r2, c2) = camera(&dir.join(format!("gt_dense_cameras/{:04}.jpg.camera", i + 1)));
+        let clean_p1: Vec<[f64; 2]> = m.iter().map(|x| pos(a, x.a)).collect();
+        let clean_p2: Vec<[f64; 2]> = m.iter().map(|x| pos(b, x.b)).collect();
+        let clean = two_view::estimate(&clean_p1, &clean_p2, &k1, &k2, 4.0, 1).unwrap();
+        // (index into m, or None for a wrong one), shuffled by a seeded sort key.
+        let salt = (i as u64) << 32;
+        let mut pairs: Vec<(Option<usize>, [f64; 2], [f64; 2])> = (0..m.len())
+            .map(|j| (Some(j), clean_p1[j], clean_p2[j]))
+            .chain((0..m.len()).map(|j| {
+                let (ka, kb) = (random(salt ^ (2 * j as u64)), random(salt ^ (2 * j as u64 + 1)));
+                let (ka, kb) =
+                    ((ka % a.keypoints.len() as u64) as u32, (kb % b.keypoints.len() as u64) as u32);
+                (None, pos(a, ka), pos(b, kb))
+            }))
+            .collect();
+        pairs
+            .sort_by_key(|p| random(salt ^ 0xabcdef ^ (p.1[0].to_bits() ^ p.2[1].to_bits().rotate_left(17))));
+        let p1: Vec<[f64; 2]> = pairs.iter().map(|p| p.1).collect();
+        let p2: Vec<[f64; 2]> = pairs.iter().map(|p| p.2).collect();
+        let tv = two_view::estimate(&p1, &p2, &k1, &k2, 4.0, 1).unwrap();
+        assert_eq!(tv.configuration, two_view::Configuration::General, "pair {i}-{}", i + 1);
+        let right = tv.inliers.iter().filter(|&&k| pairs[k].0.is_some()).count();
+        let wrong = tv.inliers.len() - right;
+        let r_true = r2.transpose() * r1;
+        let t_true = (r2.transpose() * (c1 - c2)).normalize();
+        let dr = two_view::rotation_angle_deg(&(tv.pose.r * r_true.transpose()));
+        let dr_clean = two_view::rotation_angle_deg(&(clean.pose.r * r_true.transpose()));
+        let from_clean = two_view::rotation_angle_deg(&(tv.pose.r * clean.pose.r.transpose()));
+        let dt = tv.pose.t.dot(&t_true).clamp(-1.0, 1.0).acos().to_degrees();
+        eprintln!(
+            "pair {i}-{}: it {} h {}; {} right + {} wrong matches; inliers {right} right ({} without the wrong ones), {wrong} wrong; rotation {dr:.4}° ({dr_clean:.4}° clean, {from_clean:.4}° apart), direction {dt:.3}°",
+            i + 1,
+            tv.iterations,
+            tv.homography_inliers,
+            m.len(),
+            m.len(),
+            clean.inliers.len()
+        );
+        assert!(
+            right as f64 >= 0.9 * clean.inliers.len() as f64,
+            "pair {i}: {right} of {}",
+            clean.inliers.len()
+        );
+        assert!(wrong as f64 <= 0.01 * m.len() as f64, "pair {i}: {wrong} wrong matches kept");
+        assert!(from_clean <= 0.05, "pair {i}: {from_clean}° from the clean pair's rotation");
+        assert!(dt < 1.0, "pair {i}: translation direction off by {dt}°");
+        errors.push(dr);
+    }
+    errors.sort_by(f64::total_cmp);
+    assert!(errors[3] <= 0.1 && errors[6] <= 0.3, "rotation errors {errors:?}");
+}
+
 /// The whole set, incrementally (`sfm::mapper` with its defaults, the known K): all 8 images
 /// registered, pairwise relative rotation errors over all 28 pairs within the bounds
 /// (median ≤ 0.1°, max ≤ 0.3°; COLMAP 4.2: 0.040° and 0.078°), camera centres within 1 % of
