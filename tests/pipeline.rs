@@ -159,6 +159,8 @@ fn absent_real_data_is_skipped_and_dataset_keys_are_checked() {
     assert_eq!(code, 0, "a one-view case is refused as bad input: {err}");
     let (code, err) = run(&sfm("radius = -1\n").replace("radius = 3.5\n", ""), &out);
     assert!(code == 1 && err.contains("positive radius"), "{err}");
+    let (code, err) = run(&sfm("forward = 3.5\n"), &out);
+    assert!(code == 1 && err.contains("forward = 3.5") && err.contains("less than the radius"), "{err}");
 }
 
 /// An `hdr` case on a stack of files (`list`): on a stack exposed exactly as its list says,

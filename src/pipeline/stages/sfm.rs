@@ -1,9 +1,10 @@
 //! The `sfm` stage, on renders or on real photographs with ground-truth cameras.
 //!
 //! Renders (an entry with `scene`): the scene is rendered from `views` cameras spaced evenly
-//! along a horizontal arc of `arc_deg` around `target`, at `radius` from it and `height` above
-//! the ground, each looking at `target` (the scene's own camera gives the intrinsics); the
-//! solver gets the images and the true intrinsics, as it gets K.txt on photographs.
+//! along a horizontal arc of `arc_deg` around `target`, at `radius` from it (less `forward` as
+//! the sequence advances) and `height` above the ground, each looking at `target` (the
+//! scene's own camera gives the intrinsics); the solver gets the images and the true
+//! intrinsics, as it gets K.txt on photographs.
 //! Photographs (an entry with `images`): reads the folder and its camera as `lumen sfm` does
 //! (`sfm::input`). Both run the same `sfm::run` and compare the registered cameras with the
 //! truth, free of gauge: pairwise relative rotation errors
@@ -43,6 +44,11 @@ pub struct RenderConfig {
     pub height: f64,
     /// The arc the cameras span, in degrees, centred on the −y side of `target`.
     pub arc_deg: f64,
+    /// Metres the cameras advance towards `target` over the sequence: view k of n is
+    /// `forward`·k/(n − 1) closer to it than `radius`, along its horizontal line of sight
+    /// (default 0; with `arc_deg = 0` a pure forward motion, the epipole in the image).
+    #[serde(default)]
+    pub forward: f64,
     /// Keypoints per image at most (default 8192, COLMAP's).
     #[serde(default = "default_features")]
     pub max_features: usize,
@@ -69,11 +75,15 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth,
     if c.max_features < 16 {
         return Err(StageError::Config(format!("max_features = {}: expected at least 16", c.max_features)));
     }
-    let numbers = [c.radius, c.height, c.arc_deg, c.target[0], c.target[1], c.target[2]];
-    if !numbers.iter().all(|v| v.is_finite()) || c.radius <= 0.0 || !(0.0..=360.0).contains(&c.arc_deg) {
+    let numbers = [c.radius, c.height, c.arc_deg, c.forward, c.target[0], c.target[1], c.target[2]];
+    if !numbers.iter().all(|v| v.is_finite())
+        || c.radius <= 0.0
+        || !(0.0..=360.0).contains(&c.arc_deg)
+        || !(0.0..c.radius).contains(&c.forward)
+    {
         return Err(StageError::Config(format!(
-            "radius = {}, height = {}, arc_deg = {}, target = {:?}: expected finite numbers, a positive radius and an arc of 0° to 360°",
-            c.radius, c.height, c.arc_deg, c.target
+            "radius = {}, height = {}, arc_deg = {}, forward = {}, target = {:?}: expected finite numbers, a positive radius, an arc of 0° to 360° and a forward advance from 0 to less than the radius",
+            c.radius, c.height, c.arc_deg, c.forward, c.target
         )));
     }
     let scene_path = ctx.dir.join(&c.scene);
@@ -89,7 +99,8 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth,
     for k in 0..c.views {
         let f = k as f64 / (c.views - 1) as f64;
         let phi = (-90.0 + c.arc_deg * (f - 0.5)).to_radians();
-        let origin = DVec3::new(target.x + c.radius * phi.cos(), target.y + c.radius * phi.sin(), c.height);
+        let r = c.radius - c.forward * f;
+        let origin = DVec3::new(target.x + r * phi.cos(), target.y + r * phi.sin(), c.height);
         let Some(world_from_cam) = CameraPose::look_at(origin, target, DVec3::Z) else {
             return Err(StageError::Config(format!(
                 "view {k}: the camera at {origin} cannot look at {target}"
@@ -131,8 +142,10 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth,
     }
     bar.finish_and_clear();
     ctx.renders_requested()?;
+    let advance =
+        if c.forward > 0.0 { format!(", advancing {} towards it", c.forward) } else { String::new() };
     let notes = vec![format!(
-        "{}: {} views of {}×{} px at {} spp along a {}° arc, {} from {:?} at height {}.",
+        "{}: {} views of {}×{} px at {} spp along a {}° arc, {} from {:?} at height {}{advance}.",
         c.scene, c.views, camera.width, camera.height, settings.spp, c.arc_deg, c.radius, c.target, c.height
     )];
     Ok((sfm::Input { images }, Truth { poses }, Findings { notes, ..Default::default() }))
