@@ -11,6 +11,7 @@ pub mod bundle;
 pub mod colmap;
 pub mod eval;
 pub mod features;
+pub mod five_point;
 pub mod input;
 pub mod mapper;
 pub mod matching;
