@@ -402,7 +402,7 @@ fn ln(x: V) -> V {
     let m = m.or_where(above, m + 1.0);
     let s = (f - 1.0) / (f + 1.0);
     let z = s * s;
-    // Σ z^k/(2k + 1) for k = 0 … 8, by Estrin's scheme (`estrin`).
+    // Σ z^k/(2k + 1) for k = 0 … 8, by Estrin's scheme (`estrin9`).
     let p = estrin9(
         z,
         [1.0, 1.0 / 3.0, 1.0 / 5.0, 1.0 / 7.0, 1.0 / 9.0, 1.0 / 11.0, 1.0 / 13.0, 1.0 / 15.0, 1.0 / 17.0],
@@ -439,9 +439,9 @@ fn exp(x: V) -> V {
 
 /// Σ c_k·x^k (k = 0 … 8 and k = 0 … 13, for ln and exp) by Estrin's scheme: pairs
 /// c_2i + c_2i+1·x, then pairs of those with x², x⁴, x⁸. The operations of Horner's rule, but
-/// a dependency chain of four fused multiply-adds instead of 9 and 14: those chains, one
-/// after the other for each group of eight observations, bounded the passes' speed. Written
-/// out for the two lengths, so that it unrolls with no multiply-add by a zero.
+/// a dependency chain of four fused multiply-adds instead of 9 and 14: chains that long, one
+/// after the other for each group of eight observations, left the core waiting on their
+/// latency. Written out for the two lengths, so that it unrolls with no multiply-add by a zero.
 #[inline(always)]
 fn estrin9(x: V, c: [f64; 9]) -> V {
     let k = |i: usize| V::splat(c[i]);

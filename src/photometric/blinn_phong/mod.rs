@@ -54,8 +54,7 @@ const ROUNDS: usize = 3;
 const START_SHININESS: [f64; 2] = [4.0, 64.0];
 /// Two start normals whose cosine exceeds this are one start: cos θ½ = 2^(−1/e_max), the half
 /// width at half maximum of the narrowest lobe the fit allows (e_max = 10⁴, θ½ = 0.67°). The
-/// cost has no finer angular detail, so starts that close end in the same basin (on
-/// `pipelines/all.toml` the renders' errors stay within 0.03 %).
+/// cost has no finer angular detail, so starts that close end in the same basin.
 const SAME_START_COS: f64 = 0.999_930_687_684_153_6;
 /// Gauss-Newton iterations from each of them before the best goes on (the default of
 /// `photometric::Config::start_iterations`).
