@@ -17,7 +17,10 @@
 //! dominated by one plane (a façade) among many wrong matches still yields the right E from a
 //! sample with a few points off the plane.
 
-use nalgebra::{DMatrix, Matrix3, SMatrix, SVector};
+use nalgebra::{DMatrix, Matrix3, SMatrix, SVector, Schur};
+
+/// Iterations allowed to each SVD and Schur decomposition (they converge in tens).
+const MAX_ITERATIONS: usize = 1000;
 
 /// A polynomial in (x, y, z) of degree ≤ 3: coefficients over `MONOMIALS`.
 type Poly = [f64; 20];
@@ -91,7 +94,11 @@ pub fn essentials(x1: &[[f64; 2]], x2: &[[f64; 2]], idx: &[usize]) -> Vec<Matrix
             }
         }
     }
-    let svd = q.svd(false, true);
+    // Capped iterations: nalgebra's uncapped decompositions loop for ever on a NaN.
+    if !q.iter().all(|v| v.is_finite()) {
+        return Vec::new();
+    }
+    let Some(svd) = q.try_svd(false, true, f64::EPSILON, MAX_ITERATIONS) else { return Vec::new() };
     let Some(vt) = svd.v_t else { return Vec::new() };
     let mut order: Vec<usize> = (0..9).collect();
     order.sort_by(|&a, &b| svd.singular_values[a].total_cmp(&svd.singular_values[b]));
@@ -146,13 +153,17 @@ pub fn essentials(x1: &[[f64; 2]], x2: &[[f64; 2]], idx: &[usize]) -> Vec<Matrix
     for (row, col) in [(6, 0), (7, 1), (8, 2), (9, 6)] {
         action[(row, col)] = 1.0;
     }
+    if !action.iter().all(|v| v.is_finite()) {
+        return Vec::new();
+    }
+    let Some(schur) = Schur::try_new(action, f64::EPSILON, MAX_ITERATIONS) else { return Vec::new() };
     let mut out = Vec::new();
-    for lambda in action.complex_eigenvalues().iter() {
+    for lambda in schur.complex_eigenvalues().iter() {
         if lambda.im.abs() > 1e-8 * (1.0 + lambda.re.abs()) {
             continue;
         }
         let shifted = action - SMatrix::<f64, 10, 10>::identity() * lambda.re;
-        let svd = shifted.svd(false, true);
+        let Some(svd) = shifted.try_svd(false, true, f64::EPSILON, MAX_ITERATIONS) else { continue };
         let Some(vt) = svd.v_t else { continue };
         let (k, _) = svd.singular_values.iter().enumerate().fold((0, f64::INFINITY), |best, (k, &s)| {
             if s < best.1 {
@@ -180,6 +191,17 @@ pub fn essentials(x1: &[[f64; 2]], x2: &[[f64; 2]], idx: &[usize]) -> Vec<Matrix
 mod tests {
     use super::*;
     use nalgebra::{Rotation3, Vector3};
+
+    /// Degenerate and non-finite input gives no solution, never a hang or a NaN.
+    #[test]
+    fn degenerate_input_gives_nothing() {
+        let same = [[0.1, 0.2]; 5];
+        assert!(essentials(&same, &same, &[0, 1, 2, 3, 4]).iter().all(|e| e.iter().all(|v| v.is_finite())));
+        let mut bad = [[0.1, 0.2], [0.3, -0.1], [-0.2, 0.4], [0.0, 0.0], [0.5, 0.5]];
+        bad[2][0] = f64::NAN;
+        assert!(essentials(&bad, &bad, &[0, 1, 2, 3, 4]).is_empty());
+        assert!(essentials(&bad, &bad, &[0, 1, 2]).is_empty());
+    }
 
     /// Five points seen from two poses, exactly: one of the solutions is [t]×R (up to sign),
     /// and every solution satisfies the five constraints and the essential-matrix identities.
