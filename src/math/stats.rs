@@ -1,4 +1,12 @@
-//! Small statistics helpers used by tests and reports.
+//! Small statistics helpers used by tests, reports and the robust fits.
+
+/// The value at index n/2 of `v` in ascending order (the median for odd n, the upper of the
+/// two middle values for even n), found by selection rather than a sort (`v` is reordered);
+/// `None` when `v` is empty. The robust fits' residual scale (MAD) is taken this way.
+pub fn upper_median(v: &mut [f64]) -> Option<f64> {
+    let mid = v.len() / 2;
+    (!v.is_empty()).then(|| *v.select_nth_unstable_by(mid, f64::total_cmp).1)
+}
 
 /// Standard normal CDF Φ(x).
 pub fn normal_cdf(x: f64) -> f64 {

@@ -16,6 +16,7 @@
 //! A pixel with fewer than 3 usable observations, or whose used lights are nearly coplanar
 //! (condition number of the 3×3 normal matrix above 10⁶), gets no normal.
 
+use crate::math::stats::upper_median;
 use glam::DVec3;
 use nalgebra::{Matrix3, Vector3};
 
@@ -126,8 +127,7 @@ pub fn solve_robust(lights: &[DVec3], obs: &[[f32; 3]], valid: &[bool]) -> Optio
         if res.len() < 3 {
             return None;
         }
-        let mid = res.len() / 2;
-        let mad = *res.select_nth_unstable_by(mid, f64::total_cmp).1;
+        let mad = upper_median(&mut res)?;
         let next: Vec<bool> = lights
             .iter()
             .zip(&g)

@@ -133,7 +133,7 @@ pub fn essentials(x1: &[[f64; 2]], x2: &[[f64; 2]], idx: &[usize]) -> Vec<Matrix
     for r in 0..3 {
         for c in 0..3 {
             let product = (0..3).fold([0.0; 20], |acc, k| add(&acc, &mul(&eet[r][k], &e[k][c]), 1.0));
-            let row = add(&add(&[0.0; 20], &product, 2.0), &mul(&trace, &e[r][c]), -1.0);
+            let row = add(&product.map(|v| 2.0 * v), &mul(&trace, &e[r][c]), -1.0);
             for (k, v) in row.iter().enumerate() {
                 m[(1 + 3 * r + c, k)] = *v;
             }
@@ -165,14 +165,7 @@ pub fn essentials(x1: &[[f64; 2]], x2: &[[f64; 2]], idx: &[usize]) -> Vec<Matrix
         let shifted = action - SMatrix::<f64, 10, 10>::identity() * lambda.re;
         let Some(svd) = shifted.try_svd(false, true, f64::EPSILON, MAX_ITERATIONS) else { continue };
         let Some(vt) = svd.v_t else { continue };
-        let (k, _) = svd.singular_values.iter().enumerate().fold((0, f64::INFINITY), |best, (k, &s)| {
-            if s < best.1 {
-                (k, s)
-            } else {
-                best
-            }
-        });
-        let v = vt.row(k);
+        let v = vt.row(svd.singular_values.imin());
         if v[9].abs() < 1e-12 {
             continue;
         }

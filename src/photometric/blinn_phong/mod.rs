@@ -44,6 +44,7 @@
 mod lanes;
 
 use super::lambertian;
+use crate::math::stats::upper_median;
 use glam::DVec3;
 use nalgebra::{Matrix4, SMatrix, SVector, Vector4};
 
@@ -398,8 +399,7 @@ pub fn solve(
             })
             .collect();
         let mut abs: Vec<f64> = judged.iter().map(|x| x.0).collect();
-        let mid = abs.len() / 2;
-        let mad = if abs.is_empty() { 0.0 } else { *abs.select_nth_unstable_by(mid, f64::total_cmp).1 };
+        let mad = upper_median(&mut abs).unwrap_or(0.0);
         let next: Vec<usize> = lit_now
             .iter()
             .zip(&judged)
