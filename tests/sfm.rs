@@ -27,6 +27,38 @@ fn herz_jesu_features(dir: &Path) -> &'static [features::Features] {
     })
 }
 
+/// Keypoint k's pixel position.
+fn position(f: &features::Features, k: u32) -> [f64; 2] {
+    let p = f.keypoints[k as usize];
+    [p.x as f64, p.y as f64]
+}
+
+/// Herz-Jesu-P8's images i and i + 1: their matches' positions in each, both K, and the true
+/// relative pose (X₂ = R₂ᵀR₁·X₁ + R₂ᵀ(C₁ − C₂); the translation as a unit vector).
+struct Pair {
+    p1: Vec<[f64; 2]>,
+    p2: Vec<[f64; 2]>,
+    k1: Matrix3<f64>,
+    k2: Matrix3<f64>,
+    r: Matrix3<f64>,
+    t: Vector3<f64>,
+}
+
+fn consecutive_pair(dir: &Path, feats: &[features::Features], i: usize) -> Pair {
+    let (a, b) = (&feats[i], &feats[i + 1]);
+    let m = matching::match_descriptors(&a.descriptors, &b.descriptors, &matching::Options::default());
+    let (k1, r1, c1) = camera(&dir.join(format!("gt_dense_cameras/{i:04}.jpg.camera")));
+    let (k2, r2, c2) = camera(&dir.join(format!("gt_dense_cameras/{:04}.jpg.camera", i + 1)));
+    Pair {
+        p1: m.iter().map(|x| position(a, x.a)).collect(),
+        p2: m.iter().map(|x| position(b, x.b)).collect(),
+        k1,
+        k2,
+        r: r2.transpose() * r1,
+        t: (r2.transpose() * (c1 - c2)).normalize(),
+    }
+}
+
 /// The seven consecutive pairs of Herz-Jesu-P8, each on its own: SIFT features (8192 per
 /// image), mutual ratio-test matches, E by RANSAC (4 px, COLMAP's two-view threshold) and
 /// the refined pose. Each pair is recognised as general (not planar, not a rotation), keeps
@@ -41,34 +73,22 @@ fn herz_jesu_consecutive_pairs() {
     let feats = herz_jesu_features(&dir);
     let mut errors = Vec::new();
     for i in 0..7 {
-        let (a, b) = (&feats[i], &feats[i + 1]);
-        assert_eq!(a.keypoints.len(), 8192);
-        let m = matching::match_descriptors(&a.descriptors, &b.descriptors, &matching::Options::default());
-        let pos = |f: &features::Features, k: u32| {
-            let p = f.keypoints[k as usize];
-            [p.x as f64, p.y as f64]
-        };
-        let p1: Vec<[f64; 2]> = m.iter().map(|x| pos(a, x.a)).collect();
-        let p2: Vec<[f64; 2]> = m.iter().map(|x| pos(b, x.b)).collect();
-        let (k1, r1, c1) = camera(&dir.join(format!("gt_dense_cameras/{i:04}.jpg.camera")));
-        let (k2, r2, c2) = camera(&dir.join(format!("gt_dense_cameras/{:04}.jpg.camera", i + 1)));
+        assert_eq!(feats[i].keypoints.len(), 8192);
+        let Pair { p1, p2, k1, k2, r: r_true, t: t_true } = consecutive_pair(&dir, feats, i);
         let tv = two_view::estimate(&p1, &p2, &k1, &k2, 4.0, 1).unwrap();
         assert_eq!(tv.configuration, two_view::Configuration::General, "pair {i}-{}", i + 1);
         assert!(
-            tv.inliers.len() as f64 > 0.9 * m.len() as f64,
+            tv.inliers.len() as f64 > 0.9 * p1.len() as f64,
             "pair {i}: {} of {}",
             tv.inliers.len(),
-            m.len()
+            p1.len()
         );
-        // X₂ = R₂ᵀR₁·X₁ + R₂ᵀ(C₁ − C₂).
-        let r_true = r2.transpose() * r1;
-        let t_true = (r2.transpose() * (c1 - c2)).normalize();
         let dr = two_view::rotation_angle_deg(&(tv.pose.r * r_true.transpose()));
         let dt = tv.pose.t.dot(&t_true).clamp(-1.0, 1.0).acos().to_degrees();
         eprintln!(
             "pair {i}-{}: {} matches, {} inliers, rotation {dr:.4}°, direction {dt:.3}°",
             i + 1,
-            m.len(),
+            p1.len(),
             tv.inliers.len()
         );
         assert!(dt < 1.0, "pair {i}: translation direction off by {dt}°");
@@ -95,25 +115,19 @@ fn herz_jesu_pairs_with_half_the_matches_wrong() {
     let mut errors = Vec::new();
     for i in 0..7 {
         let (a, b) = (&feats[i], &feats[i + 1]);
-        let m = matching::match_descriptors(&a.descriptors, &b.descriptors, &matching::Options::default());
-        let pos = |f: &features::Features, k: u32| {
-            let p = f.keypoints[k as usize];
-            [p.x as f64, p.y as f64]
-        };
-        let (k1, r1, c1) = camera(&dir.join(format!("gt_dense_cameras/{i:04}.jpg.camera")));
-        let (k2, r2, c2) = camera(&dir.join(format!("gt_dense_cameras/{:04}.jpg.camera", i + 1)));
-        let clean_p1: Vec<[f64; 2]> = m.iter().map(|x| pos(a, x.a)).collect();
-        let clean_p2: Vec<[f64; 2]> = m.iter().map(|x| pos(b, x.b)).collect();
+        let Pair { p1: clean_p1, p2: clean_p2, k1, k2, r: r_true, t: t_true } =
+            consecutive_pair(&dir, feats, i);
+        let n = clean_p1.len();
         let clean = two_view::estimate(&clean_p1, &clean_p2, &k1, &k2, 4.0, 1).unwrap();
-        // (index into m, or None for a wrong one), shuffled by a seeded sort key.
+        // (index of the right match, or None for a wrong one), shuffled by a seeded sort key.
         let salt = (i as u64) << 32;
-        let mut pairs: Vec<(Option<usize>, [f64; 2], [f64; 2])> = (0..m.len())
+        let mut pairs: Vec<(Option<usize>, [f64; 2], [f64; 2])> = (0..n)
             .map(|j| (Some(j), clean_p1[j], clean_p2[j]))
-            .chain((0..m.len()).map(|j| {
+            .chain((0..n).map(|j| {
                 let (ka, kb) = (random(salt ^ (2 * j as u64)), random(salt ^ (2 * j as u64 + 1)));
                 let (ka, kb) =
                     ((ka % a.keypoints.len() as u64) as u32, (kb % b.keypoints.len() as u64) as u32);
-                (None, pos(a, ka), pos(b, kb))
+                (None, position(a, ka), position(b, kb))
             }))
             .collect();
         pairs
@@ -124,8 +138,6 @@ fn herz_jesu_pairs_with_half_the_matches_wrong() {
         assert_eq!(tv.configuration, two_view::Configuration::General, "pair {i}-{}", i + 1);
         let right = tv.inliers.iter().filter(|&&k| pairs[k].0.is_some()).count();
         let wrong = tv.inliers.len() - right;
-        let r_true = r2.transpose() * r1;
-        let t_true = (r2.transpose() * (c1 - c2)).normalize();
         let dr = two_view::rotation_angle_deg(&(tv.pose.r * r_true.transpose()));
         let dr_clean = two_view::rotation_angle_deg(&(clean.pose.r * r_true.transpose()));
         let from_clean = two_view::rotation_angle_deg(&(tv.pose.r * clean.pose.r.transpose()));
@@ -135,8 +147,8 @@ fn herz_jesu_pairs_with_half_the_matches_wrong() {
             i + 1,
             tv.iterations,
             tv.homography_inliers,
-            m.len(),
-            m.len(),
+            n,
+            n,
             clean.inliers.len()
         );
         assert!(
@@ -144,7 +156,7 @@ fn herz_jesu_pairs_with_half_the_matches_wrong() {
             "pair {i}: {right} of {}",
             clean.inliers.len()
         );
-        assert!(wrong as f64 <= 0.01 * m.len() as f64, "pair {i}: {wrong} wrong matches kept");
+        assert!(wrong as f64 <= 0.01 * n as f64, "pair {i}: {wrong} wrong matches kept");
         assert!(dt < 1.0, "pair {i}: translation direction off by {dt}°");
         errors.push(dr);
     }
