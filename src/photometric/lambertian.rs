@@ -32,21 +32,25 @@ pub struct Pixel {
 /// Least squares of b over the selected lights; `None` when fewer than 3 are used or the
 /// normal matrix is ill-conditioned.
 fn fit(lights: &[DVec3], grey: &[f64], use_it: &[bool]) -> Option<DVec3> {
-    let mut a = Matrix3::<f64>::zeros();
-    let mut rhs = Vector3::<f64>::zeros();
+    // The six distinct entries of Σ l·lᵀ and Σ g·l, summed apart (nalgebra's outer product
+    // per light was most of a robust fit's time).
+    let (mut xx, mut xy, mut xz, mut yy, mut yz, mut zz) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    let mut rhs = DVec3::ZERO;
     let mut n = 0;
     for ((l, &g), &u) in lights.iter().zip(grey).zip(use_it) {
         if !u {
             continue;
         }
-        let v = Vector3::new(l.x, l.y, l.z);
-        a += v * v.transpose();
-        rhs += v * g;
+        (xx, xy, xz) = (xx + l.x * l.x, xy + l.x * l.y, xz + l.x * l.z);
+        (yy, yz, zz) = (yy + l.y * l.y, yz + l.y * l.z, zz + l.z * l.z);
+        rhs += *l * g;
         n += 1;
     }
     if n < 3 {
         return None;
     }
+    let a = Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz);
+    let rhs = Vector3::new(rhs.x, rhs.y, rhs.z);
     let eig = a.symmetric_eigenvalues();
     let (lo, hi) = (eig.min(), eig.max());
     if !(lo > hi * 1e-6) {
@@ -101,47 +105,49 @@ pub fn solve_robust(lights: &[DVec3], obs: &[[f32; 3]], valid: &[bool]) -> Optio
     let lit: Vec<bool> = g.iter().zip(valid).map(|(&v, &ok)| ok && v > 0.01 * brightest).collect();
     let valid: &[bool] = if lit.iter().filter(|&&u| u).count() >= 3 { &lit } else { valid };
     // Start from the middle of the pixel's brightness ranking: the darkest quarter (shadows)
-    // and the brightest tenth (highlights) are the commonest outliers.
+    // and the brightest tenth (highlights) are the commonest outliers. The ranks lo..hi are
+    // found by selection, ties broken by index as a stable sort would.
     let mut order: Vec<usize> = (0..g.len()).filter(|&j| valid[j]).collect();
     if order.len() < 3 {
         return None;
     }
-    order.sort_by(|&a, &b| g[a].total_cmp(&g[b]));
     let (lo, hi) =
         (order.len() / 4, (order.len() * 9).div_ceil(10).max(order.len() / 4 + 3).min(order.len()));
+    let rank = |a: &usize, b: &usize| g[*a].total_cmp(&g[*b]).then(a.cmp(b));
+    order.select_nth_unstable_by(lo, rank);
+    let upper = &mut order[lo..];
+    if hi - lo < upper.len() {
+        upper.select_nth_unstable_by(hi - lo, rank);
+    }
     let mut use_it = vec![false; g.len()];
     for &j in &order[lo..hi] {
         use_it[j] = true;
     }
     let mut b = fit(lights, &g, &use_it).or_else(|| fit(lights, &g, valid))?;
+    // l·n per light, the residuals of the lit ones and the next set, reused across rounds.
+    let (mut s, mut res, mut next) = (vec![0.0; g.len()], Vec::with_capacity(g.len()), vec![false; g.len()]);
     for _ in 0..10 {
         let n = b.normalize();
         let rho = b.length();
-        let mut res: Vec<f64> = Vec::new();
-        for ((l, &v), &ok) in lights.iter().zip(&g).zip(valid) {
-            let s = l.dot(n);
-            if ok && s > 0.05 {
-                res.push((v - rho * s).abs());
+        res.clear();
+        for j in 0..g.len() {
+            s[j] = lights[j].dot(n);
+            if valid[j] && s[j] > 0.05 {
+                res.push((g[j] - rho * s[j]).abs());
             }
         }
         if res.len() < 3 {
             return None;
         }
-        let mad = upper_median(&mut res)?;
-        let next: Vec<bool> = lights
-            .iter()
-            .zip(&g)
-            .zip(valid)
-            .map(|((l, &v), &ok)| {
-                let s = l.dot(n);
-                let pred = rho * s;
-                ok && s > 0.05 && (v - pred).abs() <= (3.0 * 1.4826 * mad).max(0.02 * pred)
-            })
-            .collect();
+        let limit = 3.0 * 1.4826 * upper_median(&mut res)?;
+        for j in 0..g.len() {
+            let pred = rho * s[j];
+            next[j] = valid[j] && s[j] > 0.05 && (g[j] - pred).abs() <= limit.max(0.02 * pred);
+        }
         // A set the model cannot be fitted to (too few or coplanar lights) keeps the last fit.
         let Some(nb) = fit(lights, &g, &next) else { break };
         let settled = next == use_it;
-        use_it = next;
+        std::mem::swap(&mut use_it, &mut next);
         b = nb;
         if settled {
             break;

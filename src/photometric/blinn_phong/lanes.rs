@@ -1,6 +1,7 @@
 //! The fit's inner loop over a pixel's used observations, eight at a time: ‖r‖² alone (the
-//! line search) or with JᵀJ and Jᵀr (the Gauss-Newton step), for the model and Jacobian of
-//! `Fit::visit`.
+//! line search), with JᵀJ and Jᵀr (the Gauss-Newton step), or the residuals themselves (the
+//! outlier rounds), for the model of the module above and its Jacobian (written out
+//! observation by observation in its tests' `visit`, which these sums are checked against).
 //!
 //! Hand-written rather than through a SIMD crate: the loop body is plain scalar f64 code over
 //! arrays of eight (structure of arrays), which LLVM turns into AVX-512 or AVX2 instructions
@@ -34,6 +35,7 @@ struct Group {
 /// observations (c = n·l = 0 there, so a padding lane adds nothing to any sum).
 pub(super) struct Observations {
     groups: Vec<Group>,
+    len: usize,
 }
 
 impl Observations {
@@ -47,7 +49,7 @@ impl Observations {
                 g.obs[a][k] = obs[j][a] as f64;
             }
         }
-        Observations { groups }
+        Observations { groups, len: used.len() }
     }
 }
 
@@ -65,15 +67,18 @@ pub(super) struct Point {
 
 /// Calls `$body(args)` compiled for the best instruction set this processor has.
 macro_rules! dispatch {
-    ($body:ident($($arg:expr),*)) => {{
+    ($body:ident($($arg:expr),*)) => {
+        dispatch!($body($($arg),*) -> Sums)
+    };
+    ($body:ident($($arg:expr),*) -> $out:ty) => {{
         #[cfg(target_arch = "x86_64")]
         {
             #[target_feature(enable = "avx512f,fma")]
-            fn avx512(obs: &Observations, at: &Point) -> Sums {
+            fn avx512(obs: &Observations, at: &Point) -> $out {
                 $body(obs, at)
             }
             #[target_feature(enable = "avx2,fma")]
-            fn avx2(obs: &Observations, at: &Point) -> Sums {
+            fn avx2(obs: &Observations, at: &Point) -> $out {
                 $body(obs, at)
             }
             if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("fma") {
@@ -125,6 +130,11 @@ pub(super) fn normal_equations(obs: &Observations, at: &Point) -> (f64, SMatrix<
     set(6, 6, s[S66]);
     let jtr = Param::from([s[G0], s[G1], s[GC], s[GC + 1], s[GC + 2], s[G5], s[G6]]);
     (s[SQ], jtj, jtr)
+}
+
+/// The residuals, three per observation (r, g, b) in the order `Observations::new` was given.
+pub(super) fn residuals(obs: &Observations, at: &Point) -> Vec<f64> {
+    dispatch!(residuals_body(obs, at) -> Vec<f64>)
 }
 
 /// The sums of the linear least squares for (ρ_r, ρ_g, ρ_b, σ) at `at.n` and `at.e` (`start_at`),
@@ -274,7 +284,7 @@ fn accumulate<const N: usize>(acc: &mut V, pairs: [(V, V); N]) {
     }
 }
 
-/// Eight observations' model terms (`Fit::visit`).
+/// Eight observations' model terms.
 struct Terms {
     /// n·l, 0 where unlit.
     c: V,
@@ -337,6 +347,20 @@ fn squares_body(obs: &Observations, at: &Point) -> Sums {
     let mut s = [0.0; SUMS];
     s[SQ] = acc.sum();
     s
+}
+
+#[inline(always)]
+fn residuals_body(obs: &Observations, at: &Point) -> Vec<f64> {
+    let lobe = (at.e + 8.0) / 8.0;
+    let mut out = Vec::with_capacity(3 * W * obs.groups.len());
+    for g in &obs.groups {
+        let r = model(g, at, lobe).r;
+        for k in 0..W {
+            out.extend([r[0].0[k], r[1].0[k], r[2].0[k]]);
+        }
+    }
+    out.truncate(3 * obs.len);
+    out
 }
 
 #[inline(always)]

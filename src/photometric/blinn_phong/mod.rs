@@ -86,28 +86,23 @@ pub struct Pixel {
 }
 
 /// The residuals of one pixel over the used observations.
-struct Fit<'a> {
-    lights: &'a [DVec3],
-    halves: &'a [DVec3],
-    obs: &'a [[f32; 3]],
-    used: &'a [usize],
-    /// The same observations in lanes, for the cost and the normal equations.
+struct Fit {
+    /// The observations in lanes, for the cost, the normal equations and the residuals.
     lanes: lanes::Observations,
     n0: DVec3,
     t: DVec3,
     s: DVec3,
 }
 
-impl<'a> Fit<'a> {
+impl Fit {
     fn new(
-        lights: &'a [DVec3],
-        halves: &'a [DVec3],
-        obs: &'a [[f32; 3]],
-        used: &'a [usize],
+        lights: &[DVec3],
+        halves: &[DVec3],
+        obs: &[[f32; 3]],
+        used: &[usize],
         (n0, t, s): (DVec3, DVec3, DVec3),
-    ) -> Fit<'a> {
-        let lanes = lanes::Observations::new(lights, halves, obs, used);
-        Fit { lights, halves, obs, used, lanes, n0, t, s }
+    ) -> Fit {
+        Fit { lanes: lanes::Observations::new(lights, halves, obs, used), n0, t, s }
     }
 
     fn normal(&self, p: &Param) -> (DVec3, f64) {
@@ -131,53 +126,9 @@ impl<'a> Fit<'a> {
         }
     }
 
-    /// Calls `each(residuals, Jacobian rows)` for every used observation in order (the rows
-    /// only when `jacobian` and the light reaches the surface: an unlit observation's rows are
-    /// zero). The model and Jacobian written out once, observation by observation; `lanes`
-    /// computes the same sums eight observations at a time.
-    fn visit(&self, p: &Param, jacobian: bool, mut each: impl FnMut([f64; 3], Option<[[f64; 7]; 3]>)) {
-        let lanes::Point { n, dna, dnb, sigma, e, ln_e_free, .. } = self.point(p);
-        for &j in self.used {
-            let (l, h) = (self.lights[j], self.halves[j]);
-            let c = n.dot(l);
-            let d = n.dot(h).max(0.0);
-            let (ln_d, de) = if c > 0.0 && d > 0.0 {
-                let ln = d.ln();
-                (ln, (e * ln).exp())
-            } else {
-                (0.0, 0.0)
-            };
-            let lobe = if de > 0.0 { (e + 8.0) / 8.0 } else { 0.0 };
-            let spec = sigma * lobe * de;
-            let r: [f64; 3] = std::array::from_fn(|ch| {
-                let pred = if c > 0.0 { (p[2 + ch] + spec) * c } else { 0.0 };
-                pred - self.obs[j][ch] as f64
-            });
-            let rows = (jacobian && c > 0.0).then(|| {
-                // ∂spec/∂n = σ·lobe·e·dᵉ⁻¹·h; ∂spec/∂ln e = e·σ·dᵉ·(1/8 + lobe·ln d).
-                let dspec_dn = if d > 0.0 { h * (sigma * lobe * e * de / d) } else { DVec3::ZERO };
-                let dspec_dt =
-                    if d > 0.0 && ln_e_free { e * sigma * de * (0.125 + lobe * ln_d) } else { 0.0 };
-                std::array::from_fn(|ch| {
-                    let dn = l * (p[2 + ch] + spec) + dspec_dn * c;
-                    let mut row = [0.0; 7];
-                    row[0] = dn.dot(dna);
-                    row[1] = dn.dot(dnb);
-                    row[2 + ch] = c;
-                    row[5] = lobe * de * c;
-                    row[6] = dspec_dt * c;
-                    row
-                })
-            });
-            each(r, rows);
-        }
-    }
-
     /// The residuals, three per used observation.
     fn residuals(&self, p: &Param) -> Vec<f64> {
-        let mut r = Vec::with_capacity(3 * self.used.len());
-        self.visit(p, false, |res, _| r.extend(res));
-        r
+        lanes::residuals(&self.lanes, &self.point(p))
     }
 
     /// ‖r‖ with the prior's seven residuals √μ·(p − p₀).
@@ -362,7 +313,7 @@ pub fn solve(
         .map(|p| p.normal)
         .filter(|n| n.dot(n0) > 0.5 && n.dot(n0) < SAME_START_COS);
     let starts = std::iter::once(n0).chain(plain);
-    let fit = Fit::new(lights, &halves, obs, &used, basis);
+    let mut fit = Fit::new(lights, &halves, obs, &used, basis);
     let Some((mut p, _, steps)) = starts
         .flat_map(|n| START_SHININESS.iter().map(move |&e| (n, e)))
         .filter_map(|(n, e)| {
@@ -378,7 +329,6 @@ pub fn solve(
     let mut history = vec![n0];
     history.extend(steps);
     for round in 0..ROUNDS {
-        let fit = Fit::new(lights, &halves, obs, &used, basis);
         let Some((q, _, steps)) = levenberg_marquardt(&fit, &p, MAX_ITERATIONS) else {
             return Some(lambertian());
         };
@@ -413,6 +363,7 @@ pub fn solve(
         if used.len() < 7 {
             return Some(lambertian());
         }
+        fit = Fit::new(lights, &halves, obs, &used, basis);
     }
     let normal = normal_of(n0, t, s, &p);
     // The model reads ln e clamped to its range (a flat direction of the cost outside it).
@@ -484,8 +435,56 @@ mod tests {
         }
     }
 
-    /// The lanes' sums equal the model and Jacobian written out observation by observation
-    /// (`Fit::visit`), with some lights unlit and ln e inside and outside its clamp.
+    /// Calls `each(residuals, Jacobian rows)` for every used observation in order (the rows
+    /// only when `jacobian` and the light reaches the surface: an unlit observation's rows are
+    /// zero): the model and Jacobian written out once, observation by observation, as the
+    /// reference the lanes are checked against.
+    fn visit(
+        fit: &Fit,
+        (lights, halves, obs, used): (&[DVec3], &[DVec3], &[[f32; 3]], &[usize]),
+        p: &Param,
+        jacobian: bool,
+        mut each: impl FnMut([f64; 3], Option<[[f64; 7]; 3]>),
+    ) {
+        let lanes::Point { n, dna, dnb, sigma, e, ln_e_free, .. } = fit.point(p);
+        for &j in used {
+            let (l, h) = (lights[j], halves[j]);
+            let c = n.dot(l);
+            let d = n.dot(h).max(0.0);
+            let (ln_d, de) = if c > 0.0 && d > 0.0 {
+                let ln = d.ln();
+                (ln, (e * ln).exp())
+            } else {
+                (0.0, 0.0)
+            };
+            let lobe = if de > 0.0 { (e + 8.0) / 8.0 } else { 0.0 };
+            let spec = sigma * lobe * de;
+            let r: [f64; 3] = std::array::from_fn(|ch| {
+                let pred = if c > 0.0 { (p[2 + ch] + spec) * c } else { 0.0 };
+                pred - obs[j][ch] as f64
+            });
+            let rows = (jacobian && c > 0.0).then(|| {
+                // ∂spec/∂n = σ·lobe·e·dᵉ⁻¹·h; ∂spec/∂ln e = e·σ·dᵉ·(1/8 + lobe·ln d).
+                let dspec_dn = if d > 0.0 { h * (sigma * lobe * e * de / d) } else { DVec3::ZERO };
+                let dspec_dt =
+                    if d > 0.0 && ln_e_free { e * sigma * de * (0.125 + lobe * ln_d) } else { 0.0 };
+                std::array::from_fn(|ch| {
+                    let dn = l * (p[2 + ch] + spec) + dspec_dn * c;
+                    let mut row = [0.0; 7];
+                    row[0] = dn.dot(dna);
+                    row[1] = dn.dot(dnb);
+                    row[2 + ch] = c;
+                    row[5] = lobe * de * c;
+                    row[6] = dspec_dt * c;
+                    row
+                })
+            });
+            each(r, rows);
+        }
+    }
+
+    /// The lanes' sums and residuals equal the model and Jacobian written out observation by
+    /// observation (`visit`), with some lights unlit and ln e inside and outside its clamp.
     #[test]
     fn lanes_match_the_written_out_jacobian() {
         let l = lights();
@@ -500,8 +499,10 @@ mod tests {
         for ln_e in [3.2, -0.5, 12.0] {
             let p = Param::from([0.05, -0.03, 0.18, 0.16, 0.09, 0.12, ln_e]);
             let (mut sum, mut jtj, mut jtr) = (0.0, SMatrix::<f64, 7, 7>::zeros(), Param::zeros());
-            fit.visit(&p, true, |r, rows| {
+            let mut written_out = Vec::new();
+            visit(&fit, (&l, &halves, &obs, &used), &p, true, |r, rows| {
                 sum += r.iter().map(|x| x * x).sum::<f64>();
+                written_out.extend(r);
                 for (row, r) in rows.into_iter().flatten().zip(r) {
                     let row = Param::from(row);
                     jtj += row * row.transpose();
@@ -512,6 +513,11 @@ mod tests {
             let (cost, lanes_jtj, lanes_jtr) = fit.normal_equations(&p, &p);
             let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * (1.0 + a.abs().max(b.abs()));
             assert!(close(cost * cost, sum), "ln e {ln_e}: {} vs {sum}", cost * cost);
+            let residuals = fit.residuals(&p);
+            assert_eq!(residuals.len(), 3 * used.len());
+            for (a, b) in residuals.iter().zip(&written_out) {
+                assert!(close(*a, *b), "ln e {ln_e}: residual {a} vs {b}");
+            }
             for i in 0..7 {
                 assert!(close(lanes_jtr[i], jtr[i]), "ln e {ln_e}: Jᵀr[{i}] {} vs {}", lanes_jtr[i], jtr[i]);
                 for k in 0..7 {
