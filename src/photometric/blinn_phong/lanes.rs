@@ -22,13 +22,13 @@ use nalgebra::SMatrix;
 const W: usize = 8;
 type Lane = [f64; W];
 
-/// Eight observations: light and half-vector directions and the three channels, each
-/// component an array of eight.
+/// Eight observations: light and half-vector directions and the three channels (negated, so
+/// that a residual is one fused multiply-add), each component an array of eight.
 #[derive(Clone, Copy, Default)]
 struct Group {
     l: [Lane; 3],
     h: [Lane; 3],
-    obs: [Lane; 3],
+    minus_obs: [Lane; 3],
 }
 
 /// A pixel's used observations in groups of eight, the last padded with zero lights and zero
@@ -46,7 +46,7 @@ impl Observations {
             for a in 0..3 {
                 g.l[a][k] = lights[j][a];
                 g.h[a][k] = halves[j][a];
-                g.obs[a][k] = obs[j][a] as f64;
+                g.minus_obs[a][k] = -(obs[j][a] as f64);
             }
         }
         Observations { groups, len: used.len() }
@@ -305,7 +305,7 @@ fn model(g: &Group, at: &Point, lobe: f64) -> Terms {
     let de = exp(ln_d * at.e).and(lit);
     let spec = de * (at.sigma * lobe);
     let c = c.max(0.0);
-    let r = |ch: usize| (spec + at.rho[ch]) * c - V(g.obs[ch]);
+    let r = |ch: usize| (spec + at.rho[ch]).fma(c, V(g.minus_obs[ch]));
     let r = [r(0), r(1), r(2)];
     Terms { c, d, ln_d, de, spec, r }
 }
@@ -320,7 +320,8 @@ fn linear_sums_body(obs: &Observations, at: &Point) -> Sums {
         let lit = c.gt(0.0) & d.gt(0.0);
         let c = c.max(0.0);
         let g = exp(ln(d.max(f64::MIN_POSITIVE)) * at.e).and(lit) * c * lobe;
-        let o = [V(grp.obs[0]), V(grp.obs[1]), V(grp.obs[2])];
+        // −I: the sums that hold it are negated at the end (exactly).
+        let o = [V(grp.minus_obs[0]), V(grp.minus_obs[1]), V(grp.minus_obs[2])];
         accumulate(&mut a[0], [(c, c)]);
         accumulate(&mut a[1], [(c, g)]);
         accumulate(&mut a[2], [(g, g)]);
@@ -330,8 +331,8 @@ fn linear_sums_body(obs: &Observations, at: &Point) -> Sums {
         accumulate(&mut a[6], [(g, o[0] + o[1] + o[2])]);
     }
     let mut s = [0.0; SUMS];
-    for (s, a) in s.iter_mut().zip(a) {
-        *s = a.sum();
+    for (k, (s, a)) in s.iter_mut().zip(a).enumerate() {
+        *s = if k < 3 { a.sum() } else { -a.sum() };
     }
     s
 }
@@ -379,8 +380,8 @@ fn normal_equations_body(obs: &Observations, at: &Point) -> Sums {
         let (ha, hb) = (dot(dna, &g.h) * kh, dot(dnb, &g.h) * kh);
         let (r5, r6) = (de * c * lobe, dt * c);
         let rs = [spec + at.rho[0], spec + at.rho[1], spec + at.rho[2]];
-        let row0 = [la * rs[0] + ha, la * rs[1] + ha, la * rs[2] + ha];
-        let row1 = [lb * rs[0] + hb, lb * rs[1] + hb, lb * rs[2] + hb];
+        let row0 = [la.fma(rs[0], ha), la.fma(rs[1], ha), la.fma(rs[2], ha)];
+        let row1 = [lb.fma(rs[0], hb), lb.fma(rs[1], hb), lb.fma(rs[2], hb)];
         let (sum0, sum1, sum_r) =
             (row0[0] + row0[1] + row0[2], row1[0] + row1[1] + row1[2], r[0] + r[1] + r[2]);
         accumulate(&mut a[SQ], [(r[0], r[0]), (r[1], r[1]), (r[2], r[2])]);
@@ -417,21 +418,29 @@ fn ln(x: V) -> V {
     const LN2_HI: f64 = 6.931_471_803_691_238_2e-1;
     const LN2_LO: f64 = 1.908_214_929_270_587_7e-10;
     const TWO52: f64 = 4_503_599_627_370_496.0;
+    // m + 1023 = the exponent of x/√½ (x's bits less √½'s, plus the bias), in integer
+    // arithmetic; f = x·2⁻ᵐ by subtracting m from x's exponent.
+    const SQRT_HALF: u64 = 0x3FE6_A09E_667F_3BCD;
+    const BIAS: u64 = 1023 << 52;
     let bits = x.bits();
-    // The biased exponent as a float, through the 2⁵² trick (no integer conversion).
-    let m = V::from_bits(bits.map(|b| 0x4330_0000_0000_0000 | (b >> 52))) - (TWO52 + 1023.0);
-    let f = V::from_bits(bits.map(|b| (b & 0x000F_FFFF_FFFF_FFFF) | 0x3FF0_0000_0000_0000));
-    let above = f.gt(std::f64::consts::SQRT_2);
-    let f = f.or_where(above, f * 0.5);
-    let m = m.or_where(above, m + 1.0);
+    let biased = bits.map(|b| (b + (BIAS - SQRT_HALF)) >> 52);
+    // m as a float, through the 2⁵² trick (no integer conversion).
+    let m = V::from_bits(biased.map(|e| 0x4330_0000_0000_0000 | e)) - (TWO52 + 1023.0);
+    let f = V::from_bits(std::array::from_fn(|i| bits[i] + BIAS - (biased[i] << 52)));
     let s = (f - 1.0) / (f + 1.0);
     let z = s * s;
-    // Σ z^k/(2k + 1) for k = 0 … 8, by Estrin's scheme (`estrin9`).
-    let p = estrin9(
-        z,
-        [1.0, 1.0 / 3.0, 1.0 / 5.0, 1.0 / 7.0, 1.0 / 9.0, 1.0 / 11.0, 1.0 / 13.0, 1.0 / 15.0, 1.0 / 17.0],
-    );
-    m * LN2_HI + (m * LN2_LO + s * p * 2.0)
+    // Σ 2·z^k/(2k + 1) for k = 0 … 8, by Estrin's scheme (`estrin9`).
+    const TWO_OVER_ODD: [f64; 9] = {
+        let mut a = [0.0; 9];
+        let mut k = 0;
+        while k < 9 {
+            a[k] = 2.0 / (2 * k + 1) as f64;
+            k += 1;
+        }
+        a
+    };
+    let p = estrin9(z, TWO_OVER_ODD);
+    m.fma(V::splat(LN2_HI), m.fma(V::splat(LN2_LO), s * p))
 }
 
 /// eˣ: x = k·ln 2 + r with |r| ≤ ½ ln 2, eʳ as its Taylor series to r¹³ (truncation below
@@ -453,8 +462,8 @@ fn exp(x: V) -> V {
         a
     };
     let y = x.clamp(-708.0, 709.0);
-    let k = (y * std::f64::consts::LOG2_E + ROUND) - ROUND;
-    let r = (y - k * LN2_HI) - k * LN2_LO;
+    let k = y.fma(V::splat(std::f64::consts::LOG2_E), V::splat(ROUND)) - ROUND;
+    let r = k.fma(V::splat(-LN2_LO), k.fma(V::splat(-LN2_HI), y));
     let p = estrin14(r, INV_FACTORIAL);
     // 2ᵏ: k + 1023 in [1, 2046] sits in the low bits of k + 1023 + 2⁵², shifted to the exponent.
     let scale = V::from_bits((k + (1023.0 + TWO52)).bits().map(|b| b << 52));
