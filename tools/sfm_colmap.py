@@ -2,10 +2,15 @@
 its cameras compared with Strecha-format ground truth, for comparison with `lumen sfm`.
 
 Usage (the peers' virtual environment, ../shared/tools/peers-venv.sh):
-    $PEERS_PY tools/sfm_colmap.py ../shared/data/sfm/herz-jesu-p8 [threads]
+    $PEERS_PY tools/sfm_colmap.py ../shared/data/sfm/herz-jesu-p8 [threads] [MODEL]
 
-Prints extraction, matching and mapping times, registered images, points, and the pairwise
-relative rotation errors (median, max) against gt_dense_cameras/.
+With MODEL (SIMPLE_PINHOLE, SIMPLE_RADIAL, …) K.txt is not read: COLMAP guesses the focal
+length (1.2 × the longer side) and refines it and the model's extra parameters, as
+`lumen sfm` without --camera.
+
+Prints extraction, matching and mapping times, registered images, points, the pairwise
+relative rotation errors (median, max) against gt_dense_cameras/, and with MODEL the camera
+it ended with.
 """
 import os
 import sys
@@ -29,17 +34,20 @@ def angle_deg(r):
     return np.degrees(np.arctan2(np.linalg.norm(v), np.trace(r) - 1))
 
 
-def main(root, threads="2"):
+def main(root, threads="2", model=None):
     images = os.path.join(root, "images")
-    k = [float(x) for x in open(os.path.join(images, "K.txt")).read().split()]
     work = tempfile.mkdtemp()
     db = os.path.join(work, "database.db")
     opts = pycolmap.FeatureExtractionOptions()
     opts.num_threads = int(threads)
     reader = pycolmap.ImageReaderOptions()
-    reader.camera_model = "PINHOLE"
-    # COLMAP's pixel centres are at +0.5.
-    reader.camera_params = f"{k[0]},{k[4]},{k[2] + 0.5},{k[5] + 0.5}"
+    if model:
+        reader.camera_model = model
+    else:
+        k = [float(x) for x in open(os.path.join(images, "K.txt")).read().split()]
+        reader.camera_model = "PINHOLE"
+        # COLMAP's pixel centres are at +0.5.
+        reader.camera_params = f"{k[0]},{k[4]},{k[2] + 0.5},{k[5] + 0.5}"
     t = time.time()
     pycolmap.extract_features(db, images, camera_mode=pycolmap.CameraMode.SINGLE, reader_options=reader, extraction_options=opts, device=pycolmap.Device.cpu)
     t_ext = time.time() - t
@@ -51,9 +59,9 @@ def main(root, threads="2"):
     t = time.time()
     popts = pycolmap.IncrementalPipelineOptions()
     popts.num_threads = int(threads)
-    popts.ba_refine_focal_length = False
+    popts.ba_refine_focal_length = bool(model)
     popts.ba_refine_principal_point = False
-    popts.ba_refine_extra_params = False
+    popts.ba_refine_extra_params = bool(model)
     maps = pycolmap.incremental_mapping(db, images, work, options=popts)
     t_map = time.time() - t
     rec = max(maps.values(), key=lambda r: r.num_reg_images())
@@ -74,6 +82,9 @@ def main(root, threads="2"):
     print(f"COLMAP {pycolmap.__version__}: extraction {t_ext:.2f} s, matching {t_match:.2f} s, mapping {t_map:.2f} s; "
           f"registered {rec.num_reg_images()}, points {rec.num_points3D()}; "
           f"rotation error median {np.median(errs):.4f}°, max {errs[-1]:.4f}°")
+    if model:
+        for cam in rec.cameras.values():
+            print(f"camera {cam.model.name} {list(cam.params)}")
 
 
 if __name__ == "__main__":

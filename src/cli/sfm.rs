@@ -14,7 +14,8 @@ pub struct SfmArgs {
     pub images: PathBuf,
     /// The camera: a calibration from `lumen calibrate` or OpenCV (.yaml/.yml/.json), or a
     /// text file holding the 3×3 camera matrix K (no distortion). Without it: a focal length
-    /// of 1.2 × the longer side and a centred principal point (not refined yet).
+    /// of 1.2 × the longer side (COLMAP's guess) and a centred principal point, the focal
+    /// length then refined by bundle adjustment (images of one size share it).
     #[arg(long)]
     pub camera: Option<PathBuf>,
     /// Keypoints per image at most (COLMAP: 8192).
@@ -40,11 +41,11 @@ pub fn run(a: &SfmArgs) -> Result<()> {
         eprintln!("reading {}/{total}: {}", n + 1, f.display())
     })?;
     if given.is_none() {
-        eprintln!("warning: no --camera: a focal length of 1.2 × the longer side is assumed and not refined");
+        eprintln!("no --camera: starting from a focal length of 1.2 × the longer side, refined by bundle adjustment");
     }
     let config = sfm::Config {
         features: sfm::features::Options { max_features: a.max_features, ..Default::default() },
-        ..Default::default()
+        mapper: sfm::mapper::Options { refine_focal: given.is_none(), ..Default::default() },
     };
     eprintln!("extracting features and matching {} images …", input.images.len());
     let out = sfm::run(&input, &config)?;
@@ -59,6 +60,7 @@ pub fn run(a: &SfmArgs) -> Result<()> {
         "mean_track_length": if kept > 0 { observations as f64 / kept as f64 } else { 0.0 },
         "mean_observations_per_image": if registered > 0 { observations as f64 / registered as f64 } else { 0.0 },
         "reprojection_rms_px": rec.rms_px,
+        "cameras": out.cameras.iter().zip(&input.images).map(|(c, im)| serde_json::json!({"image": im.name, "fx": c.intrinsics.fx, "fy": c.intrinsics.fy, "cx": c.intrinsics.cx, "cy": c.intrinsics.cy, "focal_refined": given.is_none()})).collect::<Vec<_>>(),
         "unregistered": rec.unregistered.iter().map(|(i, why)| serde_json::json!({"image": input.images[*i].name, "reason": why})).collect::<Vec<_>>(),
         "pairs": rec.pairs.iter().map(|p| serde_json::json!({"a": input.images[p.a].name, "b": input.images[p.b].name, "matches": p.matches, "inliers": p.inliers, "configuration": p.configuration})).collect::<Vec<_>>(),
         "time_s": {
@@ -89,6 +91,12 @@ pub fn run(a: &SfmArgs) -> Result<()> {
         rec.rms_px,
         a.out.display()
     );
+    if let (None, Some(c)) = (given, out.cameras.first()) {
+        println!(
+            "  focal length refined from {:.1} to {:.1} px",
+            input.images[0].camera.intrinsics.fx, c.intrinsics.fx
+        );
+    }
     for (i, why) in &rec.unregistered {
         println!("  not registered: {}: {why}", input.images[*i].name);
     }

@@ -18,8 +18,7 @@ pub fn text_model(input: &Input, out: &Output) -> (String, String, String) {
         "# Camera list with one line of data per camera:\n#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n",
     );
     let _ = writeln!(cameras, "# Number of cameras: {}", input.images.len());
-    for (i, im) in input.images.iter().enumerate() {
-        let c = &im.camera;
+    for (i, c) in out.cameras.iter().enumerate() {
         let k = &c.intrinsics;
         let (cx, cy) = (k.cx + 0.5, k.cy + 0.5);
         if c.distortion.is_zero() {
@@ -106,7 +105,7 @@ pub fn text_model(input: &Input, out: &Output) -> (String, String, String) {
     );
     for (p, point, obs) in rec.seen_points() {
         let c = out.colours[obs[0].image as usize][obs[0].keypoint as usize];
-        let err = point_error(input, out, p);
+        let err = point_error(out, p);
         let track: Vec<String> = obs.iter().map(|n| format!("{} {}", n.image + 1, n.keypoint)).collect();
         let x = point.xyz;
         let _ = writeln!(
@@ -128,13 +127,13 @@ pub fn text_model(input: &Input, out: &Output) -> (String, String, String) {
 
 /// A point's mean reprojection error (pixels) over its registered observations, measured
 /// on the undistorted keypoints the mapper used.
-fn point_error(input: &Input, out: &Output, p: usize) -> f64 {
+fn point_error(out: &Output, p: usize) -> f64 {
     let rec = &out.reconstruction;
     let point = &rec.points[p];
     let (mut s, mut m) = (0.0, 0usize);
     for n in &point.track {
         let Some(pose) = &rec.poses[n.image as usize] else { continue };
-        let cam = &input.images[n.image as usize].camera;
+        let cam = &out.cameras[n.image as usize];
         let xc = pose.r * point.xyz + pose.t;
         let kp = out.features[n.image as usize].keypoints[n.keypoint as usize];
         if let Some(px) = cam.project(glam::DVec3::new(xc[0], xc[1], xc[2])) {

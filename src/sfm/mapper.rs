@@ -18,6 +18,11 @@
 //! 4. images that cannot be registered (too few 2D–3D matches, PnP without enough inliers)
 //!    are reported with the reason; what was reconstructed is kept.
 //!
+//! With `Options::refine_focal` (intrinsics guessed, not calibrated), the focal length the
+//! images share is refined in every bundle adjustment from the third registered image on, as
+//! COLMAP's `ba_refine_focal_length`: two views barely determine it (it trades against depth),
+//! and the images registered after an adjustment use its latest value.
+//!
 //! Frames: poses map world to camera (X_c = R X + t); the world is the first camera's frame
 //! at the scale of a unit baseline between the first pair.
 
@@ -49,6 +54,9 @@ pub struct Options {
     /// the last whole adjustment (COLMAP's `ba_global_images_ratio`, 1.1); 1 adjusts it after
     /// every image.
     pub global_ratio: f64,
+    /// Refine the focal length the images share (module docs; default false: the intrinsics
+    /// are calibrated).
+    pub refine_focal: bool,
     pub seed: u64,
 }
 
@@ -64,6 +72,7 @@ impl Default for Options {
             bundle: bundle::Options::default(),
             local_images: 6,
             global_ratio: 1.1,
+            refine_focal: false,
             seed: 1,
         }
     }
@@ -102,6 +111,9 @@ pub struct Reconstruction {
     pub mapping_s: f64,
     pub bundle_s: f64,
     pub rms_px: f64,
+    /// Per image: the intrinsics the model ends with (the given ones, or with the refined
+    /// focal length).
+    pub intrinsics: Vec<Matrix3<f64>>,
 }
 
 impl Reconstruction {
@@ -181,8 +193,7 @@ fn triangulate(
 /// Reconstructs cameras and points from `features` of images with intrinsics `k`.
 pub fn reconstruct(features: &[Features], k: &[Matrix3<f64>], opts: &Options) -> Reconstruction {
     let n = features.len();
-    let mut out = Reconstruction { poses: vec![None; n], ..Default::default() };
-    let k_inv: Vec<Matrix3<f64>> = k.iter().map(|m| m.try_inverse().unwrap_or_else(Matrix3::zeros)).collect();
+    let mut out = Reconstruction { poses: vec![None; n], intrinsics: k.to_vec(), ..Default::default() };
     // 1. Match and verify every pair.
     let mut verified: Vec<PairMatches> = Vec::new();
     let mut geometry: Vec<(usize, usize, two_view::TwoView)> = Vec::new();
@@ -250,6 +261,9 @@ pub fn reconstruct(features: &[Features], k: &[Matrix3<f64>], opts: &Options) ->
         }
     }
     let triangulate_new = |out: &mut Reconstruction, point_of: &mut Vec<Option<usize>>| {
+        let k = &out.intrinsics;
+        let k_inv: Vec<Matrix3<f64>> =
+            k.iter().map(|m| m.try_inverse().unwrap_or_else(Matrix3::zeros)).collect();
         for (t, track) in tracks.iter().enumerate() {
             if point_of[t].is_some() {
                 continue;
@@ -262,12 +276,13 @@ pub fn reconstruct(features: &[Features], k: &[Matrix3<f64>], opts: &Options) ->
     };
     triangulate_new(&mut out, &mut point_of);
     let mut bundle_s = 0.0;
-    let mut adjust = |out: &mut Reconstruction, first: usize, local: Option<usize>| {
+    let iterations = opts.bundle.max_iterations;
+    let mut adjust = |out: &mut Reconstruction, first: usize, local: Option<usize>, iterations: usize| {
         let t = std::time::Instant::now();
-        adjust_bundle(out, k, features, first, local, opts);
+        adjust_bundle(out, features, first, local, iterations, opts);
         bundle_s += t.elapsed().as_secs_f64();
     };
-    adjust(&mut out, *a, None);
+    adjust(&mut out, *a, None, iterations);
     // Registered images at the last whole adjustment.
     let mut whole_at = 2usize;
     // 3. Register the others, most 2D–3D matches first.
@@ -297,16 +312,16 @@ pub fn reconstruct(features: &[Features], k: &[Matrix3<f64>], opts: &Options) ->
         }
         let pts: Vec<Vector3<f64>> = corr.iter().map(|c| c.0).collect();
         let pxs: Vec<[f64; 2]> = corr.iter().map(|c| c.1).collect();
-        match pnp::estimate(&k[i], &pts, &pxs, opts.reprojection_px, opts.seed ^ i as u64) {
+        match pnp::estimate(&out.intrinsics[i], &pts, &pxs, opts.reprojection_px, opts.seed ^ i as u64) {
             Some(reg) if reg.inliers.len() >= opts.min_matches => {
                 out.poses[i] = Some(reg.pose);
                 triangulate_new(&mut out, &mut point_of);
                 let registered = out.registered_count();
                 if registered as f64 >= opts.global_ratio * whole_at as f64 {
-                    adjust(&mut out, *a, None);
+                    adjust(&mut out, *a, None, iterations);
                     whole_at = registered;
                 } else {
-                    adjust(&mut out, *a, Some(i));
+                    adjust(&mut out, *a, Some(i), iterations);
                 }
             }
             Some(reg) => out.unregistered.push((
@@ -323,13 +338,20 @@ pub fn reconstruct(features: &[Features], k: &[Matrix3<f64>], opts: &Options) ->
                 .push((i, format!("PnP found no pose from {} matches to reconstructed points", corr.len()))),
         }
     }
-    if out.registered_count() > whole_at {
-        adjust(&mut out, *a, None);
+    // A refined focal length converges slowly: it trades against the points' depths along a
+    // curved valley of the cost (where the optical axes nearly meet, as they do when every
+    // camera looks at one façade), and each adjustment moves it part of the way. The last one
+    // gets ten times the iterations, which end where a thousand do (README, "Structure from
+    // motion").
+    if opts.refine_focal {
+        adjust(&mut out, *a, None, 10 * iterations);
+    } else if out.registered_count() > whole_at {
+        adjust(&mut out, *a, None, iterations);
     }
     out.unregistered.sort_by_key(|u| u.0);
     out.bundle_s = bundle_s;
     out.mapping_s = t_map.elapsed().as_secs_f64() - bundle_s;
-    out.rms_px = rms(&out, k, features);
+    out.rms_px = rms(&out, &out.intrinsics, features);
     out
 }
 
@@ -364,10 +386,10 @@ fn rms(out: &Reconstruction, k: &[Matrix3<f64>], features: &[Features]) -> f64 {
 /// cameras that see those points enter fixed, and hold the gauge.
 fn adjust_bundle(
     out: &mut Reconstruction,
-    k: &[Matrix3<f64>],
     features: &[Features],
     first: usize,
     local: Option<usize>,
+    max_iterations: usize,
     opts: &Options,
 ) {
     let registered = |i: usize| out.poses.get(i).is_some_and(|p| p.is_some());
@@ -417,16 +439,26 @@ fn adjust_bundle(
         }
     }
     let mut problem = Problem {
-        intrinsics: cams.iter().map(|&c| k[c]).collect(),
+        intrinsics: cams.iter().map(|&c| out.intrinsics[c]).collect(),
         poses: cams.iter().filter_map(|&c| out.poses[c]).collect(),
         fixed: cams.iter().map(|&c| c == first || !moves(c)).collect(),
         points: included.iter().map(|&p| out.points[p].xyz).collect(),
         observations,
     };
-    bundle::adjust(&mut problem, &opts.bundle);
+    // The focal length is refined where every image shares one K (images of one size), and
+    // then becomes every image's.
+    let shared = out.intrinsics.iter().all(|k| *k == out.intrinsics[0]);
+    let refine_focal = opts.refine_focal && shared && out.registered_count() >= 3;
+    bundle::adjust(&mut problem, &bundle::Options { refine_focal, max_iterations, ..opts.bundle });
     for (s, &c) in cams.iter().enumerate() {
         out.poses[c] = Some(problem.poses[s]);
     }
+    if let Some(f) = problem.intrinsics.first().map(|k| k[(0, 0)]).filter(|_| refine_focal) {
+        for k in out.intrinsics.iter_mut() {
+            (k[(0, 0)], k[(1, 1)]) = (f, f);
+        }
+    }
+    let k = &out.intrinsics;
     for (q, &p) in included.iter().enumerate() {
         out.points[p].xyz = problem.points[q];
     }

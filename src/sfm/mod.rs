@@ -5,7 +5,8 @@
 //! (`input`).
 //!
 //! [`run`] is what `lumen sfm` calls: features per image, keypoints undistorted through each
-//! image's camera model, then the mapper on the known intrinsics.
+//! image's camera model, then the mapper on the given intrinsics (refining their shared focal
+//! length where `mapper::Options::refine_focal` says they are a guess).
 
 pub mod bundle;
 pub mod colmap;
@@ -59,6 +60,9 @@ pub struct Output {
     /// Per image and keypoint: its colour.
     pub colours: Vec<Vec<[u8; 3]>>,
     pub reconstruction: mapper::Reconstruction,
+    /// Per image: its camera as the model ends with it (the input's, with the refined focal
+    /// length where it was refined).
+    pub cameras: Vec<CameraModel>,
     pub extraction_s: f64,
 }
 
@@ -132,5 +136,15 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
         })
         .collect();
     let reconstruction = mapper::reconstruct(&undistorted, &k, &config.mapper);
-    Ok(Output { features, colours, reconstruction, extraction_s })
+    let cameras = input
+        .images
+        .iter()
+        .zip(&reconstruction.intrinsics)
+        .map(|(im, k)| {
+            let mut c = im.camera.clone();
+            (c.intrinsics.fx, c.intrinsics.fy) = (k[(0, 0)], k[(1, 1)]);
+            c
+        })
+        .collect();
+    Ok(Output { features, colours, reconstruction, cameras, extraction_s })
 }

@@ -4,9 +4,12 @@
 //! along a horizontal arc of `arc_deg` around `target`, at `radius` from it (less `forward` as
 //! the sequence advances) and `height` above the ground, each looking at `target` (the
 //! scene's own camera gives the intrinsics); the solver gets the images and the true
-//! intrinsics, as it gets K.txt on photographs.
+//! intrinsics, as it gets K.txt on photographs, or with `guess_intrinsics = true` what
+//! `lumen sfm` assumes without `--camera` (focal length 1.2 × the longer side, principal point
+//! at the centre), refining the focal length in bundle adjustment.
 //! Photographs (an entry with `images`): reads the folder and its camera as `lumen sfm` does
-//! (`sfm::input`). Both run the same `sfm::run` and compare the registered cameras with the
+//! (`sfm::input`; without `camera`, the same guess as above, refined). Both run the same
+//! `sfm::run` and compare the registered cameras with the
 //! truth, free of gauge: pairwise relative rotation errors
 //! over every pair of registered images, and camera-centre errors after the similarity that
 //! best maps the estimated centres onto the true ones (`sfm::eval`), relative to the largest
@@ -16,7 +19,8 @@
 //!
 //! Metrics: `registered_images`, `unregistered_images`, `points`, `mean_track_length`,
 //! `reprojection_rms_px`, `rotation_err_median_deg`, `rotation_err_max_deg`,
-//! `centre_err_max_rel`; and the phases' times as a note.
+//! `centre_err_max_rel`; with guessed intrinsics `focal_err_rel`, |f − f_true|/f_true against
+//! the true fx; and the phases' times as a note.
 
 use super::{apply_overrides, Context, Findings, SettingsKey, StageError, MAX_RENDERS};
 use crate::math::Pose as CameraPose;
@@ -54,6 +58,10 @@ pub struct RenderConfig {
     pub max_features: usize,
     /// Samples per pixel (default: the scene's).
     pub spp: Option<u32>,
+    /// Give the solver the guess of `lumen sfm` without `--camera` instead of the true
+    /// intrinsics, and let it refine the focal length (default false).
+    #[serde(default)]
+    pub guess_intrinsics: bool,
 }
 
 fn default_views() -> usize {
@@ -132,7 +140,12 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth,
         // As a photograph: 8-bit sRGB codes, read as the photograph reader reads them.
         let code = |v: f32| (crate::image::srgb_encode(v.max(0.0)) * 255.0).round().clamp(0.0, 255.0) / 255.0;
         let coded = crate::image::Image { data: img.data.iter().map(|&v| code(v)).collect(), ..img };
-        images.push(sfm::input::image(name, &coded, camera));
+        let given = if c.guess_intrinsics {
+            sfm::input::assumed_camera(camera.width, camera.height)
+        } else {
+            camera.clone()
+        };
+        images.push(sfm::input::image(name, &coded, given));
         // World to camera: R = R_wcᵀ, t = −R C.
         let r = world_from_cam.rotation.transpose();
         let m = Matrix3::from_fn(|i, j| r.col(j)[i]);
@@ -148,11 +161,12 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth,
         "{}: {} views of {}×{} px at {} spp along a {}° arc, {} from {:?} at height {}{advance}.",
         c.scene, c.views, camera.width, camera.height, settings.spp, c.arc_deg, c.radius, c.target, c.height
     )];
-    Ok((sfm::Input { images }, Truth { poses }, Findings { notes, ..Default::default() }))
+    let focal = c.guess_intrinsics.then_some(camera.intrinsics.fx);
+    Ok((sfm::Input { images }, Truth { poses, focal }, Findings { notes, ..Default::default() }))
 }
 
 pub fn solve_render(c: &RenderConfig, input: &sfm::Input) -> Result<sfm::Output, StageError> {
-    solve_with(c.max_features, input)
+    solve_with(c.max_features, c.guess_intrinsics, input)
 }
 
 #[derive(Debug, Deserialize)]
@@ -161,8 +175,8 @@ pub struct Config {
     /// Folder of photographs, relative to the pipeline file (`sfm::input::EXTENSIONS`).
     pub images: String,
     /// The camera file, as `lumen sfm --camera` (calibration YAML/JSON, or K as text),
-    /// relative to the pipeline file.
-    pub camera: String,
+    /// relative to the pipeline file; without it, `lumen sfm`'s guess, refined (module docs).
+    pub camera: Option<String>,
     /// Folder of ground-truth cameras, `<image file name>.camera` each.
     pub truth: String,
     /// Keypoints per image at most (default 8192, COLMAP's).
@@ -174,9 +188,11 @@ fn default_features() -> usize {
     8192
 }
 
-/// The true world-to-camera pose of every image, in the input's order.
+/// The true world-to-camera pose of every image, in the input's order, and the true focal
+/// length (fx) where the solver starts from a guess.
 pub struct Truth {
     poses: Vec<Pose>,
+    focal: Option<f64>,
 }
 
 pub fn read(c: &Config, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), StageError> {
@@ -184,37 +200,44 @@ pub fn read(c: &Config, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), 
         return Err(StageError::Config(format!("max_features = {}: expected at least 16", c.max_features)));
     }
     let dir = super::dataset_path(ctx, &c.images)?;
-    let camera_path = super::dataset_path(ctx, &c.camera)?;
-    let camera = sfm::input::read_camera(&camera_path)?;
+    let camera_path = c.camera.as_deref().map(|p| super::dataset_path(ctx, p)).transpose()?;
+    let camera = camera_path.as_deref().map(sfm::input::read_camera).transpose()?;
     let truth_dir = super::dataset_path(ctx, &c.truth)?;
     let files = sfm::input::photographs(&dir)?;
-    let input = sfm::input::read_images(&files, Some(camera), |_, _, _| {})?;
+    let input = sfm::input::read_images(&files, camera, |_, _, _| {})?;
     let mut poses = Vec::new();
+    let mut focal = None;
     for im in &input.images {
-        let (_, r, centre) = sfm::input::read_strecha_camera(&truth_dir.join(format!("{}.camera", im.name)))?;
+        let (k, r, centre) = sfm::input::read_strecha_camera(&truth_dir.join(format!("{}.camera", im.name)))?;
+        if camera.is_none() {
+            focal = focal.or(Some(k[(0, 0)]));
+        }
         // World to camera: R_wc = Rᵀ, t = −Rᵀ C.
         poses.push(Pose { r: r.transpose(), t: -(r.transpose() * centre) });
     }
+    let camera_note = match &camera_path {
+        Some(p) => format!("the camera {}", p.display()),
+        None => "no camera (focal length guessed, then refined)".to_string(),
+    };
     let notes = vec![format!(
-        "Real data: {} photographs in {} ({}×{} px), the camera {}, the truth from {}.",
+        "Real data: {} photographs in {} ({}×{} px), {camera_note}, the truth from {}.",
         input.images.len(),
         dir.display(),
         input.images[0].grey.width,
         input.images[0].grey.height,
-        camera_path.display(),
         truth_dir.display()
     )];
-    Ok((input, Truth { poses }, Findings { notes, ..Default::default() }))
+    Ok((input, Truth { poses, focal }, Findings { notes, ..Default::default() }))
 }
 
 pub fn solve(c: &Config, input: &sfm::Input) -> Result<sfm::Output, StageError> {
-    solve_with(c.max_features, input)
+    solve_with(c.max_features, c.camera.is_none(), input)
 }
 
-fn solve_with(max_features: usize, input: &sfm::Input) -> Result<sfm::Output, StageError> {
+fn solve_with(max_features: usize, refine_focal: bool, input: &sfm::Input) -> Result<sfm::Output, StageError> {
     let config = sfm::Config {
         features: sfm::features::Options { max_features, ..Default::default() },
-        ..Default::default()
+        mapper: sfm::mapper::Options { refine_focal, ..Default::default() },
     };
     Ok(sfm::run(input, &config)?)
 }
@@ -258,6 +281,14 @@ pub fn validate(out: &sfm::Output, truth: &Truth) -> Findings {
         Better::Lower,
         "fewer than 3 images registered, or their centres are collinear",
     ));
+    if let Some(true_f) = truth.focal {
+        let focal = out.cameras.first().map(|c| c.intrinsics.fx);
+        let err = focal.map(|v| (v / true_f - 1.0).abs());
+        m.push(Metric::maybe("focal_err_rel", err, "", Better::Lower, "no image"));
+        if let Some(v) = focal {
+            f.notes.push(format!("Focal length {v:.2} px refined from the guess, against the true {true_f:.2} px."));
+        }
+    }
     for (i, why) in &rec.unregistered {
         f.notes.push(format!("image {i} not registered: {why}"));
     }
