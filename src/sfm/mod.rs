@@ -15,6 +15,7 @@ pub mod features;
 pub mod five_point;
 pub mod input;
 pub mod mapper;
+pub mod p3p;
 pub mod matching;
 pub mod pnp;
 pub mod tracks;
