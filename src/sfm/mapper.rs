@@ -341,7 +341,7 @@ pub fn reconstruct(features: &[Features], k: &[Matrix3<f64>], opts: &Options) ->
     // A refined focal length converges slowly: it trades against the points' depths along a
     // curved valley of the cost (where the optical axes nearly meet, as they do when every
     // camera looks at one façade), and each adjustment moves it part of the way. The last one
-    // gets ten times the iterations, which end where a thousand do (README, "Structure from
+    // gets ten times the iterations to go most of the rest of it (README, "Structure from
     // motion").
     if opts.refine_focal {
         adjust(&mut out, *a, None, 10 * iterations);
