@@ -37,8 +37,14 @@ pub struct Options {
     pub matching: matching::Options,
     /// Sampson threshold of the two-view geometry, pixels (COLMAP: 4).
     pub two_view_px: f64,
-    /// Reprojection threshold of PnP, triangulation and the bundle's filtering, pixels (4).
+    /// Reprojection threshold of PnP, triangulation and the bundle's filtering with calibrated
+    /// intrinsics, pixels (2: about four standard deviations of the keypoints' noise, whose
+    /// reprojection RMS over both coordinates is 0.5–0.7 px on the renders and on Herz-Jesu;
+    /// COLMAP's 4 keeps observations that cost accuracy, README "Structure from motion").
     pub reprojection_px: f64,
+    /// The same while the focal length is refined (4, COLMAP's): the residuals then hold the
+    /// guess's error as well as noise, and 2 px drops good observations before it is gone.
+    pub guessed_reprojection_px: f64,
     /// Smallest median triangulation angle of the first pair (degrees).
     pub init_min_angle_deg: f64,
     /// Smallest angle between two rays of a triangulated point (degrees; COLMAP 1.5).
@@ -65,7 +71,8 @@ impl Default for Options {
         Options {
             matching: matching::Options::default(),
             two_view_px: 4.0,
-            reprojection_px: 4.0,
+            reprojection_px: 2.0,
+            guessed_reprojection_px: 4.0,
             init_min_angle_deg: 2.0,
             min_angle_deg: 1.5,
             min_matches: 30,
@@ -192,6 +199,8 @@ fn triangulate(
 
 /// Reconstructs cameras and points from `features` of images with intrinsics `k`.
 pub fn reconstruct(features: &[Features], k: &[Matrix3<f64>], opts: &Options) -> Reconstruction {
+    let threshold = if opts.refine_focal { opts.guessed_reprojection_px } else { opts.reprojection_px };
+    let opts = &Options { reprojection_px: threshold, ..*opts };
     let n = features.len();
     let mut out = Reconstruction { poses: vec![None; n], intrinsics: k.to_vec(), ..Default::default() };
     // 1. Match and verify every pair.
