@@ -60,7 +60,7 @@ pub fn run(a: &SfmArgs) -> Result<()> {
         "mean_track_length": if kept > 0 { observations as f64 / kept as f64 } else { 0.0 },
         "mean_observations_per_image": if registered > 0 { observations as f64 / registered as f64 } else { 0.0 },
         "reprojection_rms_px": rec.rms_px,
-        "cameras": out.cameras.iter().zip(&input.images).map(|(c, im)| serde_json::json!({"image": im.name, "fx": c.intrinsics.fx, "fy": c.intrinsics.fy, "cx": c.intrinsics.cx, "cy": c.intrinsics.cy, "focal_refined": given.is_none()})).collect::<Vec<_>>(),
+        "cameras": out.cameras.iter().zip(&input.images).map(|(c, im)| serde_json::json!({"image": im.name, "fx": c.intrinsics.fx, "fy": c.intrinsics.fy, "cx": c.intrinsics.cx, "cy": c.intrinsics.cy, "focal_refined": c.intrinsics.fx != im.camera.intrinsics.fx})).collect::<Vec<_>>(),
         "unregistered": rec.unregistered.iter().map(|(i, why)| serde_json::json!({"image": input.images[*i].name, "reason": why})).collect::<Vec<_>>(),
         "pairs": rec.pairs.iter().map(|p| serde_json::json!({"a": input.images[p.a].name, "b": input.images[p.b].name, "matches": p.matches, "inliers": p.inliers, "configuration": p.configuration})).collect::<Vec<_>>(),
         "time_s": {
@@ -92,10 +92,12 @@ pub fn run(a: &SfmArgs) -> Result<()> {
         a.out.display()
     );
     if let (None, Some(c)) = (given, out.cameras.first()) {
-        println!(
-            "  focal length refined from {:.1} to {:.1} px",
-            input.images[0].camera.intrinsics.fx, c.intrinsics.fx
-        );
+        let guess = input.images[0].camera.intrinsics.fx;
+        if c.intrinsics.fx != guess {
+            println!("  focal length refined from {guess:.1} to {:.1} px", c.intrinsics.fx);
+        } else {
+            println!("  focal length kept at the guess, {guess:.1} px: it is refined only for images of one size, once three are registered");
+        }
     }
     for (i, why) in &rec.unregistered {
         println!("  not registered: {}: {why}", input.images[*i].name);
