@@ -83,7 +83,8 @@ impl Default for Options {
 /// The focal length every camera of `p` shares (fx = fy, no skew, the same K), if one does.
 fn shared_focal(p: &Problem) -> Option<f64> {
     let k0 = p.intrinsics.first()?;
-    (k0[(0, 0)] == k0[(1, 1)] && k0[(0, 1)] == 0.0 && p.intrinsics.iter().all(|k| k == k0)).then_some(k0[(0, 0)])
+    (k0[(0, 0)] == k0[(1, 1)] && k0[(0, 1)] == 0.0 && p.intrinsics.iter().all(|k| k == k0))
+        .then_some(k0[(0, 0)])
 }
 
 /// `k` with focal length f.
@@ -365,7 +366,11 @@ pub fn adjust(problem: &mut Problem, opts: &Options) -> Report {
                 None => problem.intrinsics.clone(),
             };
             let focal_ok = intrinsics.first().is_none_or(|k| k[(0, 0)] > 0.0 && k[(0, 0)].is_finite());
-            let new_cost = if focal_ok { total_cost(problem, &intrinsics, &poses, &points, delta) } else { f64::INFINITY };
+            let new_cost = if focal_ok {
+                total_cost(problem, &intrinsics, &poses, &points, delta)
+            } else {
+                f64::INFINITY
+            };
             if new_cost.is_finite() && new_cost <= cost {
                 let gain = (cost - new_cost) / cost.max(1e-300);
                 problem.intrinsics = intrinsics;

@@ -111,7 +111,9 @@ pub fn solve(points: &[Vector3<f64>; 3], rays: &[Vector3<f64>; 3]) -> Vec<Pose> 
     let b2 = (points[0] - points[2]).norm_squared();
     let c2 = (points[0] - points[1]).norm_squared();
     // Collinear points (zero area) or coincident ones leave the pose undetermined.
-    if !(b2 > 0.0) || (points[1] - points[0]).cross(&(points[2] - points[0])).norm_squared() <= 1e-20 * b2 * b2 {
+    if !(b2 > 0.0)
+        || (points[1] - points[0]).cross(&(points[2] - points[0])).norm_squared() <= 1e-20 * b2 * b2
+    {
         return Vec::new();
     }
     // 1 + v² − 2v·cβ, K, N and D as polynomials in v.
@@ -175,7 +177,8 @@ mod tests {
             let rays: [Vector3<f64>; 3] = std::array::from_fn(|i| (r * points[i] + t) * (0.5 + next()));
             let poses = solve(&points, &rays);
             assert!(!poses.is_empty() && poses.len() <= 4, "trial {trial}: {} poses", poses.len());
-            let best = poses.iter().map(|p| (p.r - r).norm() + (p.t - t).norm()).fold(f64::INFINITY, f64::min);
+            let best =
+                poses.iter().map(|p| (p.r - r).norm() + (p.t - t).norm()).fold(f64::INFINITY, f64::min);
             worst.push(best);
             for p in &poses {
                 for i in 0..3 {

@@ -234,7 +234,11 @@ pub fn solve(c: &Config, input: &sfm::Input) -> Result<sfm::Output, StageError> 
     solve_with(c.max_features, c.camera.is_none(), input)
 }
 
-fn solve_with(max_features: usize, refine_focal: bool, input: &sfm::Input) -> Result<sfm::Output, StageError> {
+fn solve_with(
+    max_features: usize,
+    refine_focal: bool,
+    input: &sfm::Input,
+) -> Result<sfm::Output, StageError> {
     let config = sfm::Config {
         features: sfm::features::Options { max_features, ..Default::default() },
         mapper: sfm::mapper::Options { refine_focal, ..Default::default() },
@@ -286,7 +290,9 @@ pub fn validate(out: &sfm::Output, truth: &Truth) -> Findings {
         let err = focal.map(|v| (v / true_f - 1.0).abs());
         m.push(Metric::maybe("focal_err_rel", err, "", Better::Lower, "no image"));
         if let Some(v) = focal {
-            f.notes.push(format!("Focal length {v:.2} px refined from the guess, against the true {true_f:.2} px."));
+            f.notes.push(format!(
+                "Focal length {v:.2} px refined from the guess, against the true {true_f:.2} px."
+            ));
         }
     }
     for (i, why) in &rec.unregistered {
