@@ -233,8 +233,10 @@ pub fn adjust(problem: &mut Problem, opts: &Options) -> Report {
             let jp = d_t * d_x_rot; // 2 × 3
             v[o.point] += wt * jp.transpose() * jp;
             gp[o.point] += wt * jp.transpose() * r;
-            let jf = focal.map(|f| {
+            // At the current focal length (the start's, `focal`, only says one is refined).
+            let jf = focal.map(|_| {
                 let kc = &problem.intrinsics[o.camera];
+                let f = kc[(0, 0)];
                 Vector2::new((r[0] + o.xy[0] - kc[(0, 2)]) / f, (r[1] + o.xy[1] - kc[(1, 2)]) / f)
             });
             if let Some(jf) = jf {

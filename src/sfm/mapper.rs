@@ -285,13 +285,12 @@ pub fn reconstruct(features: &[Features], k: &[Matrix3<f64>], opts: &Options) ->
     };
     triangulate_new(&mut out, &mut point_of);
     let mut bundle_s = 0.0;
-    let iterations = opts.bundle.max_iterations;
-    let mut adjust = |out: &mut Reconstruction, first: usize, local: Option<usize>, iterations: usize| {
+    let mut adjust = |out: &mut Reconstruction, first: usize, local: Option<usize>| {
         let t = std::time::Instant::now();
-        adjust_bundle(out, features, first, local, iterations, opts);
+        adjust_bundle(out, features, first, local, opts);
         bundle_s += t.elapsed().as_secs_f64();
     };
-    adjust(&mut out, *a, None, iterations);
+    adjust(&mut out, *a, None);
     // Registered images at the last whole adjustment.
     let mut whole_at = 2usize;
     // 3. Register the others, most 2D–3D matches first.
@@ -327,10 +326,10 @@ pub fn reconstruct(features: &[Features], k: &[Matrix3<f64>], opts: &Options) ->
                 triangulate_new(&mut out, &mut point_of);
                 let registered = out.registered_count();
                 if registered as f64 >= opts.global_ratio * whole_at as f64 {
-                    adjust(&mut out, *a, None, iterations);
+                    adjust(&mut out, *a, None);
                     whole_at = registered;
                 } else {
-                    adjust(&mut out, *a, Some(i), iterations);
+                    adjust(&mut out, *a, Some(i));
                 }
             }
             Some(reg) => out.unregistered.push((
@@ -347,15 +346,8 @@ pub fn reconstruct(features: &[Features], k: &[Matrix3<f64>], opts: &Options) ->
                 .push((i, format!("PnP found no pose from {} matches to reconstructed points", corr.len()))),
         }
     }
-    // A refined focal length converges slowly: it trades against the points' depths along a
-    // curved valley of the cost (where the optical axes nearly meet, as they do when every
-    // camera looks at one façade), and each adjustment moves it part of the way. The last one
-    // gets ten times the iterations to go most of the rest of it (README, "Structure from
-    // motion").
-    if opts.refine_focal {
-        adjust(&mut out, *a, None, 10 * iterations);
-    } else if out.registered_count() > whole_at {
-        adjust(&mut out, *a, None, iterations);
+    if out.registered_count() > whole_at {
+        adjust(&mut out, *a, None);
     }
     out.unregistered.sort_by_key(|u| u.0);
     out.bundle_s = bundle_s;
@@ -398,7 +390,6 @@ fn adjust_bundle(
     features: &[Features],
     first: usize,
     local: Option<usize>,
-    max_iterations: usize,
     opts: &Options,
 ) {
     let registered = |i: usize| out.poses.get(i).is_some_and(|p| p.is_some());
@@ -458,7 +449,7 @@ fn adjust_bundle(
     // then becomes every image's.
     let shared = out.intrinsics.iter().all(|k| *k == out.intrinsics[0]);
     let refine_focal = opts.refine_focal && shared && out.registered_count() >= 3;
-    bundle::adjust(&mut problem, &bundle::Options { refine_focal, max_iterations, ..opts.bundle });
+    bundle::adjust(&mut problem, &bundle::Options { refine_focal, ..opts.bundle });
     for (s, &c) in cams.iter().enumerate() {
         out.poses[c] = Some(problem.poses[s]);
     }
