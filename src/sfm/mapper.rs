@@ -453,10 +453,8 @@ fn adjust_bundle(
     for (s, &c) in cams.iter().enumerate() {
         out.poses[c] = Some(problem.poses[s]);
     }
-    if let Some(f) = problem.intrinsics.first().map(|k| k[(0, 0)]).filter(|_| refine_focal) {
-        for k in out.intrinsics.iter_mut() {
-            (k[(0, 0)], k[(1, 1)]) = (f, f);
-        }
+    if let Some(k) = problem.intrinsics.first().filter(|_| refine_focal) {
+        out.intrinsics.fill(*k);
     }
     let k = &out.intrinsics;
     for (q, &p) in included.iter().enumerate() {
