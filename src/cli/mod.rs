@@ -53,6 +53,11 @@ enum Command {
         /// one large case are spread over all shards; then run the shards from the full cache.
         #[arg(long, requires = "shard", conflicts_with = "no_cache")]
         renders_only: bool,
+        /// With --shard K/N, after every --renders-only share: only make this shard's share of
+        /// the blocks of image pairs that structure-from-motion cases match and verify (the
+        /// cases' features come from the renders shares), so that work is spread too.
+        #[arg(long, requires = "shard", conflicts_with_all = ["no_cache", "renders_only"])]
+        matches_only: bool,
     },
     /// Join the fragments in OUT/shards (from `lumen run --shard K/N --out OUT`) into one
     /// report.json, report.md and plots in OUT, checking that they are one pipeline's and cover
@@ -294,11 +299,19 @@ pub fn main() -> i32 {
         }
     };
     let result = match cli.command {
-        Command::Run { pipeline, out, threads, cache, no_cache, shard, renders_only } => {
+        Command::Run { pipeline, out, threads, cache, no_cache, shard, renders_only, matches_only } => {
+            use lumen::pipeline::cache::Pass;
             let cache =
                 if no_cache { None } else { Some(cache.unwrap_or_else(|| PathBuf::from("out/cache"))) };
-            match (renders_only, shard, cache) {
-                (true, Some(share), Some(cache)) => render_share(&pipeline, cache, share, threads),
+            let pass = match (renders_only, matches_only) {
+                (true, _) => Some(Pass::Renders),
+                (_, true) => Some(Pass::Matches),
+                _ => None,
+            };
+            match (pass, shard, cache) {
+                (Some(pass), Some(share), Some(cache)) => {
+                    render_share(&pipeline, cache, share, pass, threads)
+                }
                 (_, shard, cache) => run_pipeline(
                     &pipeline,
                     out,

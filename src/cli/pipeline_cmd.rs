@@ -31,12 +31,17 @@ pub fn render_share(
     path: &Path,
     cache: PathBuf,
     share: lumen::pipeline::shard::Shard,
+    pass: pipeline::cache::Pass,
     threads: Option<usize>,
 ) -> Result<i32> {
     let file = pipeline::load(path)?;
-    let c = pipeline::render_share(path, &file, cache.clone(), share, threads, true)?;
+    let c = pipeline::render_share(path, &file, cache.clone(), share, pass, threads, true)?;
+    let (name, what) = match pass {
+        pipeline::cache::Pass::Renders => ("render", "render requests"),
+        pipeline::cache::Pass::Matches => ("matches", "blocks of image pairs"),
+    };
     eprintln!(
-        "render share {}/{}: {} of the pipeline's render requests are this share's, {} rendered into {} ({} already there); {} are other shares'",
+        "{name} share {}/{}: {} of the pipeline's {what} are this share's, {} made in {} ({} already there); {} are other shares'",
         share.k,
         share.n,
         c.owned,

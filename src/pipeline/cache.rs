@@ -15,6 +15,12 @@
 //! inside one large case (its views, lights or wavelength bands) is spread and an entry two
 //! cases share is made once. The stages then run their cases from a full cache.
 //!
+//! A second pass of shares (`Pass::Matches`, `lumen run --shard K/N --matches-only`), after
+//! the renders, spreads the work that needs every render of a case at hand: structure from
+//! motion's blocks of image pairs to match and verify. Its stages read the renders back as a
+//! case does and make the derived entries (`bytes`) they own. Derived entries (features,
+//! verified pairs) are kept as bytes whose meaning the stage that asks for them knows.
+//!
 //! The key is FNV-1a over 128 bits of the recipe's JSON, written here rather than taken from a
 //! crate because it must stay the same across toolchains and crate versions (std's hasher
 //! does not promise that) and is ten lines.
@@ -39,8 +45,8 @@ pub struct Event {
 pub struct Cache {
     /// `None`: nothing is stored (every image is rendered).
     dir: Option<PathBuf>,
-    /// A render share: (K, N), this process makes only the entries whose key is K − 1 mod N.
-    share: Option<(usize, usize)>,
+    /// A share: (K, N, pass), this process makes only the entries whose key is K − 1 mod N.
+    share: Option<(usize, usize, Pass)>,
     shared: Mutex<ShareCount>,
     events: Mutex<Vec<Event>>,
     warnings: Mutex<Vec<String>>,
@@ -95,6 +101,19 @@ fn collect_strings(v: &toml::Value, out: &mut Vec<String>) {
 }
 
 const MAGIC: &[u8; 8] = b"LUMENC01";
+const MAGIC_BYTES: &[u8; 8] = b"LUMENB01";
+
+/// The two passes of shares (module docs): renders first, then the work that needs them all.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Pass {
+    Renders,
+    Matches,
+}
+
+/// An entry's key: FNV-1a 128 of lumen's version and the recipe's JSON.
+fn key(recipe: &impl Serialize) -> Option<u128> {
+    serde_json::to_string(&(env!("CARGO_PKG_VERSION"), recipe)).ok().map(|j| fnv128(j.as_bytes()))
+}
 
 impl Cache {
     pub fn new(dir: Option<PathBuf>) -> Cache {
@@ -107,19 +126,66 @@ impl Cache {
         }
     }
 
-    /// A render share K of N (1 ≤ K ≤ N) over the cache in `dir` (module docs).
-    pub fn share(dir: PathBuf, k: usize, n: usize) -> Cache {
-        Cache { share: Some((k, n)), ..Cache::new(Some(dir)) }
+    /// Share K of N (1 ≤ K ≤ N) of `pass` over the cache in `dir` (module docs).
+    pub fn share(dir: PathBuf, k: usize, n: usize, pass: Pass) -> Cache {
+        Cache { share: Some((k, n, pass)), ..Cache::new(Some(dir)) }
     }
 
-    /// A render share hands no images back: the stages stop after asking for their renders.
+    /// A share runs no case: the stages stop after asking for their renders (and, in the
+    /// matches pass, after making the derived entries they own).
     pub fn renders_only(&self) -> bool {
         self.share.is_some()
     }
 
+    /// The pass of a share, `None` in a run of cases.
+    pub fn pass(&self) -> Option<Pass> {
+        self.share.map(|s| s.2)
+    }
+
+    /// Whether this process makes the entry `recipe` names: in a share, when its key is
+    /// K − 1 mod N; otherwise always.
+    pub fn owns(&self, recipe: &impl Serialize) -> bool {
+        match self.share {
+            Some((k, n, _)) => key(recipe).is_some_and(|key| key % n as u128 == (k - 1) as u128),
+            None => true,
+        }
+    }
+
+    fn path_of(&self, recipe: &impl Serialize) -> Option<PathBuf> {
+        self.dir.as_ref().zip(key(recipe)).map(|(dir, key)| dir.join(format!("{key:032x}.bin")))
+    }
+
+    /// The images of `recipe` when the cache holds them whole (no event is logged: a share
+    /// reading back what it rendered).
+    pub fn stored_images(&self, recipe: &impl Serialize) -> Option<Vec<Image>> {
+        self.path_of(recipe).as_deref().and_then(read_entry)
+    }
+
+    /// The derived entry `recipe` names (module docs), when the cache holds it whole.
+    pub fn bytes(&self, recipe: &impl Serialize) -> Option<Vec<u8>> {
+        let bytes = std::fs::read(self.path_of(recipe)?).ok()?;
+        bytes.strip_prefix(MAGIC_BYTES).map(<[u8]>::to_vec)
+    }
+
+    /// Stores a derived entry (without a cache folder, nothing); a failure is a warning.
+    pub fn store_bytes(&self, recipe: &impl Serialize, bytes: &[u8]) {
+        if let Some(path) = self.path_of(recipe) {
+            if let Err(e) = write_atomically(&path, &[MAGIC_BYTES.as_slice(), bytes].concat()) {
+                self.warn(format!("render cache: cannot write {}: {e}", path.display()));
+            }
+        }
+    }
+
+    fn warn(&self, w: String) {
+        if let Ok(mut ws) = self.warnings.lock() {
+            ws.push(w);
+        }
+    }
+
     /// The images `recipe` describes: read back when the cache holds them, otherwise made by
-    /// `make` and stored. `case` and `what` only label the event in the report. In a render
-    /// share, `None`: the entry is made if this share owns it and the cache lacks it.
+    /// `make` and stored. `case` and `what` only label the event in the report. In a share of
+    /// the renders pass, `None`: the entry is made if this share owns it and the cache lacks
+    /// it. (In the matches pass, as in a run of cases.)
     pub fn images<E>(
         &self,
         case: &str,
@@ -128,11 +194,9 @@ impl Cache {
         make: impl FnOnce() -> Result<Vec<Image>, E>,
     ) -> Result<Option<Vec<Image>>, E> {
         let t = std::time::Instant::now();
-        let key =
-            serde_json::to_string(&(env!("CARGO_PKG_VERSION"), recipe)).ok().map(|j| fnv128(j.as_bytes()));
-        let path = self.dir.as_ref().zip(key).map(|(dir, key)| dir.join(format!("{key:032x}.bin")));
-        if let Some((k, n)) = self.share {
-            let owned = key.is_some_and(|key| key % n as u128 == (k - 1) as u128);
+        let path = self.path_of(recipe);
+        if let Some((_, _, Pass::Renders)) = self.share {
+            let owned = self.owns(recipe);
             // Present entries were renamed into place whole; a damaged one is remade when a
             // case reads it.
             let present = path.as_deref().is_some_and(Path::is_file);
@@ -141,11 +205,7 @@ impl Cache {
                 let images = make()?;
                 self.store(path.as_deref(), &images);
             }
-            if let Ok(mut c) = self.shared.lock() {
-                c.owned += usize::from(owned);
-                c.rendered += usize::from(make_it);
-                c.others += usize::from(!owned);
-            }
+            self.count(owned, make_it);
             return Ok(None);
         }
         if let Some(images) = path.as_deref().and_then(read_entry) {
@@ -161,14 +221,21 @@ impl Cache {
     fn store(&self, path: Option<&Path>, images: &[Image]) {
         if let Some(path) = path {
             if let Err(e) = write_entry(path, images) {
-                if let Ok(mut w) = self.warnings.lock() {
-                    w.push(format!("render cache: cannot write {}: {e}", path.display()));
-                }
+                self.warn(format!("render cache: cannot write {}: {e}", path.display()));
             }
         }
     }
 
-    /// What this render share did so far (zero outside a share).
+    /// Counts an entry a share asked for: its own or another's, made now or already there.
+    pub fn count(&self, owned: bool, made: bool) {
+        if let Ok(mut c) = self.shared.lock() {
+            c.owned += usize::from(owned);
+            c.rendered += usize::from(made);
+            c.others += usize::from(!owned);
+        }
+    }
+
+    /// What this share did so far (zero outside a share).
     pub fn share_count(&self) -> ShareCount {
         self.shared.lock().map(|c| *c).unwrap_or_default()
     }
@@ -223,6 +290,10 @@ fn write_entry(path: &Path, images: &[Image]) -> std::io::Result<()> {
             bytes.extend_from_slice(&v.to_le_bytes());
         }
     }
+    write_atomically(path, &bytes)
+}
+
+fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir)?;
     }
@@ -230,7 +301,7 @@ fn write_entry(path: &Path, images: &[Image]) -> std::io::Result<()> {
     let nanos =
         std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
     let tmp = path.with_extension(format!("tmp.{}.{nanos}", std::process::id()));
-    std::fs::write(&tmp, &bytes)?;
+    std::fs::write(&tmp, bytes)?;
     std::fs::rename(&tmp, path).inspect_err(|_| {
         let _ = std::fs::remove_file(&tmp);
     })
@@ -281,7 +352,7 @@ mod tests {
         let made = std::sync::atomic::AtomicUsize::new(0);
         let mut owned = Vec::new();
         for k in 1..=3 {
-            let share = Cache::share(dir.path().to_path_buf(), k, 3);
+            let share = Cache::share(dir.path().to_path_buf(), k, 3, Pass::Renders);
             for recipe in 0..30u64 {
                 let got = share
                     .images("c", "x", &("film", recipe), || {
@@ -298,7 +369,7 @@ mod tests {
         assert_eq!(made.into_inner(), 30);
         assert!(owned.iter().all(|&n| n > 0), "{owned:?}");
         // Run again, a share makes nothing.
-        let again = Cache::share(dir.path().to_path_buf(), 2, 3);
+        let again = Cache::share(dir.path().to_path_buf(), 2, 3, Pass::Renders);
         for recipe in 0..30u64 {
             again
                 .images("c", "x", &("film", recipe), || -> Result<Vec<Image>, ()> { panic!("made twice") })

@@ -95,10 +95,13 @@ where
     pool.install(f)
 }
 
-/// A render share of a pipeline (`lumen run --shard K/N --renders-only`): every case's
-/// renders, whichever shard runs the case, are requested in file order through a cache that
-/// makes only the entries share K owns (`cache` module docs). Nothing else runs and no report
-/// is written: once every share has run, the shards run their cases from the full cache.
+/// A share of a pipeline's work before its cases run (`cache` module docs). In the renders
+/// pass (`lumen run --shard K/N --renders-only`) every case's renders, whichever shard runs
+/// the case, are requested in file order through a cache that makes only the entries share K
+/// owns, with the features of the structure-from-motion views it renders; in the matches pass
+/// (`--matches-only`, after every renders share) the structure-from-motion cases make the
+/// blocks of verified pairs share K owns. Nothing else runs and no report is written: once
+/// every share of both passes has run, the shards run their cases from the full cache.
 /// A case whose synthesis fails (a setting out of range, a declared error) is left to the
 /// shard that runs it, which reports it; here it is only named on stderr with `progress`.
 pub fn render_share(
@@ -106,29 +109,31 @@ pub fn render_share(
     file: &PipelineFile,
     cache_dir: PathBuf,
     share: shard::Shard,
+    pass: cache::Pass,
     threads: Option<usize>,
     progress: bool,
 ) -> Result<cache::ShareCount, Error> {
     in_pool(threads, || {
         let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
-        let cache = cache::Cache::share(cache_dir.clone(), share.k, share.n);
+        let cache = cache::Cache::share(cache_dir.clone(), share.k, share.n, pass);
         let n = file.cases.len();
         for (k, case) in file.cases.iter().enumerate() {
             let seed = case.common.seed.unwrap_or(file.seed);
             let ctx = Context { dir: &dir, case: &case.common.case, seed, cache: &cache, progress: false };
             let before = cache.share_count();
-            let result = match &case.stage {
-                Stage::Calibrate(c) => stages::calibrate::synthesize(c, &ctx).map(|_| ()),
-                Stage::Photometric(c) => stages::photometric::synthesize(c, &ctx).map(|_| ()),
-                Stage::Color(c) => stages::color::synthesize(c, &ctx).map(|_| ()),
-                Stage::Hdr(c) => stages::hdr::synthesize(c, &ctx).map(|_| ()),
-                Stage::SfmRender(c) => stages::sfm::synthesize(c, &ctx).map(|_| ()),
-                // Renders timed afresh (never cached) and real data: nothing to share.
-                Stage::Render(_)
-                | Stage::CalibrateData(_)
-                | Stage::PhotometricData(_)
-                | Stage::HdrData(_)
-                | Stage::Sfm(_) => continue,
+            let result = match (&case.stage, pass) {
+                (Stage::Calibrate(c), cache::Pass::Renders) => {
+                    stages::calibrate::synthesize(c, &ctx).map(|_| ())
+                }
+                (Stage::Photometric(c), cache::Pass::Renders) => {
+                    stages::photometric::synthesize(c, &ctx).map(|_| ())
+                }
+                (Stage::Color(c), cache::Pass::Renders) => stages::color::synthesize(c, &ctx).map(|_| ()),
+                (Stage::Hdr(c), cache::Pass::Renders) => stages::hdr::synthesize(c, &ctx).map(|_| ()),
+                (Stage::SfmRender(c), _) => stages::sfm::synthesize(c, &ctx).map(|_| ()),
+                // Renders timed afresh (never cached), real data, and in the matches pass
+                // every stage without pairs to match: nothing to share.
+                _ => continue,
             };
             if progress {
                 let now = cache.share_count();
@@ -136,8 +141,12 @@ pub fn render_share(
                     Ok(()) | Err(StageError::RendersOnly) => String::new(),
                     Err(e) => format!(" (stopped: {e})"),
                 };
+                let kind = match pass {
+                    cache::Pass::Renders => "renders",
+                    cache::Pass::Matches => "blocks of pairs",
+                };
                 eprintln!(
-                    "[{}/{n}] {} {}: {} of its renders are this share's, {} rendered{what}",
+                    "[{}/{n}] {} {}: {} of its {kind} are this share's, {} made{what}",
                     k + 1,
                     case.stage.name(),
                     case.common.case,

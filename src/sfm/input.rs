@@ -93,7 +93,7 @@ pub fn read_images(
         let name = f.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
         images.push(image(name, &img, camera));
     }
-    Ok(Input { images })
+    Ok(Input { images, prepared: Default::default() })
 }
 
 /// An image as the solver takes it, from code values in [0, 1] (as `image::io::read` gives a

@@ -93,7 +93,7 @@ pub struct Point {
 }
 
 /// What one pair's verification found.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct PairReport {
     pub a: usize,
     pub b: usize,
@@ -197,48 +197,93 @@ fn triangulate(
     wide.then_some(x)
 }
 
+/// One pair's matching and verification: the report, and where it was verified with at least
+/// `Options::min_matches` inliers, what the mapper builds on.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VerifiedPair {
+    pub report: PairReport,
+    pub geometry: Option<PairGeometry>,
+    /// Seconds spent matching and verifying it (0 when read back from a cache).
+    pub matching_s: f64,
+    pub verification_s: f64,
+}
+
+/// A verified pair's inlier matches (keypoint in a, keypoint in b) and relative pose.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PairGeometry {
+    pub matches: Vec<(u32, u32)>,
+    pub pose: two_view::RelativePose,
+    pub median_triangulation_angle_deg: f64,
+}
+
+/// Matches images `a` < `b` of `n` and verifies them by their two-view geometry (step 1 of
+/// the module docs). Its RANSAC is seeded by (`opts.seed`, a, b, n) only, so a pair gives the
+/// same result whichever process verifies it and whatever else it verifies.
+pub fn verify_pair(
+    features: &[Features],
+    k: &[Matrix3<f64>],
+    (a, b): (usize, usize),
+    opts: &Options,
+) -> VerifiedPair {
+    let n = features.len();
+    let t = std::time::Instant::now();
+    let m = matching::match_descriptors(&features[a].descriptors, &features[b].descriptors, &opts.matching);
+    let matching_s = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let p1: Vec<[f64; 2]> = m.iter().map(|x| pixel(&features[a], x.a)).collect();
+    let p2: Vec<[f64; 2]> = m.iter().map(|x| pixel(&features[b], x.b)).collect();
+    let tv = if m.len() >= opts.min_matches {
+        two_view::estimate(&p1, &p2, &k[a], &k[b], opts.two_view_px, opts.seed ^ (a * n + b) as u64)
+    } else {
+        None
+    };
+    let report = PairReport {
+        a,
+        b,
+        matches: m.len(),
+        inliers: tv.as_ref().map_or(0, |t| t.inliers.len()),
+        configuration: tv.as_ref().map(|t| t.configuration),
+    };
+    let geometry = tv.filter(|tv| tv.inliers.len() >= opts.min_matches).map(|tv| PairGeometry {
+        matches: tv.inliers.iter().map(|&i| (m[i].a, m[i].b)).collect(),
+        pose: tv.pose,
+        median_triangulation_angle_deg: tv.median_triangulation_angle_deg,
+    });
+    VerifiedPair { report, geometry, matching_s, verification_s: t.elapsed().as_secs_f64() }
+}
+
 /// Reconstructs cameras and points from `features` of images with intrinsics `k`.
 pub fn reconstruct(features: &[Features], k: &[Matrix3<f64>], opts: &Options) -> Reconstruction {
+    let n = features.len();
+    let pairs = (0..n).flat_map(|a| (a + 1..n).map(move |b| (a, b)));
+    let verified = pairs.map(|p| verify_pair(features, k, p, opts)).collect();
+    reconstruct_verified(features, k, verified, opts)
+}
+
+/// Steps 2–4 of the module docs, from every pair's `verify_pair` (in any order; a pair
+/// missing from `pairs` counts as unmatched).
+pub fn reconstruct_verified(
+    features: &[Features],
+    k: &[Matrix3<f64>],
+    mut pairs: Vec<VerifiedPair>,
+    opts: &Options,
+) -> Reconstruction {
     let threshold = if opts.refine_focal { opts.guessed_reprojection_px } else { opts.reprojection_px };
     let opts = &Options { reprojection_px: threshold, ..*opts };
     let n = features.len();
     let mut out = Reconstruction { poses: vec![None; n], intrinsics: k.to_vec(), ..Default::default() };
-    // 1. Match and verify every pair.
+    pairs.sort_by_key(|p| (p.report.a, p.report.b));
     let mut verified: Vec<PairMatches> = Vec::new();
-    let mut geometry: Vec<(usize, usize, two_view::TwoView)> = Vec::new();
-    for a in 0..n {
-        for b in a + 1..n {
-            let t = std::time::Instant::now();
-            let m = matching::match_descriptors(
-                &features[a].descriptors,
-                &features[b].descriptors,
-                &opts.matching,
-            );
-            out.matching_s += t.elapsed().as_secs_f64();
-            let t = std::time::Instant::now();
-            let p1: Vec<[f64; 2]> = m.iter().map(|x| pixel(&features[a], x.a)).collect();
-            let p2: Vec<[f64; 2]> = m.iter().map(|x| pixel(&features[b], x.b)).collect();
-            let tv = if m.len() >= opts.min_matches {
-                two_view::estimate(&p1, &p2, &k[a], &k[b], opts.two_view_px, opts.seed ^ (a * n + b) as u64)
-            } else {
-                None
-            };
-            out.verification_s += t.elapsed().as_secs_f64();
-            out.pairs.push(PairReport {
-                a,
-                b,
-                matches: m.len(),
-                inliers: tv.as_ref().map_or(0, |t| t.inliers.len()),
-                configuration: tv.as_ref().map(|t| t.configuration),
-            });
-            if let Some(tv) = tv {
-                if tv.inliers.len() >= opts.min_matches {
-                    let matches = tv.inliers.iter().map(|&i| (m[i].a, m[i].b)).collect();
-                    verified.push(PairMatches { a: a as u32, b: b as u32, matches });
-                    geometry.push((a, b, tv));
-                }
-            }
+    let mut geometry: Vec<(usize, usize, PairGeometry, two_view::Configuration)> = Vec::new();
+    for p in pairs {
+        out.matching_s += p.matching_s;
+        out.verification_s += p.verification_s;
+        let (a, b) = (p.report.a, p.report.b);
+        if let (Some(g), Some(c)) = (p.geometry, p.report.configuration) {
+            verified.push(PairMatches { a: a as u32, b: b as u32, matches: g.matches.clone() });
+            geometry.push((a, b, g, c));
         }
+        out.pairs.push(p.report);
     }
     let t_map = std::time::Instant::now();
     let counts: Vec<usize> = features.iter().map(|f| f.keypoints.len()).collect();
@@ -246,12 +291,12 @@ pub fn reconstruct(features: &[Features], k: &[Matrix3<f64>], opts: &Options) ->
     // 2. The first pair.
     let first = geometry
         .iter()
-        .filter(|(_, _, tv)| {
-            tv.configuration == two_view::Configuration::General
-                && tv.median_triangulation_angle_deg >= opts.init_min_angle_deg
+        .filter(|(_, _, g, c)| {
+            *c == two_view::Configuration::General
+                && g.median_triangulation_angle_deg >= opts.init_min_angle_deg
         })
-        .max_by_key(|(_, _, tv)| tv.inliers.len());
-    let Some((a, b, tv)) = first else {
+        .max_by_key(|(_, _, g, _)| g.matches.len());
+    let Some((a, b, tv, _)) = first else {
         let why = no_first_pair(out.pairs.len(), &geometry, opts.init_min_angle_deg);
         out.unregistered = (0..n).map(|i| (i, why.clone())).collect();
         return out;
@@ -480,9 +525,12 @@ fn adjust_bundle(
 
 /// Why no pair can start the reconstruction, counted over the `pairs` matched: how many of the
 /// verified ones are planar, a pure rotation or too narrow, the rest having too few matches.
-fn no_first_pair(pairs: usize, verified: &[(usize, usize, two_view::TwoView)], min_angle_deg: f64) -> String {
-    let count =
-        |c: two_view::Configuration| verified.iter().filter(|(_, _, tv)| tv.configuration == c).count();
+fn no_first_pair(
+    pairs: usize,
+    verified: &[(usize, usize, PairGeometry, two_view::Configuration)],
+    min_angle_deg: f64,
+) -> String {
+    let count = |c: two_view::Configuration| verified.iter().filter(|v| v.3 == c).count();
     let (planar, rotation) =
         (count(two_view::Configuration::Planar), count(two_view::Configuration::PureRotation));
     let narrow = verified.len() - planar - rotation;

@@ -9,6 +9,7 @@
 //! length where `mapper::Options::refine_focal` says they are a guess).
 
 pub mod bundle;
+pub mod bytes;
 pub mod colmap;
 pub mod eval;
 pub mod features;
@@ -47,6 +48,20 @@ pub struct Image {
 
 pub struct Input {
     pub images: Vec<Image>,
+    /// Work done beforehand, by other processes (a pipeline's shares), that the run takes as
+    /// it is instead of doing it again.
+    pub prepared: Prepared,
+}
+
+/// Features and verified pairs computed beforehand, by the same functions `run` calls
+/// (`features::detect` with the run's options on each image's `grey`; `mapper::verify_pair`
+/// on `ideal_features` with the run's mapper options and `intrinsics`).
+#[derive(Clone, Debug, Default)]
+pub struct Prepared {
+    /// Per image, or shorter: its features as detected, where known.
+    pub features: Vec<Option<features::Features>>,
+    /// Verified pairs: any of them, in any order.
+    pub pairs: Vec<mapper::VerifiedPair>,
 }
 
 #[derive(Clone, Copy, Debug, Default)]
@@ -65,17 +80,20 @@ pub struct Output {
     /// length where it was refined).
     pub cameras: Vec<CameraModel>,
     pub extraction_s: f64,
+    /// Images whose features, and pairs whose verification, came from `Input::prepared`.
+    pub prepared_images: usize,
+    pub prepared_pairs: usize,
 }
 
-/// Features, undistortion and the mapper (module docs).
-pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
-    if input.images.len() < 2 {
+/// Checks that the images can be reconstructed at all (their number, sizes and cameras).
+pub fn check(images: &[Image]) -> Result<(), Error> {
+    if images.len() < 2 {
         return Err(Error::BadInput(format!(
             "{} image(s): structure from motion needs at least 2",
-            input.images.len()
+            images.len()
         )));
     }
-    for im in &input.images {
+    for im in images {
         let (w, h) = (im.grey.width, im.grey.height);
         if w != im.camera.width as usize || h != im.camera.height as usize {
             return Err(Error::BadInput(format!(
@@ -88,55 +106,96 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
         }
         im.camera.validate().map_err(|m| Error::BadInput(format!("{}: camera: {m}", im.name)))?;
     }
+    Ok(())
+}
+
+/// The keypoints of `im` its camera model can undistort (far outside its valid region it
+/// cannot), as detected and as ideal pixels (the mapper's), in the same order, with the
+/// colour under each.
+pub fn ideal_features(im: &Image, detected: &features::Features) -> IdealFeatures {
+    let mut kept = features::Features::default();
+    let mut ideal = features::Features::default();
+    for (kp, d) in detected.keypoints.iter().zip(&detected.descriptors) {
+        let k = &im.camera;
+        let p = if k.distortion.is_zero() {
+            Some(glam::DVec2::new(kp.x as f64, kp.y as f64))
+        } else {
+            k.undistort_pixel(glam::DVec2::new(kp.x as f64, kp.y as f64)).map(|n| k.normalized_to_pixel(n))
+        };
+        if let Some(p) = p.filter(|p| p.is_finite()) {
+            kept.keypoints.push(*kp);
+            kept.descriptors.push(*d);
+            ideal.keypoints.push(features::Keypoint { x: p.x as f32, y: p.y as f32, ..*kp });
+            ideal.descriptors.push(*d);
+        }
+    }
+    let w = im.grey.width;
+    let colours = kept
+        .keypoints
+        .iter()
+        .map(|kp| {
+            let (x, y) =
+                ((kp.x.round() as usize).min(w - 1), (kp.y.round() as usize).min(im.grey.height - 1));
+            im.rgb8.get(y * w + x).copied().unwrap_or([128, 128, 128])
+        })
+        .collect();
+    IdealFeatures { kept, ideal, colours }
+}
+
+/// `ideal_features`' result.
+pub struct IdealFeatures {
+    pub kept: features::Features,
+    pub ideal: features::Features,
+    pub colours: Vec<[u8; 3]>,
+}
+
+/// The camera matrix K of a camera model.
+pub fn intrinsics(camera: &CameraModel) -> nalgebra::Matrix3<f64> {
+    let i = &camera.intrinsics;
+    nalgebra::Matrix3::new(i.fx, 0.0, i.cx, 0.0, i.fy, i.cy, 0.0, 0.0, 1.0)
+}
+
+/// Features, undistortion and the mapper (module docs), taking what `input.prepared` holds.
+pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
+    check(&input.images)?;
+    let n = input.images.len();
     let t = std::time::Instant::now();
     let mut features = Vec::new();
     let mut undistorted = Vec::new();
     let mut colours = Vec::new();
-    for im in &input.images {
-        let f = features::detect(&im.grey, &config.features);
-        // Keypoints the distortion model cannot invert (far outside its valid region) are
-        // left out of both copies, so that indices agree.
-        let mut kept = features::Features::default();
-        let mut ideal = features::Features::default();
-        for (kp, d) in f.keypoints.iter().zip(&f.descriptors) {
-            let k = &im.camera;
-            let p = if k.distortion.is_zero() {
-                Some(glam::DVec2::new(kp.x as f64, kp.y as f64))
-            } else {
-                k.undistort_pixel(glam::DVec2::new(kp.x as f64, kp.y as f64))
-                    .map(|n| k.normalized_to_pixel(n))
-            };
-            if let Some(p) = p.filter(|p| p.is_finite()) {
-                kept.keypoints.push(*kp);
-                kept.descriptors.push(*d);
-                ideal.keypoints.push(features::Keypoint { x: p.x as f32, y: p.y as f32, ..*kp });
-                ideal.descriptors.push(*d);
-            }
-        }
-        let w = im.grey.width;
-        colours.push(
-            kept.keypoints
-                .iter()
-                .map(|kp| {
-                    let (x, y) =
-                        ((kp.x.round() as usize).min(w - 1), (kp.y.round() as usize).min(im.grey.height - 1));
-                    im.rgb8.get(y * w + x).copied().unwrap_or([128, 128, 128])
-                })
-                .collect(),
-        );
-        features.push(kept);
-        undistorted.push(ideal);
+    let mut prepared_images = 0;
+    for (i, im) in input.images.iter().enumerate() {
+        let given = input.prepared.features.get(i).and_then(Option::as_ref);
+        prepared_images += usize::from(given.is_some());
+        let f = match given {
+            Some(f) => ideal_features(im, f),
+            None => ideal_features(im, &features::detect(&im.grey, &config.features)),
+        };
+        features.push(f.kept);
+        undistorted.push(f.ideal);
+        colours.push(f.colours);
     }
     let extraction_s = t.elapsed().as_secs_f64();
-    let k: Vec<nalgebra::Matrix3<f64>> = input
-        .images
-        .iter()
-        .map(|im| {
-            let i = &im.camera.intrinsics;
-            nalgebra::Matrix3::new(i.fx, 0.0, i.cx, 0.0, i.fy, i.cy, 0.0, 0.0, 1.0)
-        })
-        .collect();
-    let reconstruction = mapper::reconstruct(&undistorted, &k, &config.mapper);
+    let k: Vec<nalgebra::Matrix3<f64>> = input.images.iter().map(|im| intrinsics(&im.camera)).collect();
+    // The prepared pairs (the first of any repeated one), then every other pair.
+    let mut done = vec![false; n * n];
+    let mut pairs = Vec::new();
+    for p in &input.prepared.pairs {
+        let (a, b) = (p.report.a, p.report.b);
+        if a < b && b < n && !done[a * n + b] {
+            done[a * n + b] = true;
+            pairs.push(p.clone());
+        }
+    }
+    let prepared_pairs = pairs.len();
+    for a in 0..n {
+        for b in a + 1..n {
+            if !done[a * n + b] {
+                pairs.push(mapper::verify_pair(&undistorted, &k, (a, b), &config.mapper));
+            }
+        }
+    }
+    let reconstruction = mapper::reconstruct_verified(&undistorted, &k, pairs, &config.mapper);
     let cameras = input
         .images
         .iter()
@@ -147,5 +206,5 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
             c
         })
         .collect();
-    Ok(Output { features, colours, reconstruction, cameras, extraction_s })
+    Ok(Output { features, colours, reconstruction, cameras, extraction_s, prepared_images, prepared_pairs })
 }

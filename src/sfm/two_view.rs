@@ -37,7 +37,7 @@ use crate::math::ransac::{self, Found};
 use nalgebra::{DMatrix, Matrix3, Vector3, SVD};
 
 /// A relative pose: X₂ = R·X₁ + t.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RelativePose {
     pub r: Matrix3<f64>,
     pub t: Vector3<f64>,

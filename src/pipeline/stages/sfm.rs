@@ -24,7 +24,7 @@
 
 use super::{apply_overrides, Context, Findings, SettingsKey, StageError, MAX_RENDERS};
 use crate::math::Pose as CameraPose;
-use crate::pipeline::cache::scene_digest;
+use crate::pipeline::cache::{scene_digest, Pass};
 use crate::pipeline::metric::{Better, Metric};
 use crate::render;
 use crate::sfm::{self, bundle::Pose, eval};
@@ -76,6 +76,33 @@ struct ViewRecipe<'a> {
     settings: SettingsKey,
 }
 
+/// A view's features (a derived cache entry): its render and the detector's settings.
+#[derive(Serialize)]
+struct FeaturesRecipe<'a> {
+    product: &'static str,
+    view: ViewRecipe<'a>,
+    /// `features::Options` as Debug prints it (every field, floats exactly).
+    options: String,
+}
+
+/// A block of verified pairs (a derived cache entry): the features and given cameras of its
+/// images, their number (the pairs' RANSAC seeds depend on it), where the block starts, and the
+/// mapper's settings.
+#[derive(Serialize)]
+struct PairsRecipe<'a> {
+    product: &'static str,
+    views: usize,
+    first: [usize; 2],
+    features: Vec<&'a FeaturesRecipe<'a>>,
+    cameras: Vec<crate::math::CameraModel>,
+    /// `mapper::Options` as Debug prints it.
+    options: &'a str,
+}
+
+/// Images on each side of a block of pairs the matches pass hands out: 8 × 8 pairs, about
+/// 0.3 s of matching and verification at 640×480 px with 8192 keypoints per image.
+const PAIR_BLOCK: usize = 8;
+
 pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), StageError> {
     if !(2..=MAX_RENDERS).contains(&c.views) {
         return Err(StageError::Config(format!("views = {}: expected 2 to {MAX_RENDERS}", c.views)));
@@ -100,6 +127,8 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth,
     let mut settings = render::Settings::from_scene(&scene);
     apply_overrides(&mut settings, c.spp, None)?;
     let camera = scene.camera;
+    let cfg = config(c.max_features, c.guess_intrinsics);
+    let mut recipes = Vec::new();
     let target = DVec3::from_array(c.target);
     let bar = render::progress_bar(c.views as u64, &format!("{} views", ctx.case), ctx.progress);
     let mut images = Vec::new();
@@ -120,32 +149,38 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth,
         pose[..9].copy_from_slice(&world_from_cam.rotation.to_cols_array());
         pose[9..].copy_from_slice(&world_from_cam.translation.to_array());
         let name = format!("view{k:03}.png");
-        let recipe = ViewRecipe {
-            product: "sfm-rgb",
-            scene: &digest,
-            t_world_cam: pose,
-            settings: SettingsKey::from(&settings),
+        let recipe = FeaturesRecipe {
+            product: "sfm-features",
+            view: ViewRecipe {
+                product: "sfm-rgb",
+                scene: &digest,
+                t_world_cam: pose,
+                settings: SettingsKey::from(&settings),
+            },
+            options: format!("{:?}", cfg.features),
         };
-        let rendered = ctx.cache.images(ctx.case, &name, &recipe, || {
+        let rendered = ctx.cache.images(ctx.case, &name, &recipe.view, || {
             Ok::<_, StageError>(vec![render::render(&scene, &settings).mean])
         })?;
-        let Some(rendered) = rendered else { continue };
-        let Some(img) = rendered
-            .into_iter()
-            .next()
-            .filter(|i| i.channels == 3 && (i.width, i.height) == (camera.width, camera.height))
-        else {
-            return Err(StageError::Config(format!("{name}: the cached render has the wrong size")));
-        };
-        // As a photograph: 8-bit sRGB codes, read as the photograph reader reads them.
-        let code = |v: f32| (crate::image::srgb_encode(v.max(0.0)) * 255.0).round().clamp(0.0, 255.0) / 255.0;
-        let coded = crate::image::Image { data: img.data.iter().map(|&v| code(v)).collect(), ..img };
         let given = if c.guess_intrinsics {
             sfm::input::assumed_camera(camera.width, camera.height)
         } else {
             camera.clone()
         };
-        images.push(sfm::input::image(name, &coded, given));
+        let Some(rendered) = rendered else {
+            // A share of the renders pass: the owner of a view extracts its features.
+            if ctx.cache.owns(&recipe.view) && ctx.cache.bytes(&recipe).is_none() {
+                if let Some(img) = ctx.cache.stored_images(&recipe.view) {
+                    let im = photograph(name, img, &camera, given)?;
+                    let f = sfm::features::detect(&im.grey, &cfg.features);
+                    ctx.cache.store_bytes(&recipe, &sfm::bytes::encode_features(&f));
+                }
+            }
+            recipes.push(recipe);
+            continue;
+        };
+        images.push(photograph(name, rendered, &camera, given)?);
+        recipes.push(recipe);
         // World to camera: R = R_wcᵀ, t = −R C.
         let r = world_from_cam.rotation.transpose();
         let m = Matrix3::from_fn(|i, j| r.col(j)[i]);
@@ -154,6 +189,10 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth,
         bar.inc(1);
     }
     bar.finish_and_clear();
+    let prepared = match ctx.cache.pass() {
+        Some(Pass::Renders) => sfm::Prepared::default(),
+        _ => prepare(ctx, &images, &recipes, &cfg),
+    };
     ctx.renders_requested()?;
     let advance =
         if c.forward > 0.0 { format!(", advancing {} towards it", c.forward) } else { String::new() };
@@ -162,11 +201,105 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth,
         c.scene, c.views, camera.width, camera.height, settings.spp, c.arc_deg, c.radius, c.target, c.height
     )];
     let focal = c.guess_intrinsics.then_some(camera.intrinsics.fx);
-    Ok((sfm::Input { images }, Truth { poses, focal }, Findings { notes, ..Default::default() }))
+    Ok((sfm::Input { images, prepared }, Truth { poses, focal }, Findings { notes, ..Default::default() }))
+}
+
+/// A render as the photograph `lumen sfm` would read: 8-bit sRGB codes, read back as
+/// `sfm::input` reads them, with the camera the solver is `given`.
+fn photograph(
+    name: String,
+    rendered: Vec<crate::image::Image>,
+    camera: &crate::math::CameraModel,
+    given: crate::math::CameraModel,
+) -> Result<sfm::Image, StageError> {
+    let Some(img) = rendered
+        .into_iter()
+        .next()
+        .filter(|i| i.channels == 3 && (i.width, i.height) == (camera.width, camera.height))
+    else {
+        return Err(StageError::Config(format!("{name}: the cached render has the wrong size")));
+    };
+    let code = |v: f32| (crate::image::srgb_encode(v.max(0.0)) * 255.0).round().clamp(0.0, 255.0) / 255.0;
+    let coded = crate::image::Image { data: img.data.iter().map(|&v| code(v)).collect(), ..img };
+    Ok(sfm::input::image(name, &coded, given))
+}
+
+/// What shares made for the case (`cache` module docs): every view's features and every block
+/// of verified pairs the cache holds. In the matches pass, also makes the blocks this share
+/// owns (detecting, and storing, the features of their images where the renders pass left
+/// none). Outside the passes, only reads: a run of cases stores none of this, so its phase
+/// times stay those of the work it does.
+fn prepare(
+    ctx: &Context,
+    images: &[sfm::Image],
+    recipes: &[FeaturesRecipe],
+    cfg: &sfm::Config,
+) -> sfm::Prepared {
+    let making = ctx.cache.pass() == Some(Pass::Matches);
+    let mut features: Vec<Option<sfm::features::Features>> =
+        recipes.iter().map(|r| ctx.cache.bytes(r).and_then(|b| sfm::bytes::decode_features(&b))).collect();
+    let n = images.len();
+    let k: Vec<Matrix3<f64>> = images.iter().map(|im| sfm::intrinsics(&im.camera)).collect();
+    let options = format!("{:?}", cfg.mapper);
+    let mut pairs = Vec::new();
+    for i0 in (0..n).step_by(PAIR_BLOCK) {
+        for j0 in (i0..n).step_by(PAIR_BLOCK) {
+            let mut members: Vec<usize> = (i0..n.min(i0 + PAIR_BLOCK)).collect();
+            if j0 != i0 {
+                members.extend(j0..n.min(j0 + PAIR_BLOCK));
+            }
+            let recipe = PairsRecipe {
+                product: "sfm-pairs",
+                views: n,
+                first: [i0, j0],
+                features: members.iter().map(|&m| &recipes[m]).collect(),
+                cameras: members.iter().map(|&m| images[m].camera.clone()).collect(),
+                options: &options,
+            };
+            let owned = ctx.cache.owns(&recipe);
+            if let Some(p) = ctx.cache.bytes(&recipe).and_then(|b| sfm::bytes::decode_pairs(&b)) {
+                ctx.cache.count(owned, false);
+                pairs.extend(p);
+                continue;
+            }
+            if !making {
+                continue;
+            }
+            ctx.cache.count(owned, owned);
+            if !owned {
+                continue;
+            }
+            // Only the block's images need features: the others stay empty.
+            let mut ideal = vec![sfm::features::Features::default(); n];
+            for &m in &members {
+                let f = features[m].get_or_insert_with(|| {
+                    let f = sfm::features::detect(&images[m].grey, &cfg.features);
+                    ctx.cache.store_bytes(&recipes[m], &sfm::bytes::encode_features(&f));
+                    f
+                });
+                ideal[m] = sfm::ideal_features(&images[m], f).ideal;
+            }
+            let block: Vec<sfm::mapper::VerifiedPair> = (i0..n.min(i0 + PAIR_BLOCK))
+                .flat_map(|a| (j0.max(a + 1)..n.min(j0 + PAIR_BLOCK)).map(move |b| (a, b)))
+                .map(|p| sfm::mapper::verify_pair(&ideal, &k, p, &cfg.mapper))
+                .collect();
+            ctx.cache.store_bytes(&recipe, &sfm::bytes::encode_pairs(&block));
+        }
+    }
+    sfm::Prepared { features, pairs }
+}
+
+/// The solver's settings for a case: its keypoints per image, and whether the focal length
+/// is a guess to refine.
+fn config(max_features: usize, refine_focal: bool) -> sfm::Config {
+    sfm::Config {
+        features: sfm::features::Options { max_features, ..Default::default() },
+        mapper: sfm::mapper::Options { refine_focal, ..Default::default() },
+    }
 }
 
 pub fn solve_render(c: &RenderConfig, input: &sfm::Input) -> Result<sfm::Output, StageError> {
-    solve_with(c.max_features, c.guess_intrinsics, input)
+    Ok(sfm::run(input, &config(c.max_features, c.guess_intrinsics))?)
 }
 
 #[derive(Debug, Deserialize)]
@@ -231,19 +364,7 @@ pub fn read(c: &Config, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), 
 }
 
 pub fn solve(c: &Config, input: &sfm::Input) -> Result<sfm::Output, StageError> {
-    solve_with(c.max_features, c.camera.is_none(), input)
-}
-
-fn solve_with(
-    max_features: usize,
-    refine_focal: bool,
-    input: &sfm::Input,
-) -> Result<sfm::Output, StageError> {
-    let config = sfm::Config {
-        features: sfm::features::Options { max_features, ..Default::default() },
-        mapper: sfm::mapper::Options { refine_focal, ..Default::default() },
-    };
-    Ok(sfm::run(input, &config)?)
+    Ok(sfm::run(input, &config(c.max_features, c.camera.is_none()))?)
 }
 
 pub fn validate(out: &sfm::Output, truth: &Truth) -> Findings {
@@ -297,6 +418,15 @@ pub fn validate(out: &sfm::Output, truth: &Truth) -> Findings {
     }
     for (i, why) in &rec.unregistered {
         f.notes.push(format!("image {i} not registered: {why}"));
+    }
+    if out.prepared_images + out.prepared_pairs > 0 {
+        let n = out.features.len();
+        f.notes.push(format!(
+            "Made beforehand by the pipeline's shares and read from the cache: the features of {} of {n} images, the matches and two-view geometry of {} of {} pairs (the phase times below leave that work out).",
+            out.prepared_images,
+            out.prepared_pairs,
+            n * n.saturating_sub(1) / 2
+        ));
     }
     f.notes.push(format!(
         "Phases: extraction {:.2} s, matching {:.2} s, geometric verification {:.2} s, mapping {:.2} s, bundle adjustment {:.2} s.",
