@@ -649,8 +649,9 @@ fn slurm_scripts_run_the_shards_and_the_merge() {
     assert!(o.status.success(), "{o:?}");
     let script = std::fs::read_to_string(out.join("slurm/run.sbatch")).unwrap();
     assert!(script.contains("#SBATCH --array=0-2") && script.contains("#SBATCH --time=0:10:00"), "{script}");
-    // The render array, then the run array (which then finds every render in the cache).
-    for array in ["render", "run"] {
+    // The render array, the matches array, then the run array (which then finds every render
+    // in the cache).
+    for array in ["render", "match", "run"] {
         for task in 0..3 {
             let o = Command::new("bash")
                 .arg(out.join(format!("slurm/{array}.sbatch")))
@@ -696,8 +697,8 @@ fn render_shares_split_the_renders_inside_cases() {
             .unwrap();
         let err = String::from_utf8_lossy(&o.stderr).into_owned();
         assert!(o.status.success(), "{err}");
-        // "... requests are this share's, R rendered into ..."
-        let made = err.split(" rendered into").next().and_then(|s| s.rsplit(' ').next()).unwrap();
+        // "... requests are this share's, R made in ..."
+        let made = err.split(" made in").next().and_then(|s| s.rsplit(' ').next()).unwrap();
         (made.parse::<u64>().unwrap(), err)
     };
     let (made, lights): (Vec<u64>, Vec<usize>) = (1..=3)
@@ -737,6 +738,84 @@ fn render_shares_split_the_renders_inside_cases() {
     assert!(err.contains("--no-cache"), "{err}");
 }
 
+/// Shares split structure from motion inside one case: the renders pass extracts the
+/// features of the views each share renders, the matches pass verifies the blocks of pairs
+/// each owns (10 views: blocks of views 0–7 × 0–7, 0–7 × 8–9 and 8–9 × 8–9), and the case,
+/// run as a shard from that cache, reads them all and gives the one-process numbers.
+#[test]
+fn shares_split_structure_from_motion_inside_a_case() {
+    let dir = tempfile::tempdir().unwrap();
+    // The courtyard at half the resolution, to keep the test short.
+    let scene = std::fs::read_to_string(common::root().join("pipelines/scenes/sfm-courtyard.toml")).unwrap();
+    let small = scene
+        .replace("width = 1024", "width = 512")
+        .replace("height = 768", "height = 384")
+        .replace("fx = 960.0", "fx = 480.0")
+        .replace("fy = 960.0", "fy = 480.0")
+        .replace("cx = 511.5", "cx = 255.5")
+        .replace("cy = 383.5", "cy = 191.5");
+    assert_ne!(small, scene);
+    std::fs::write(dir.path().join("courtyard.toml"), small).unwrap();
+    let text = "name = \"sfm\"\nseed = 3\n[[stages]]\nstage = \"sfm\"\ncase = \"courtyard\"\nscene = \"courtyard.toml\"\n\
+                target = [0.0, 0.5, 0.6]\nradius = 3.5\nheight = 1.3\narc_deg = 40\nviews = 10\nspp = 4\n\
+                bounds = { unregistered_images = 0 }\n";
+    let (code, err, one) =
+        run_with(text, dir.path(), "one", &["--cache", dir.path().join("c1").to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let cache = dir.path().join("c2");
+    let p = dir.path().join("p.toml");
+    let share = |k: usize, pass: &str| {
+        let o = Command::new(env!("CARGO_BIN_EXE_lumen"))
+            .args(["run", p.to_str().unwrap(), "--shard", &format!("{k}/2"), pass])
+            .args(["--cache", cache.to_str().unwrap()])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert!(o.status.success(), "{err}");
+        // "... are this share's, M made in ..."
+        let made = err.split(" made in").next().and_then(|s| s.rsplit(' ').next()).unwrap();
+        made.parse::<usize>().unwrap()
+    };
+    let renders: usize = (1..=2).map(|k| share(k, "--renders-only")).sum();
+    assert_eq!(renders, 10);
+    // Every view's render and its features.
+    assert_eq!(std::fs::read_dir(&cache).unwrap().count(), 20);
+    let blocks: Vec<usize> = (1..=2).map(|k| share(k, "--matches-only")).collect();
+    assert_eq!(blocks.iter().sum::<usize>(), 3, "{blocks:?}");
+    assert_eq!(std::fs::read_dir(&cache).unwrap().count(), 23);
+    assert_eq!(share(1, "--matches-only"), 0, "a share run again makes nothing");
+    for k in 1..=2 {
+        let (code, err, _) = run_with(
+            text,
+            dir.path(),
+            "sharded",
+            &["--shard", &format!("{k}/2"), "--cache", cache.to_str().unwrap()],
+        );
+        assert_eq!(code, 0, "{err}");
+    }
+    let o = Command::new(env!("CARGO_BIN_EXE_lumen"))
+        .args(["merge", dir.path().join("sharded").to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let merged: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("sharded/report.json")).unwrap())
+            .unwrap();
+    assert_eq!(numbers(&one), numbers(&merged));
+    assert_eq!(case(&merged, "courtyard")["metrics"][0]["value"], 10.0);
+    let notes = case(&merged, "courtyard")["notes"].to_string();
+    assert!(
+        notes
+            .contains("the features of 10 of 10 images, the matches and two-view geometry of 45 of 45 pairs"),
+        "{notes}"
+    );
+    // --matches-only needs a shard and a cache, and is not --renders-only.
+    for bad in [vec!["--matches-only"], vec!["--shard", "1/2", "--matches-only", "--renders-only"]] {
+        let (code, err) = common::lumen(&[&["run", p.to_str().unwrap()], bad.as_slice()].concat());
+        assert_eq!(code, 2, "{err}");
+    }
+}
+
 /// The same small pipeline through a live Slurm: `lumen slurm --submit --wait` submits the
 /// 3-task array and the merge job that depends on it, waits for the merge, and its report
 /// equals the one-process run's; a shard that fails makes Slurm cancel the merge, which
@@ -768,7 +847,7 @@ fn live_slurm_runs_the_array_and_the_merge() {
     let (code, err, out) = submit("p.toml", "cluster");
     assert_eq!(code, Some(0), "{err}");
     for task in 0..3 {
-        for log in ["render", "shard"] {
+        for log in ["render", "match", "shard"] {
             assert!(out.join(format!("slurm/{log}-{task}.log")).is_file(), "no {log} log of task {task}");
         }
     }

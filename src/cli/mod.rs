@@ -67,9 +67,10 @@ enum Command {
         out: PathBuf,
     },
     /// Write the sbatch scripts that run a pipeline on Slurm: OUT/slurm/render.sbatch (a job
-    /// array, each task making its share of every case's renders), OUT/slurm/run.sbatch (a job
-    /// array after it, one task per shard of cases) and OUT/slurm/merge.sbatch (`lumen merge
-    /// OUT` after that); with --submit, submit all three and print the job ids; with --wait,
+    /// array, each task making its share of every case's renders), OUT/slurm/match.sbatch (a
+    /// job array after it, each task matching its share of the image pairs), OUT/slurm/run.sbatch
+    /// (a job array after that, one task per shard of cases) and OUT/slurm/merge.sbatch
+    /// (`lumen merge OUT` last); with --submit, submit all four and print the job ids; with --wait,
     /// also wait for the merge and exit as it does (0 all bounds met, 3 a bound missed, 1 a
     /// failure).
     Slurm {

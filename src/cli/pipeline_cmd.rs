@@ -108,26 +108,29 @@ pub fn slurm_cmd(path: &Path, a: SlurmArgs) -> Result<i32> {
         partition: a.partition,
     };
     let dir = out.join("slurm");
-    let (render, run, merge) = (dir.join("render.sbatch"), dir.join("run.sbatch"), dir.join("merge.sbatch"));
+    let scripts = [
+        ("render.sbatch", slurm::render_script(&job)),
+        ("match.sbatch", slurm::match_script(&job)),
+        ("run.sbatch", slurm::array_script(&job)),
+        ("merge.sbatch", slurm::merge_script(&job)),
+    ];
     lumen::image::io::write_together(&dir, |staged| -> Result<()> {
-        for (name, text) in [
-            ("render.sbatch", slurm::render_script(&job)),
-            ("run.sbatch", slurm::array_script(&job)),
-            ("merge.sbatch", slurm::merge_script(&job)),
-        ] {
+        for (name, text) in &scripts {
             let p = staged.join(name);
             std::fs::write(&p, text).with_context(|| format!("cannot write {}", p.display()))?;
         }
         Ok(())
     })?;
-    eprintln!("wrote {}, {} and {}", render.display(), run.display(), merge.display());
+    let [render, matches, run, merge] = scripts.map(|(name, _)| dir.join(name));
+    eprintln!("wrote {}, {}, {} and {}", render.display(), matches.display(), run.display(), merge.display());
     // A task that fails leaves the next job's dependency unmet: Slurm then cancels that job
     // instead of holding it pending for ever.
     let after = "--kill-on-invalid-dep=yes";
     if !a.submit {
         eprintln!(
-            "submit with: r=$(sbatch --parsable {}) && s=$(sbatch --parsable --dependency=afterok:$r {after} {}) && sbatch --dependency=afterok:$s {after} {}",
+            "submit with: r=$(sbatch --parsable {}) && m=$(sbatch --parsable --dependency=afterok:$r {after} {}) && s=$(sbatch --parsable --dependency=afterok:$m {after} {}) && sbatch --dependency=afterok:$s {after} {}",
             render.display(),
+            matches.display(),
             run.display(),
             merge.display()
         );
@@ -153,22 +156,30 @@ pub fn slurm_cmd(path: &Path, a: SlurmArgs) -> Result<i32> {
     let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
     let before = modified(&report);
     let (renders, _) = sbatch(&["--parsable", &render.to_string_lossy()])?;
+    let (pairs, _) = sbatch(&[
+        "--parsable",
+        &format!("--dependency=afterok:{renders}"),
+        after,
+        &matches.to_string_lossy(),
+    ])?;
     let (array, _) =
-        sbatch(&["--parsable", &format!("--dependency=afterok:{renders}"), after, &run.to_string_lossy()])?;
+        sbatch(&["--parsable", &format!("--dependency=afterok:{pairs}"), after, &run.to_string_lossy()])?;
     let dependency = format!("--dependency=afterok:{array}");
     let mut args = vec!["--parsable", &dependency, after];
     if a.wait {
-        eprintln!("render job {renders} and array job {array} submitted; waiting for the merge job");
+        eprintln!(
+            "render job {renders}, matches job {pairs} and array job {array} submitted; waiting for the merge job"
+        );
         args.push("--wait");
     }
     let script = merge.to_string_lossy();
     args.push(&script);
     let (merge_id, code) = sbatch(&args)?;
-    println!("render job {renders}, array job {array}, merge job {merge_id}");
+    println!("render job {renders}, matches job {pairs}, array job {array}, merge job {merge_id}");
     if !a.wait {
         return Ok(0);
     }
-    let logs = dir.join("{render,shard}-*.log");
+    let logs = dir.join("{render,match,shard}-*.log");
     match code {
         Some(c @ (0 | 3)) if modified(&report).is_some_and(|m| Some(m) != before) => Ok(c),
         Some(0 | 3) => bail!(

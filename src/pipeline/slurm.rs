@@ -1,9 +1,13 @@
-//! `lumen slurm`: the three plain `sbatch` scripts that run a pipeline on a Slurm cluster:
+//! `lumen slurm`: the four plain `sbatch` scripts that run a pipeline on a Slurm cluster:
 //! - `render.sbatch`, a job array with one task per shard, each making its share of every
 //!   case's renders in the shared cache (`lumen run --shard K/N --renders-only`), so the views
-//!   or lights of one large case are spread over all tasks;
-//! - `run.sbatch`, a second array after it, each task running its shard's cases from the full
-//!   cache (`lumen run --shard K/N`);
+//!   or lights of one large case are spread over all tasks (with the features of the
+//!   structure-from-motion views each task renders);
+//! - `match.sbatch`, a second array after it, each task matching and verifying its share of
+//!   the structure-from-motion cases' blocks of image pairs (`--matches-only`), which need
+//!   every view's features;
+//! - `run.sbatch`, a third array after that, each task running its shard's cases from the
+//!   full cache (`lumen run --shard K/N`);
 //! - `merge.sbatch`, the merge job after that (`lumen merge OUT`).
 //!
 //! lumen never talks to Slurm except through `sbatch`; users read and adapt the scripts.
@@ -86,6 +90,17 @@ pub fn render_script(job: &Job) -> String {
     )
 }
 
+/// The matches array's script: task i verifies share i + 1 of every case's blocks of pairs.
+pub fn match_script(job: &Job) -> String {
+    let p = job.pipeline.display();
+    array(
+        job,
+        &format!("lumen: the image pairs of {p} in {} shares, one array task each", job.shards),
+        "match-%a.log",
+        "--matches-only",
+    )
+}
+
 /// The run array's script: task i runs shard i + 1. A shard whose metrics miss a bound (exit 3)
 /// still counts as done, so the merge runs and its report shows the miss (the merge exits 3).
 pub fn array_script(job: &Job) -> String {
@@ -134,6 +149,8 @@ mod tests {
             r.contains("#SBATCH --array=0-2\n") && r.contains("--renders-only --cache '/scratch/cache'"),
             "{r}"
         );
+        let m = match_script(&job);
+        assert!(m.contains("--matches-only --cache '/scratch/cache'") && m.contains("match-%a.log"), "{m}");
         assert!(check_word("--partition", "gpu,debug").is_ok());
         for bad in ["", "a b", "x\n#SBATCH --mem=1T", "$(rm)"] {
             assert!(check_word("--partition", bad).is_err(), "{bad:?}");
