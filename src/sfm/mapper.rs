@@ -2,8 +2,9 @@
 //! motion revisited", CVPR 2016), from per-image features and known intrinsics:
 //!
 //! 1. every pair is matched (`matching`) and verified by its two-view geometry
-//!    (`two_view`); the inliers of E (general pairs) or of H (planar or rotation pairs) are
-//!    the verified matches, joined into tracks (`tracks`);
+//!    (`two_view`), pairs in parallel, each independent of the others (`verify_pair`); the
+//!    inliers of E (general pairs) or of H (planar or rotation pairs) are the verified
+//!    matches, joined into tracks (`tracks`);
 //! 2. the first pair: among general pairs whose median triangulation angle is at least
 //!    `init_min_angle_deg`, the one with the most inliers; its tracks are triangulated;
 //! 3. then, repeatedly, the unregistered image that sees the most triangulated tracks is
@@ -252,11 +253,34 @@ pub fn verify_pair(
     VerifiedPair { report, geometry, matching_s, verification_s: t.elapsed().as_secs_f64() }
 }
 
+/// `verify_pair` over `pairs`, in parallel, results in their order. The pairs' matching and
+/// verification times are scaled so that together they add up to the wall time spent, split
+/// between the two in the proportion of their times on the threads.
+pub fn verify_pairs(
+    features: &[Features],
+    k: &[Matrix3<f64>],
+    pairs: &[(usize, usize)],
+    opts: &Options,
+) -> Vec<VerifiedPair> {
+    use rayon::prelude::*;
+    let t = std::time::Instant::now();
+    let mut out: Vec<VerifiedPair> = pairs.par_iter().map(|&p| verify_pair(features, k, p, opts)).collect();
+    let threads: f64 = out.iter().map(|p| p.matching_s + p.verification_s).sum();
+    if threads > 0.0 {
+        let scale = t.elapsed().as_secs_f64() / threads;
+        for p in &mut out {
+            p.matching_s *= scale;
+            p.verification_s *= scale;
+        }
+    }
+    out
+}
+
 /// Reconstructs cameras and points from `features` of images with intrinsics `k`.
 pub fn reconstruct(features: &[Features], k: &[Matrix3<f64>], opts: &Options) -> Reconstruction {
     let n = features.len();
-    let pairs = (0..n).flat_map(|a| (a + 1..n).map(move |b| (a, b)));
-    let verified = pairs.map(|p| verify_pair(features, k, p, opts)).collect();
+    let pairs: Vec<(usize, usize)> = (0..n).flat_map(|a| (a + 1..n).map(move |b| (a, b))).collect();
+    let verified = verify_pairs(features, k, &pairs, opts);
     reconstruct_verified(features, k, verified, opts)
 }
 

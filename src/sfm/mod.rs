@@ -188,13 +188,9 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
         }
     }
     let prepared_pairs = pairs.len();
-    for a in 0..n {
-        for b in a + 1..n {
-            if !done[a * n + b] {
-                pairs.push(mapper::verify_pair(&undistorted, &k, (a, b), &config.mapper));
-            }
-        }
-    }
+    let todo: Vec<(usize, usize)> =
+        (0..n).flat_map(|a| (a + 1..n).map(move |b| (a, b))).filter(|&(a, b)| !done[a * n + b]).collect();
+    pairs.extend(mapper::verify_pairs(&undistorted, &k, &todo, &config.mapper));
     let reconstruction = mapper::reconstruct_verified(&undistorted, &k, pairs, &config.mapper);
     let cameras = input
         .images

@@ -279,10 +279,10 @@ fn prepare(
                 });
                 ideal[m] = sfm::ideal_features(&images[m], f).ideal;
             }
-            let block: Vec<sfm::mapper::VerifiedPair> = (i0..n.min(i0 + PAIR_BLOCK))
+            let block: Vec<(usize, usize)> = (i0..n.min(i0 + PAIR_BLOCK))
                 .flat_map(|a| (j0.max(a + 1)..n.min(j0 + PAIR_BLOCK)).map(move |b| (a, b)))
-                .map(|p| sfm::mapper::verify_pair(&ideal, &k, p, &cfg.mapper))
                 .collect();
+            let block = sfm::mapper::verify_pairs(&ideal, &k, &block, &cfg.mapper);
             ctx.cache.store_bytes(&recipe, &sfm::bytes::encode_pairs(&block));
         }
     }
