@@ -816,6 +816,66 @@ fn shares_split_structure_from_motion_inside_a_case() {
     }
 }
 
+/// The photographs' sfm case splits the same way: each renders share extracts the features of
+/// the photographs it owns (keyed by the file's content), a matches share verifies the block,
+/// and the case read as a shard takes both from the cache, with the one-process numbers.
+/// Four of Herz-Jesu's photographs, to keep the test short.
+#[test]
+fn shares_split_the_photographs_features_and_pairs() {
+    let Some(data) = common::shared_data() else { return };
+    let hj = data.join("sfm/herz-jesu-p8");
+    let dir = tempfile::tempdir().unwrap();
+    let images = dir.path().join("images");
+    std::fs::create_dir(&images).unwrap();
+    for name in ["0000.jpg", "0001.jpg", "0002.jpg", "0003.jpg"] {
+        std::os::unix::fs::symlink(hj.join("images").join(name), images.join(name)).unwrap();
+    }
+    let text = format!(
+        "seed = 2\n[[stages]]\nstage = \"sfm\"\ncase = \"herz-jesu-4\"\nimages = \"images\"\ncamera = \"{}\"\ntruth = \"{}\"\n",
+        hj.join("images/K.txt").display(),
+        hj.join("gt_dense_cameras").display()
+    );
+    let (code, err, one) = run_with(&text, dir.path(), "one", &["--no-cache"]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(case(&one, "herz-jesu-4")["metrics"][0]["value"], 4.0, "{one}");
+    let cache = dir.path().join("cache");
+    let p = dir.path().join("p.toml");
+    let mut passes = Vec::new();
+    for pass in ["--renders-only", "--matches-only"] {
+        let shares: Vec<_> = (1..=2)
+            .map(|k| {
+                Command::new(env!("CARGO_BIN_EXE_lumen"))
+                    .args(["run", p.to_str().unwrap(), "--shard", &format!("{k}/2"), pass])
+                    .args(["--cache", cache.to_str().unwrap(), "--threads", "1"])
+                    .spawn()
+                    .unwrap()
+            })
+            .collect();
+        for mut c in shares {
+            assert!(c.wait().unwrap().success(), "{pass}");
+        }
+        passes.push(std::fs::read_dir(&cache).unwrap().count());
+    }
+    // Four photographs' features, then one block of pairs.
+    assert_eq!(passes, [4, 5]);
+    for k in 1..=2 {
+        let args = ["--shard", &format!("{k}/2"), "--cache", cache.to_str().unwrap()];
+        let (code, err, _) = run_with(&text, dir.path(), "sharded", &args);
+        assert_eq!(code, 0, "{err}");
+    }
+    let (code, err) = common::lumen(&["merge", dir.path().join("sharded").to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let merged: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("sharded/report.json")).unwrap())
+            .unwrap();
+    assert_eq!(numbers(&one), numbers(&merged));
+    let notes = case(&merged, "herz-jesu-4")["notes"].to_string();
+    assert!(
+        notes.contains("the features of 4 of 4 images, the matches and two-view geometry of 6 of 6 pairs"),
+        "{notes}"
+    );
+}
+
 /// The same small pipeline through a live Slurm: `lumen slurm --submit --wait` submits the
 /// 3-task array and the merge job that depends on it, waits for the merge, and its report
 /// equals the one-process run's; a shard that fails makes Slurm cancel the merge, which

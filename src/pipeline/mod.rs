@@ -131,8 +131,9 @@ pub fn render_share(
                 (Stage::Color(c), cache::Pass::Renders) => stages::color::synthesize(c, &ctx).map(|_| ()),
                 (Stage::Hdr(c), cache::Pass::Renders) => stages::hdr::synthesize(c, &ctx).map(|_| ()),
                 (Stage::SfmRender(c), _) => stages::sfm::synthesize(c, &ctx).map(|_| ()),
-                // Renders timed afresh (never cached), real data, and in the matches pass
-                // every stage without pairs to match: nothing to share.
+                (Stage::Sfm(c), _) => stages::sfm::read(c, &ctx).map(|_| ()),
+                // Renders timed afresh (never cached), other real data, and in the matches
+                // pass every stage without pairs to match: nothing to share.
                 _ => continue,
             };
             if progress {

@@ -85,15 +85,25 @@ struct FeaturesRecipe<'a> {
     options: String,
 }
 
+/// A photograph's features (a derived cache entry): its file's content and the detector's
+/// settings.
+#[derive(Serialize)]
+struct PhotoFeaturesRecipe {
+    product: &'static str,
+    /// FNV-1a 128 of the file's bytes.
+    file: String,
+    options: String,
+}
+
 /// A block of verified pairs (a derived cache entry): the features and given cameras of its
 /// images, their number (the pairs' RANSAC seeds depend on it), where the block starts, and the
 /// mapper's settings.
 #[derive(Serialize)]
-struct PairsRecipe<'a> {
+struct PairsRecipe<'a, R> {
     product: &'static str,
     views: usize,
     first: [usize; 2],
-    features: Vec<&'a FeaturesRecipe<'a>>,
+    features: Vec<&'a R>,
     cameras: Vec<crate::math::CameraModel>,
     /// `mapper::Options` as Debug prints it.
     options: &'a str,
@@ -229,10 +239,10 @@ fn photograph(
 /// owns (detecting, and storing, the features of their images where the renders pass left
 /// none). Outside the passes, only reads: a run of cases stores none of this, so its phase
 /// times stay those of the work it does.
-fn prepare(
+fn prepare<R: Serialize>(
     ctx: &Context,
     images: &[sfm::Image],
-    recipes: &[FeaturesRecipe],
+    recipes: &[R],
     cfg: &sfm::Config,
 ) -> sfm::Prepared {
     let making = ctx.cache.pass() == Some(Pass::Matches);
@@ -289,6 +299,25 @@ fn prepare(
     sfm::Prepared { features, pairs }
 }
 
+/// The features recipe of each photograph: its file's digest and the detector's settings.
+fn photo_recipes(
+    files: &[std::path::PathBuf],
+    cfg: &sfm::Config,
+) -> Result<Vec<PhotoFeaturesRecipe>, StageError> {
+    files
+        .iter()
+        .map(|f| {
+            let bytes =
+                std::fs::read(f).map_err(|e| sfm::Error::File { path: f.clone(), message: e.to_string() })?;
+            Ok(PhotoFeaturesRecipe {
+                product: "sfm-photo-features",
+                file: format!("{:032x}", crate::pipeline::cache::fnv128(&bytes)),
+                options: format!("{:?}", cfg.features),
+            })
+        })
+        .collect()
+}
+
 /// The solver's settings for a case: its keypoints per image, and whether the focal length
 /// is a guess to refine.
 fn config(max_features: usize, refine_focal: bool) -> sfm::Config {
@@ -337,7 +366,24 @@ pub fn read(c: &Config, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), 
     let camera = camera_path.as_deref().map(sfm::input::read_camera).transpose()?;
     let truth_dir = super::dataset_path(ctx, &c.truth)?;
     let files = sfm::input::photographs(&dir)?;
-    let input = sfm::input::read_images(&files, camera, |_, _, _| {})?;
+    let cfg = config(c.max_features, c.camera.is_none());
+    let recipes = photo_recipes(&files, &cfg)?;
+    if ctx.cache.pass() == Some(Pass::Renders) {
+        // A share of the renders pass: the features of the photographs it owns.
+        for (file, recipe) in files.iter().zip(&recipes) {
+            if ctx.cache.owns(recipe) && ctx.cache.bytes(recipe).is_none() {
+                let input = sfm::input::read_images(std::slice::from_ref(file), camera, |_, _, _| {})?;
+                for im in &input.images {
+                    let f = sfm::features::detect(&im.grey, &cfg.features);
+                    ctx.cache.store_bytes(recipe, &sfm::bytes::encode_features(&f));
+                }
+            }
+        }
+        return Err(StageError::RendersOnly);
+    }
+    let mut input = sfm::input::read_images(&files, camera, |_, _, _| {})?;
+    input.prepared = prepare(ctx, &input.images, &recipes, &cfg);
+    ctx.renders_requested()?;
     let mut poses = Vec::new();
     let mut focal = None;
     for im in &input.images {
@@ -364,6 +410,7 @@ pub fn read(c: &Config, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), 
 }
 
 pub fn solve(c: &Config, input: &sfm::Input) -> Result<sfm::Output, StageError> {
+    // `read` took the same settings for the prepared features and pairs.
     Ok(sfm::run(input, &config(c.max_features, c.camera.is_none()))?)
 }
 
