@@ -19,6 +19,7 @@ pub mod mapper;
 pub mod matching;
 pub mod p3p;
 pub mod pnp;
+pub mod reduced;
 pub mod tracks;
 pub mod two_view;
 
