@@ -238,8 +238,9 @@ fn herz_jesu_reconstruction_without_the_camera() {
     let dir = data.join("sfm/herz-jesu-p8");
     let feats = herz_jesu_features(&dir);
     let (cams, truth) = herz_jesu_truth(&dir);
-    let guess = lumen::sfm::input::assumed_camera(3072, 2048).intrinsics;
-    let k = vec![Matrix3::new(guess.fx, 0.0, guess.cx, 0.0, guess.fy, guess.cy, 0.0, 0.0, 1.0); 8];
+    let assumed = lumen::sfm::input::assumed_camera(3072, 2048);
+    let guess = assumed.intrinsics;
+    let k = vec![lumen::sfm::intrinsics(&assumed); 8];
     let rec = mapper::reconstruct(feats, &k, &mapper::Options { refine_focal: true, ..Default::default() });
     let f = rec.intrinsics[0][(0, 0)];
     let true_f = cams[0].0[(0, 0)];

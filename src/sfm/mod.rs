@@ -87,7 +87,7 @@ pub struct Output {
 }
 
 /// Checks that the images can be reconstructed at all (their number, sizes and cameras).
-pub fn check(images: &[Image]) -> Result<(), Error> {
+fn check(images: &[Image]) -> Result<(), Error> {
     if images.len() < 2 {
         return Err(Error::BadInput(format!(
             "{} image(s): structure from motion needs at least 2",
