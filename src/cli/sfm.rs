@@ -21,6 +21,11 @@ pub struct SfmArgs {
     /// Keypoints per image at most (COLMAP: 8192).
     #[arg(long, default_value_t = 8192)]
     pub max_features: usize,
+    /// Match each verified pair again among only the keypoints near each other's epipolar
+    /// lines (COLMAP's guided matching; off by default, as there: on the renders and
+    /// Herz-Jesu it adds matches and costs accuracy, README "Structure from motion").
+    #[arg(long)]
+    pub guided_matching: bool,
     /// Output folder: cameras.txt, images.txt, points3D.txt, points.ply, summary.json.
     #[arg(long)]
     pub out: PathBuf,
@@ -45,7 +50,11 @@ pub fn run(a: &SfmArgs) -> Result<()> {
     }
     let config = sfm::Config {
         features: sfm::features::Options { max_features: a.max_features, ..Default::default() },
-        mapper: sfm::mapper::Options { refine_focal: given.is_none(), ..Default::default() },
+        mapper: sfm::mapper::Options {
+            refine_focal: given.is_none(),
+            guided_matching: a.guided_matching,
+            ..Default::default()
+        },
     };
     eprintln!("extracting features and matching {} images …", input.images.len());
     let out = sfm::run(&input, &config)?;

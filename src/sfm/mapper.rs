@@ -64,6 +64,11 @@ pub struct Options {
     /// Refine the focal length the images share (module docs; default false: the intrinsics
     /// are calibrated).
     pub refine_focal: bool,
+    /// Match each pair verified as general again, guided by its geometry: among only the
+    /// keypoints within `two_view_px` of each other's epipolar lines (`matching::match_guided`),
+    /// keeping the new matches its pose explains when they are more (COLMAP's
+    /// `guided_matching`, off there by default).
+    pub guided_matching: bool,
     pub seed: u64,
 }
 
@@ -81,6 +86,7 @@ impl Default for Options {
             local_images: 6,
             global_ratio: 1.1,
             refine_focal: false,
+            guided_matching: false,
             seed: 1,
         }
     }
@@ -229,7 +235,7 @@ pub fn verify_pair(
     let n = features.len();
     let t = std::time::Instant::now();
     let m = matching::match_descriptors(&features[a].descriptors, &features[b].descriptors, &opts.matching);
-    let matching_s = t.elapsed().as_secs_f64();
+    let mut matching_s = t.elapsed().as_secs_f64();
     let t = std::time::Instant::now();
     let p1: Vec<[f64; 2]> = m.iter().map(|x| pixel(&features[a], x.a)).collect();
     let p2: Vec<[f64; 2]> = m.iter().map(|x| pixel(&features[b], x.b)).collect();
@@ -238,19 +244,67 @@ pub fn verify_pair(
     } else {
         None
     };
-    let report = PairReport {
+    let mut report = PairReport {
         a,
         b,
         matches: m.len(),
         inliers: tv.as_ref().map_or(0, |t| t.inliers.len()),
         configuration: tv.as_ref().map(|t| t.configuration),
     };
-    let geometry = tv.filter(|tv| tv.inliers.len() >= opts.min_matches).map(|tv| PairGeometry {
+    let mut geometry = tv.filter(|tv| tv.inliers.len() >= opts.min_matches).map(|tv| PairGeometry {
         matches: tv.inliers.iter().map(|&i| (m[i].a, m[i].b)).collect(),
         pose: tv.pose,
         median_triangulation_angle_deg: tv.median_triangulation_angle_deg,
     });
-    VerifiedPair { report, geometry, matching_s, verification_s: t.elapsed().as_secs_f64() }
+    let verification_s = t.elapsed().as_secs_f64();
+    if let (Some(g), Some(two_view::Configuration::General), true) =
+        (&mut geometry, report.configuration, opts.guided_matching)
+    {
+        let t = std::time::Instant::now();
+        let guided = guided_matches(&features[a], &features[b], &k[a], &k[b], &g.pose, opts);
+        let p1: Vec<[f64; 2]> = guided.iter().map(|x| pixel(&features[a], x.a)).collect();
+        let p2: Vec<[f64; 2]> = guided.iter().map(|x| pixel(&features[b], x.b)).collect();
+        let inliers = two_view::consistent(&g.pose, &p1, &p2, &k[a], &k[b], 1.0);
+        if inliers.len() > g.matches.len() {
+            g.matches = inliers.iter().map(|&i| (guided[i].a, guided[i].b)).collect();
+            (report.matches, report.inliers) = (guided.len(), inliers.len());
+        }
+        matching_s += t.elapsed().as_secs_f64();
+    }
+    VerifiedPair { report, geometry, matching_s, verification_s }
+}
+
+/// The matches of two images' features among keypoints within `opts.two_view_px` of each
+/// other's epipolar line under `pose` (`Options::guided_matching`).
+fn guided_matches(
+    fa: &Features,
+    fb: &Features,
+    ka: &Matrix3<f64>,
+    kb: &Matrix3<f64>,
+    pose: &two_view::RelativePose,
+    opts: &Options,
+) -> Vec<matching::Match> {
+    let (Some(kai), Some(kbi)) = (ka.try_inverse(), kb.try_inverse()) else {
+        return Vec::new();
+    };
+    let f = kbi.transpose() * two_view::essential_of(pose) * kai;
+    // Each keypoint's epipolar line in the other image, scaled so that l·(x, y, 1) is the
+    // distance in pixels (f32: at 10⁴ px its rounding is 10⁻³ px).
+    let lines = |m: &Matrix3<f64>, kps: &[super::features::Keypoint]| -> Vec<[f32; 3]> {
+        kps.iter()
+            .map(|kp| {
+                let l = m * Vector3::new(kp.x as f64, kp.y as f64, 1.0);
+                let n = l[0].hypot(l[1]).max(1e-300);
+                [(l[0] / n) as f32, (l[1] / n) as f32, (l[2] / n) as f32]
+            })
+            .collect()
+    };
+    let (in_b, in_a) = (lines(&f, &fa.keypoints), lines(&f.transpose(), &fb.keypoints));
+    let t = opts.two_view_px as f32;
+    let near = |l: &[f32; 3], kp: &super::features::Keypoint| (l[0] * kp.x + l[1] * kp.y + l[2]).abs() <= t;
+    matching::match_guided(&fa.descriptors, &fb.descriptors, &opts.matching, |i, j| {
+        near(&in_b[i], &fb.keypoints[j]) && near(&in_a[j], &fa.keypoints[i])
+    })
 }
 
 /// `verify_pair` over `pairs`, in parallel, results in their order. The pairs' matching and

@@ -65,6 +65,28 @@ const BLOCK: usize = 512;
 
 /// Matches of `a` against `b` (ascending in `a`).
 pub fn match_descriptors(a: &[[u8; 128]], b: &[[u8; 128]], opts: &Options) -> Vec<Match> {
+    matches_where(a, b, opts, None::<fn(usize, usize) -> bool>)
+}
+
+/// Guided matching: as `match_descriptors`, among only the pairs (i, j) that `allowed` keeps
+/// (those near each other's epipolar line once a pair's geometry is known): the nearest,
+/// second-nearest and mutual neighbours are taken within them, so a descriptor whose twin
+/// lies elsewhere in the image (repeated texture) is no longer ambiguous.
+pub fn match_guided(
+    a: &[[u8; 128]],
+    b: &[[u8; 128]],
+    opts: &Options,
+    allowed: impl Fn(usize, usize) -> bool + Sync,
+) -> Vec<Match> {
+    matches_where(a, b, opts, Some(allowed))
+}
+
+fn matches_where(
+    a: &[[u8; 128]],
+    b: &[[u8; 128]],
+    opts: &Options,
+    allowed: Option<impl Fn(usize, usize) -> bool + Sync>,
+) -> Vec<Match> {
     if a.is_empty() || b.is_empty() {
         return Vec::new();
     }
@@ -79,7 +101,17 @@ pub fn match_descriptors(a: &[[u8; 128]], b: &[[u8; 128]], opts: &Options) -> Ve
             // rows × nb, column-major: A's rows as a matrix times B's columns, a plain product
             // that nalgebra hands to matrixmultiply's kernels.
             let a_rows = ma.columns(start, rows).transpose();
-            let dots = &a_rows * &mb;
+            let mut dots = &a_rows * &mb;
+            if let Some(allowed) = &allowed {
+                // A pair left out is as far as two opposite descriptors.
+                for (j, col) in dots.as_mut_slice().chunks_exact_mut(rows).enumerate() {
+                    for (i, v) in col.iter_mut().enumerate() {
+                        if !allowed(start + i, j) {
+                            *v = -2.0;
+                        }
+                    }
+                }
+            }
             // Row bests as three arrays updated with selects, which vectorise; each
             // column's best by a scan of its contiguous values.
             let (mut first, mut second) = (vec![-2f32; rows], vec![-2f32; rows]);
@@ -186,5 +218,33 @@ mod tests {
                 .unwrap();
             assert_eq!(best as u32, x.b);
         }
+    }
+
+    /// Repeated texture: every descriptor of `a` has two near twins in `b`, so the ratio test
+    /// refuses every match; guided to one twin each (as an epipolar band would), every
+    /// descriptor finds it, and no match leaves the allowed pairs.
+    #[test]
+    fn guidance_resolves_twins_and_keeps_within_the_allowed_pairs() {
+        let n = 600;
+        let a: Vec<[u8; 128]> = (0..n).map(|i| random_descriptor(i as u64 + 11)).collect();
+        // Each twin differs from its original in one element, by the same amount.
+        let twin = |d: &[u8; 128], k: usize| {
+            let mut d = *d;
+            d[k % 128] = if d[k % 128] >= 8 { d[k % 128] - 8 } else { d[k % 128] + 8 };
+            d
+        };
+        let b: Vec<[u8; 128]> = a
+            .iter()
+            .enumerate()
+            .map(|(i, d)| twin(d, 13 * i))
+            .chain(a.iter().enumerate().map(|(i, d)| twin(d, 29 * i + 5)))
+            .collect();
+        let opts = Options::default();
+        assert!(match_descriptors(&a, &b, &opts).is_empty());
+        // The twin allowed for a[i]: b[i] for even i, b[i + n] for odd i.
+        let allowed = |i: usize, j: usize| j == if i % 2 == 0 { i } else { i + n };
+        let m = match_guided(&a, &b, &opts, allowed);
+        assert_eq!(m.len(), n);
+        assert!(m.iter().all(|x| allowed(x.a as usize, x.b as usize)));
     }
 }

@@ -338,13 +338,7 @@ pub fn estimate(
     let pose = refine(&pose, p1, p2, &k1i, &k2i, &front);
     // Inliers again under the refined E: within the threshold and in front of both cameras.
     let e = essential_of(&pose);
-    let f = to_f(&e);
-    let inliers: Vec<usize> = (0..n)
-        .filter(|&i| sampson(&f, p1[i], p2[i]) <= threshold_px)
-        .filter(|&i| {
-            triangulate(&pose, x1[i], x2[i]).is_some_and(|x| x[2] > 0.0 && (pose.r * x + pose.t)[2] > 0.0)
-        })
-        .collect();
+    let inliers = consistent(&pose, p1, p2, k1, k2, threshold_px);
     // The homography, and the rays' divergence, for the model selection (module docs).
     let h_found = ransac::ransac(
         n,
@@ -398,6 +392,33 @@ pub fn estimate(
         median_triangulation_angle_deg,
         configuration,
     })
+}
+
+/// The correspondences `p1`, `p2` (pixels of cameras with intrinsics `k1`, `k2`) that `pose`
+/// explains: Sampson distance within `threshold_px` and in front of both cameras.
+pub fn consistent(
+    pose: &RelativePose,
+    p1: &[[f64; 2]],
+    p2: &[[f64; 2]],
+    k1: &Matrix3<f64>,
+    k2: &Matrix3<f64>,
+    threshold_px: f64,
+) -> Vec<usize> {
+    let (Some(k1i), Some(k2i)) = (k1.try_inverse(), k2.try_inverse()) else {
+        return Vec::new();
+    };
+    let ray = |k: &Matrix3<f64>, p: [f64; 2]| {
+        let v = k * Vector3::new(p[0], p[1], 1.0);
+        [v[0] / v[2], v[1] / v[2]]
+    };
+    let f = k2i.transpose() * essential_of(pose) * k1i;
+    (0..p1.len().min(p2.len()))
+        .filter(|&i| sampson(&f, p1[i], p2[i]) <= threshold_px)
+        .filter(|&i| {
+            triangulate(pose, ray(&k1i, p1[i]), ray(&k2i, p2[i]))
+                .is_some_and(|x| x[2] > 0.0 && (pose.r * x + pose.t)[2] > 0.0)
+        })
+        .collect()
 }
 
 /// The angle of a rotation matrix, in degrees: atan2(‖v‖, tr R − 1) with v the axial vector

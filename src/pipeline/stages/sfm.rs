@@ -67,6 +67,10 @@ pub struct RenderConfig {
     /// intrinsics, and let it refine the focal length (default false).
     #[serde(default)]
     pub guess_intrinsics: bool,
+    /// Match verified pairs again guided by their geometry (`mapper::Options::guided_matching`,
+    /// default false).
+    #[serde(default)]
+    pub guided_matching: bool,
 }
 
 fn default_views() -> usize {
@@ -143,7 +147,7 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth,
     let mut settings = render::Settings::from_scene(&scene);
     apply_overrides(&mut settings, c.spp, None)?;
     let camera = scene.camera;
-    let cfg = config(c.max_features, c.guess_intrinsics);
+    let cfg = config(c.max_features, c.guess_intrinsics, c.guided_matching);
     let mut recipes = Vec::new();
     let target = DVec3::from_array(c.target);
     let bar = render::progress_bar(c.views as u64, &format!("{} views", ctx.case), ctx.progress);
@@ -324,17 +328,17 @@ fn photo_recipes(
         .collect()
 }
 
-/// The solver's settings for a case: its keypoints per image, and whether the focal length
-/// is a guess to refine.
-fn config(max_features: usize, refine_focal: bool) -> sfm::Config {
+/// The solver's settings for a case: its keypoints per image, whether the focal length is a
+/// guess to refine, and whether verified pairs are matched again guided by their geometry.
+fn config(max_features: usize, refine_focal: bool, guided_matching: bool) -> sfm::Config {
     sfm::Config {
         features: sfm::features::Options { max_features, ..Default::default() },
-        mapper: sfm::mapper::Options { refine_focal, ..Default::default() },
+        mapper: sfm::mapper::Options { refine_focal, guided_matching, ..Default::default() },
     }
 }
 
 pub fn solve_render(c: &RenderConfig, input: &sfm::Input) -> Result<sfm::Output, StageError> {
-    Ok(sfm::run(input, &config(c.max_features, c.guess_intrinsics))?)
+    Ok(sfm::run(input, &config(c.max_features, c.guess_intrinsics, c.guided_matching))?)
 }
 
 #[derive(Debug, Deserialize)]
@@ -350,6 +354,9 @@ pub struct Config {
     /// Keypoints per image at most (default 8192, COLMAP's).
     #[serde(default = "default_features")]
     pub max_features: usize,
+    /// As the render entry's `guided_matching`.
+    #[serde(default)]
+    pub guided_matching: bool,
 }
 
 fn default_features() -> usize {
@@ -372,7 +379,7 @@ pub fn read(c: &Config, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), 
     let camera = camera_path.as_deref().map(sfm::input::read_camera).transpose()?;
     let truth_dir = super::dataset_path(ctx, &c.truth)?;
     let files = sfm::input::photographs(&dir)?;
-    let cfg = config(c.max_features, c.camera.is_none());
+    let cfg = config(c.max_features, c.camera.is_none(), c.guided_matching);
     let recipes = photo_recipes(&files, &cfg)?;
     if ctx.cache.pass() == Some(Pass::Renders) {
         // A share of the renders pass: the features of the photographs it owns.
@@ -417,7 +424,7 @@ pub fn read(c: &Config, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), 
 
 pub fn solve(c: &Config, input: &sfm::Input) -> Result<sfm::Output, StageError> {
     // `read` took the same settings for the prepared features and pairs.
-    Ok(sfm::run(input, &config(c.max_features, c.camera.is_none()))?)
+    Ok(sfm::run(input, &config(c.max_features, c.camera.is_none(), c.guided_matching))?)
 }
 
 pub fn validate(out: &sfm::Output, truth: &Truth) -> Findings {
