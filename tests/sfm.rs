@@ -241,7 +241,14 @@ fn herz_jesu_reconstruction_without_the_camera() {
     let assumed = lumen::sfm::input::assumed_camera(3072, 2048);
     let guess = assumed.intrinsics;
     let k = vec![lumen::sfm::intrinsics(&assumed); 8];
-    let rec = mapper::reconstruct(feats, &k, &mapper::Options { refine_focal: true, ..Default::default() });
+    let rec = mapper::reconstruct(
+        feats,
+        &k,
+        &mapper::Options {
+            refine: lumen::sfm::bundle::Refine { focal: true, ..Default::default() },
+            ..Default::default()
+        },
+    );
     let f = rec.intrinsics[0][(0, 0)];
     let true_f = cams[0].0[(0, 0)];
     eprintln!(
@@ -297,6 +304,21 @@ fn cli_refusals_and_an_unreconstructable_pair() {
             "cam.yaml",
         ),
         (vec!["--images".into(), two_s.clone(), "--max-features".into(), "3".into()], "--max-features 3"),
+        (
+            vec!["--images".into(), two_s.clone(), "--refine".into(), "focal,k3".into()],
+            "\"k3\": expected focal",
+        ),
+        (
+            vec![
+                "--images".into(),
+                two_s.clone(),
+                "--camera".into(),
+                s(&d.join("k.txt")),
+                "--refine".into(),
+                "k1".into(),
+            ],
+            "--refine: only without --camera",
+        ),
         (
             vec!["--images".into(), s(&sizes), "--camera".into(), s(&d.join("k.txt"))],
             "b.png: 120×90 pixels, but its camera is 160×120",

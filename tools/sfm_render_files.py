@@ -3,7 +3,10 @@ cameras in the Strecha format beside them, so that `lumen sfm` and COLMAP
 (`tools/sfm_colmap.py`) can be run and compared on the same files.
 
 Usage (numpy is needed: the peers' virtual environment, ../shared/tools/peers-venv.sh):
-    $PEERS_PY tools/sfm_render_files.py VIEWS OUT_DIR [LUMEN_BINARY]
+    $PEERS_PY tools/sfm_render_files.py VIEWS OUT_DIR [LUMEN_BINARY] [SCENE]
+
+SCENE is a file of pipelines/scenes (default sfm-courtyard.toml; sfm-courtyard-wide.toml is
+the same through a lens with k1 = −0.12, whose K.txt then leaves the distortion out).
 
 Writes OUT_DIR/images/view000.png … (`lumen render`, the scene's 8 spp, seed k + 1 for view
 k), OUT_DIR/images/K.txt and OUT_DIR/gt_dense_cameras/<image>.camera: K, no distortion, the
@@ -22,12 +25,12 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-def main(views, out, lumen=os.path.join(ROOT, "target/release/lumen")):
+def main(views, out, lumen=os.path.join(ROOT, "target/release/lumen"), scene_file="sfm-courtyard.toml"):
     n = int(views)
     os.makedirs(os.path.join(out, "images"), exist_ok=True)
     os.makedirs(os.path.join(out, "gt_dense_cameras"), exist_ok=True)
     scene_dir = os.path.join(ROOT, "pipelines/scenes")
-    src = open(os.path.join(scene_dir, "sfm-courtyard.toml")).read()
+    src = open(os.path.join(scene_dir, scene_file)).read()
     target, radius, height, arc = np.array([0.0, 0.5, 0.6]), 3.5, 1.3, 40.0
     fx, cx, cy, w, h = 960.0, 511.5, 383.5, 1024, 768
     with open(os.path.join(out, "images/K.txt"), "w") as f:

@@ -21,6 +21,11 @@ pub struct SfmArgs {
     /// Keypoints per image at most (COLMAP: 8192).
     #[arg(long, default_value_t = 8192)]
     pub max_features: usize,
+    /// Without --camera: the intrinsics the images share that bundle adjustment refines from
+    /// the guess, comma-separated, of focal, principal-point, k1, k2 (default focal,k1, as
+    /// COLMAP's SIMPLE_RADIAL camera).
+    #[arg(long, value_delimiter = ',')]
+    pub refine: Option<Vec<String>>,
     /// Match each verified pair again among only the keypoints near each other's epipolar
     /// lines (COLMAP's guided matching; off by default, as there: on the renders and
     /// Herz-Jesu it adds matches and costs accuracy, README "Structure from motion").
@@ -45,16 +50,20 @@ pub fn run(a: &SfmArgs) -> Result<()> {
     let input = sfm::input::read_images(&files, given, |n, total, f| {
         eprintln!("reading {}/{total}: {}", n + 1, f.display())
     })?;
+    let refine = match (&given, &a.refine) {
+        (Some(_), Some(_)) => bail!("--refine: only without --camera (a given camera is kept as it is)"),
+        (Some(_), None) => sfm::bundle::Refine::NONE,
+        (None, None) => sfm::GUESSED_REFINE,
+        (None, Some(names)) => {
+            sfm::bundle::Refine::from_names(names).map_err(|e| anyhow::anyhow!("--refine {e}"))?
+        }
+    };
     if given.is_none() {
-        eprintln!("no --camera: starting from a focal length of 1.2 × the longer side, refined by bundle adjustment");
+        eprintln!("no --camera: starting from a focal length of 1.2 × the longer side and no distortion, refined by bundle adjustment ({refine:?})");
     }
     let config = sfm::Config {
         features: sfm::features::Options { max_features: a.max_features, ..Default::default() },
-        mapper: sfm::mapper::Options {
-            refine_focal: given.is_none(),
-            guided_matching: a.guided_matching,
-            ..Default::default()
-        },
+        mapper: sfm::mapper::Options { refine, guided_matching: a.guided_matching, ..Default::default() },
     };
     eprintln!("extracting features and matching {} images …", input.images.len());
     let out = sfm::run(&input, &config)?;
@@ -69,7 +78,7 @@ pub fn run(a: &SfmArgs) -> Result<()> {
         "mean_track_length": if kept > 0 { observations as f64 / kept as f64 } else { 0.0 },
         "mean_observations_per_image": if registered > 0 { observations as f64 / registered as f64 } else { 0.0 },
         "reprojection_rms_px": rec.rms_px,
-        "cameras": out.cameras.iter().zip(&input.images).map(|(c, im)| serde_json::json!({"image": im.name, "fx": c.intrinsics.fx, "fy": c.intrinsics.fy, "cx": c.intrinsics.cx, "cy": c.intrinsics.cy, "focal_refined": c.intrinsics.fx != im.camera.intrinsics.fx})).collect::<Vec<_>>(),
+        "cameras": out.cameras.iter().zip(&input.images).map(|(c, im)| serde_json::json!({"image": im.name, "fx": c.intrinsics.fx, "fy": c.intrinsics.fy, "cx": c.intrinsics.cx, "cy": c.intrinsics.cy, "k1": c.distortion.k1, "k2": c.distortion.k2, "refined": c != &im.camera})).collect::<Vec<_>>(),
         "unregistered": rec.unregistered.iter().map(|(i, why)| serde_json::json!({"image": input.images[*i].name, "reason": why})).collect::<Vec<_>>(),
         "pairs": rec.pairs.iter().map(|p| serde_json::json!({"a": input.images[p.a].name, "b": input.images[p.b].name, "matches": p.matches, "inliers": p.inliers, "configuration": p.configuration})).collect::<Vec<_>>(),
         "time_s": {

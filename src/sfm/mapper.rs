@@ -19,10 +19,14 @@
 //! 4. images that cannot be registered (too few 2D–3D matches, PnP without enough inliers)
 //!    are reported with the reason; what was reconstructed is kept.
 //!
-//! With `Options::refine_focal` (intrinsics guessed, not calibrated), the focal length the
-//! images share is refined in every bundle adjustment from the third registered image on, as
-//! COLMAP's `ba_refine_focal_length`: two views barely determine it (it trades against depth),
-//! and the images registered after an adjustment use its latest value.
+//! With `Options::refine` (intrinsics guessed, not calibrated), the intrinsics the images
+//! share that it names (focal length, principal point, radial k1 and k2) are refined in every
+//! bundle adjustment from the third registered image on, as COLMAP's `ba_refine_*` options on
+//! one shared camera: two views barely determine them (the focal length trades against
+//! depth), and the images registered after an adjustment use their latest values. The
+//! keypoints keep the positions they were given (`Reconstruction::radial` is the distortion of
+//! those positions); registration, triangulation and the filtering use them undistorted
+//! through the latest (k1, k2), the bundle the positions themselves through the model.
 //!
 //! Frames: poses map world to camera (X_c = R X + t); the world is the first camera's frame
 //! at the scale of a unit baseline between the first pair.
@@ -61,9 +65,9 @@ pub struct Options {
     /// the last whole adjustment (COLMAP's `ba_global_images_ratio`, 1.1); 1 adjusts it after
     /// every image.
     pub global_ratio: f64,
-    /// Refine the focal length the images share (module docs; default false: the intrinsics
-    /// are calibrated).
-    pub refine_focal: bool,
+    /// The shared intrinsics to refine (module docs; default none: the intrinsics are
+    /// calibrated).
+    pub refine: bundle::Refine,
     /// Match each pair verified as general again, guided by its geometry: among only the
     /// keypoints within `two_view_px` of each other's epipolar lines (`matching::match_guided`),
     /// keeping the new matches its pose explains when they are more (COLMAP's
@@ -85,7 +89,7 @@ impl Default for Options {
             bundle: bundle::Options::default(),
             local_images: 6,
             global_ratio: 1.1,
-            refine_focal: false,
+            refine: bundle::Refine::NONE,
             guided_matching: false,
             seed: 1,
         }
@@ -126,8 +130,11 @@ pub struct Reconstruction {
     pub bundle_s: f64,
     pub rms_px: f64,
     /// Per image: the intrinsics the model ends with (the given ones, or with the refined
-    /// focal length).
+    /// focal length and principal point).
     pub intrinsics: Vec<Matrix3<f64>>,
+    /// Per image: the radial distortion (k1, k2) of its keypoints' positions as given
+    /// (zero unless refined).
+    pub radial: Vec<[f64; 2]>,
 }
 
 impl Reconstruction {
@@ -152,6 +159,32 @@ fn pixel(f: &Features, k: u32) -> [f64; 2] {
     [p.x as f64, p.y as f64]
 }
 
+/// Per image and keypoint, a position in pixels.
+type Pixels = Vec<Vec<[f64; 2]>>;
+
+/// The keypoints' positions as given.
+fn positions(features: &[Features]) -> Pixels {
+    features.iter().map(|f| (0..f.keypoints.len() as u32).map(|k| pixel(f, k)).collect()).collect()
+}
+
+/// `raw` positions undistorted through each image's radial (k1, k2) and K, as a pinhole
+/// camera K would see them (a position the model cannot undistort stays as it is).
+fn undistorted(raw: &Pixels, k: &[Matrix3<f64>], radial: &[[f64; 2]]) -> Pixels {
+    raw.iter()
+        .zip(k.iter().zip(radial))
+        .map(|(pxs, (k, r))| {
+            let d = crate::math::camera::Distortion { k1: r[0], k2: r[1], ..Default::default() };
+            let (fx, fy, cx, cy) = (k[(0, 0)], k[(1, 1)], k[(0, 2)], k[(1, 2)]);
+            pxs.iter()
+                .map(|p| {
+                    let n = glam::DVec2::new((p[0] - cx) / fx, (p[1] - cy) / fy);
+                    d.undistort(n).filter(|u| u.is_finite()).map_or(*p, |u| [fx * u.x + cx, fy * u.y + cy])
+                })
+                .collect()
+        })
+        .collect()
+}
+
 /// The multi-view DLT point of a track over its registered views, if it is in front of all,
 /// reprojects within the threshold in all, and has two rays at least `min_angle` apart.
 fn triangulate(
@@ -159,14 +192,14 @@ fn triangulate(
     poses: &[Option<Pose>],
     k: &[Matrix3<f64>],
     k_inv: &[Matrix3<f64>],
-    features: &[Features],
+    ideal: &Pixels,
     opts: &Options,
 ) -> Option<Vector3<f64>> {
     let views: Vec<(usize, [f64; 2], Pose)> = track
         .iter()
         .filter_map(|n| {
             poses[n.image as usize]
-                .map(|p| (n.image as usize, pixel(&features[n.image as usize], n.keypoint), p))
+                .map(|p| (n.image as usize, ideal[n.image as usize][n.keypoint as usize], p))
         })
         .collect();
     if views.len() < 2 {
@@ -346,10 +379,18 @@ pub fn reconstruct_verified(
     mut pairs: Vec<VerifiedPair>,
     opts: &Options,
 ) -> Reconstruction {
-    let threshold = if opts.refine_focal { opts.guessed_reprojection_px } else { opts.reprojection_px };
+    let threshold = if opts.refine.any() { opts.guessed_reprojection_px } else { opts.reprojection_px };
     let opts = &Options { reprojection_px: threshold, ..*opts };
     let n = features.len();
-    let mut out = Reconstruction { poses: vec![None; n], intrinsics: k.to_vec(), ..Default::default() };
+    let mut out = Reconstruction {
+        poses: vec![None; n],
+        intrinsics: k.to_vec(),
+        radial: vec![[0.0; 2]; n],
+        ..Default::default()
+    };
+    // The keypoints as given (the bundle's observations) and undistorted (module docs).
+    let raw = positions(features);
+    let mut ideal = raw.clone();
     pairs.sort_by_key(|p| (p.report.a, p.report.b));
     let mut verified: Vec<PairMatches> = Vec::new();
     let mut geometry: Vec<(usize, usize, PairGeometry, two_view::Configuration)> = Vec::new();
@@ -392,7 +433,7 @@ pub fn reconstruct_verified(
             track_of[node.image as usize].insert(node.keypoint, t);
         }
     }
-    let triangulate_new = |out: &mut Reconstruction, point_of: &mut Vec<Option<usize>>| {
+    let triangulate_new = |out: &mut Reconstruction, point_of: &mut Vec<Option<usize>>, ideal: &Pixels| {
         let k = &out.intrinsics;
         let k_inv: Vec<Matrix3<f64>> =
             k.iter().map(|m| m.try_inverse().unwrap_or_else(Matrix3::zeros)).collect();
@@ -400,20 +441,20 @@ pub fn reconstruct_verified(
             if point_of[t].is_some() {
                 continue;
             }
-            if let Some(x) = triangulate(track, &out.poses, k, &k_inv, features, opts) {
+            if let Some(x) = triangulate(track, &out.poses, k, &k_inv, ideal, opts) {
                 point_of[t] = Some(out.points.len());
                 out.points.push(Point { xyz: x, track: track.clone() });
             }
         }
     };
-    triangulate_new(&mut out, &mut point_of);
+    triangulate_new(&mut out, &mut point_of, &ideal);
     let mut bundle_s = 0.0;
-    let mut adjust = |out: &mut Reconstruction, first: usize, local: Option<usize>| {
+    let mut adjust = |out: &mut Reconstruction, ideal: &mut Pixels, first: usize, local: Option<usize>| {
         let t = std::time::Instant::now();
-        adjust_bundle(out, features, first, local, opts);
+        adjust_bundle(out, &raw, ideal, first, local, opts);
         bundle_s += t.elapsed().as_secs_f64();
     };
-    adjust(&mut out, *a, None);
+    adjust(&mut out, &mut ideal, *a, None);
     // Registered images at the last whole adjustment.
     let mut whole_at = 2usize;
     // 3. Register the others, most 2D–3D matches first.
@@ -425,7 +466,7 @@ pub fn reconstruct_verified(
             }
             let corr: Vec<(Vector3<f64>, [f64; 2])> = track_of[i]
                 .iter()
-                .filter_map(|(&kp, &t)| point_of[t].map(|p| (out.points[p].xyz, pixel(&features[i], kp))))
+                .filter_map(|(&kp, &t)| point_of[t].map(|p| (out.points[p].xyz, ideal[i][kp as usize])))
                 .collect();
             if best.as_ref().is_none_or(|b| corr.len() > b.1.len()) {
                 best = Some((i, corr));
@@ -446,13 +487,13 @@ pub fn reconstruct_verified(
         match pnp::estimate(&out.intrinsics[i], &pts, &pxs, opts.reprojection_px, opts.seed ^ i as u64) {
             Some(reg) if reg.inliers.len() >= opts.min_matches => {
                 out.poses[i] = Some(reg.pose);
-                triangulate_new(&mut out, &mut point_of);
+                triangulate_new(&mut out, &mut point_of, &ideal);
                 let registered = out.registered_count();
                 if registered as f64 >= opts.global_ratio * whole_at as f64 {
-                    adjust(&mut out, *a, None);
+                    adjust(&mut out, &mut ideal, *a, None);
                     whole_at = registered;
                 } else {
-                    adjust(&mut out, *a, Some(i));
+                    adjust(&mut out, &mut ideal, *a, Some(i));
                 }
             }
             Some(reg) => out.unregistered.push((
@@ -470,26 +511,29 @@ pub fn reconstruct_verified(
         }
     }
     if out.registered_count() > whole_at {
-        adjust(&mut out, *a, None);
+        adjust(&mut out, &mut ideal, *a, None);
     }
     out.unregistered.sort_by_key(|u| u.0);
     out.bundle_s = bundle_s;
     out.mapping_s = t_map.elapsed().as_secs_f64() - bundle_s;
-    out.rms_px = rms(&out, &out.intrinsics, features);
+    out.rms_px = rms(&out, &raw);
     out
 }
 
-/// RMS reprojection error over every observation of every point, pixels.
-fn rms(out: &Reconstruction, k: &[Matrix3<f64>], features: &[Features]) -> f64 {
+/// RMS reprojection error over every observation of every point, pixels of the keypoints as
+/// given.
+fn rms(out: &Reconstruction, raw: &Pixels) -> f64 {
     let (mut s, mut m) = (0.0, 0usize);
     for p in &out.points {
         for node in &p.track {
-            if let Some(pose) = &out.poses[node.image as usize] {
-                let e = pnp::reprojection_error(
-                    &k[node.image as usize],
+            let i = node.image as usize;
+            if let Some(pose) = &out.poses[i] {
+                let e = bundle::reprojection_error(
+                    &out.intrinsics[i],
+                    out.radial[i],
                     pose,
                     &p.xyz,
-                    pixel(&features[node.image as usize], node.keypoint),
+                    raw[i][node.keypoint as usize],
                 );
                 s += e * e;
                 m += 1;
@@ -510,7 +554,8 @@ fn rms(out: &Reconstruction, k: &[Matrix3<f64>], features: &[Features]) -> f64 {
 /// cameras that see those points enter fixed, and hold the gauge.
 fn adjust_bundle(
     out: &mut Reconstruction,
-    features: &[Features],
+    raw: &Pixels,
+    ideal: &mut Pixels,
     first: usize,
     local: Option<usize>,
     opts: &Options,
@@ -556,30 +601,36 @@ fn adjust_bundle(
                 observations.push(Observation {
                     camera: c,
                     point: q,
-                    xy: pixel(&features[node.image as usize], node.keypoint),
+                    xy: raw[node.image as usize][node.keypoint as usize],
                 });
             }
         }
     }
     let mut problem = Problem {
         intrinsics: cams.iter().map(|&c| out.intrinsics[c]).collect(),
+        radial: cams.iter().map(|&c| out.radial[c]).collect(),
         poses: cams.iter().filter_map(|&c| out.poses[c]).collect(),
         fixed: cams.iter().map(|&c| c == first || !moves(c)).collect(),
         points: included.iter().map(|&p| out.points[p].xyz).collect(),
         observations,
     };
-    // The focal length is refined where every image shares one K (images of one size), and
-    // then becomes every image's.
+    // The intrinsics are refined where every image shares one camera (images of one size),
+    // and then become every image's.
     let shared = out.intrinsics.iter().all(|k| *k == out.intrinsics[0]);
-    let refine_focal = opts.refine_focal && shared && out.registered_count() >= 3;
-    bundle::adjust(&mut problem, &bundle::Options { refine_focal, ..opts.bundle });
+    let refine = if shared && out.registered_count() >= 3 { opts.refine } else { bundle::Refine::NONE };
+    bundle::adjust(&mut problem, &bundle::Options { refine, ..opts.bundle });
     for (s, &c) in cams.iter().enumerate() {
         out.poses[c] = Some(problem.poses[s]);
     }
-    if let Some(k) = problem.intrinsics.first().filter(|_| refine_focal) {
-        out.intrinsics.fill(*k);
+    if let (Some(k), Some(r)) = (problem.intrinsics.first(), problem.radial.first()) {
+        if refine.any() && (*k != out.intrinsics[0] || *r != out.radial[0]) {
+            out.intrinsics.fill(*k);
+            out.radial.fill(*r);
+            if *r != [0.0; 2] {
+                *ideal = undistorted(raw, &out.intrinsics, &out.radial);
+            }
+        }
     }
-    let k = &out.intrinsics;
     for (q, &p) in included.iter().enumerate() {
         out.points[p].xyz = problem.points[q];
     }
@@ -587,16 +638,13 @@ fn adjust_bundle(
     // nodes for later images).
     for point in out.points.iter_mut() {
         let x = point.xyz;
-        point.track.retain(|node| match &out.poses[node.image as usize] {
-            Some(pose) => {
-                pnp::reprojection_error(
-                    &k[node.image as usize],
-                    pose,
-                    &x,
-                    pixel(&features[node.image as usize], node.keypoint),
-                ) <= opts.reprojection_px
-            }
-            None => true,
+        point.track.retain(|node| {
+            let i = node.image as usize;
+            out.poses[i].as_ref().is_none_or(|pose| {
+                let px = raw[i][node.keypoint as usize];
+                bundle::reprojection_error(&out.intrinsics[i], out.radial[i], pose, &x, px)
+                    <= opts.reprojection_px
+            })
         });
     }
 }

@@ -64,9 +64,12 @@ pub struct RenderConfig {
     /// Samples per pixel (default: the scene's).
     pub spp: Option<u32>,
     /// Give the solver the guess of `lumen sfm` without `--camera` instead of the true
-    /// intrinsics, and let it refine the focal length (default false).
+    /// intrinsics, and let it refine them (default false).
     #[serde(default)]
     pub guess_intrinsics: bool,
+    /// The shared intrinsics refined from the guess: any of "focal", "principal-point",
+    /// "k1", "k2" (default `sfm::GUESSED_REFINE`: focal and k1); only with guessed intrinsics.
+    pub refine: Option<Vec<String>>,
     /// Match verified pairs again guided by their geometry (`mapper::Options::guided_matching`,
     /// default false).
     #[serde(default)]
@@ -147,7 +150,7 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth,
     let mut settings = render::Settings::from_scene(&scene);
     apply_overrides(&mut settings, c.spp, None)?;
     let camera = scene.camera;
-    let cfg = config(c.max_features, c.guess_intrinsics, c.guided_matching);
+    let cfg = config(c.max_features, c.guess_intrinsics, &c.refine, c.guided_matching)?;
     let mut recipes = Vec::new();
     let target = DVec3::from_array(c.target);
     let bar = render::progress_bar(c.views as u64, &format!("{} views", ctx.case), ctx.progress);
@@ -221,7 +224,12 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth,
         c.scene, c.views, camera.width, camera.height, settings.spp, c.arc_deg, c.radius, c.target, c.height
     )];
     let focal = c.guess_intrinsics.then_some(camera.intrinsics.fx);
-    Ok((sfm::Input { images, prepared }, Truth { poses, focal }, Findings { notes, ..Default::default() }))
+    let k1 = c.guess_intrinsics.then_some(camera.distortion.k1);
+    Ok((
+        sfm::Input { images, prepared },
+        Truth { poses, focal, k1 },
+        Findings { notes, ..Default::default() },
+    ))
 }
 
 /// A render as the photograph `lumen sfm` would read: 8-bit sRGB codes, read back as
@@ -328,17 +336,35 @@ fn photo_recipes(
         .collect()
 }
 
-/// The solver's settings for a case: its keypoints per image, whether the focal length is a
-/// guess to refine, and whether verified pairs are matched again guided by their geometry.
-fn config(max_features: usize, refine_focal: bool, guided_matching: bool) -> sfm::Config {
-    sfm::Config {
+/// The solver's settings for a case: its keypoints per image, what it refines of guessed
+/// intrinsics (`refine` names, or none when they are given), and whether verified pairs are
+/// matched again guided by their geometry.
+fn config(
+    max_features: usize,
+    guessed: bool,
+    refine: &Option<Vec<String>>,
+    guided_matching: bool,
+) -> Result<sfm::Config, StageError> {
+    let refine = match (guessed, refine) {
+        (false, None) => sfm::bundle::Refine::NONE,
+        (false, Some(_)) => {
+            return Err(StageError::Config(
+                "refine: only with guessed intrinsics (guess_intrinsics = true, or no camera)".into(),
+            ))
+        }
+        (true, None) => sfm::GUESSED_REFINE,
+        (true, Some(names)) => {
+            sfm::bundle::Refine::from_names(names).map_err(|e| StageError::Config(format!("refine: {e}")))?
+        }
+    };
+    Ok(sfm::Config {
         features: sfm::features::Options { max_features, ..Default::default() },
-        mapper: sfm::mapper::Options { refine_focal, guided_matching, ..Default::default() },
-    }
+        mapper: sfm::mapper::Options { refine, guided_matching, ..Default::default() },
+    })
 }
 
 pub fn solve_render(c: &RenderConfig, input: &sfm::Input) -> Result<sfm::Output, StageError> {
-    Ok(sfm::run(input, &config(c.max_features, c.guess_intrinsics, c.guided_matching))?)
+    Ok(sfm::run(input, &config(c.max_features, c.guess_intrinsics, &c.refine, c.guided_matching)?)?)
 }
 
 #[derive(Debug, Deserialize)]
@@ -357,6 +383,8 @@ pub struct Config {
     /// As the render entry's `guided_matching`.
     #[serde(default)]
     pub guided_matching: bool,
+    /// As the render entry's `refine`; only without `camera`.
+    pub refine: Option<Vec<String>>,
 }
 
 fn default_features() -> usize {
@@ -364,10 +392,11 @@ fn default_features() -> usize {
 }
 
 /// The true world-to-camera pose of every image, in the input's order, and the true focal
-/// length (fx) where the solver starts from a guess.
+/// length (fx) and k1 where the solver starts from a guess (k1 of renders only).
 pub struct Truth {
     poses: Vec<Pose>,
     focal: Option<f64>,
+    k1: Option<f64>,
 }
 
 pub fn read(c: &Config, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), StageError> {
@@ -379,7 +408,7 @@ pub fn read(c: &Config, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), 
     let camera = camera_path.as_deref().map(sfm::input::read_camera).transpose()?;
     let truth_dir = super::dataset_path(ctx, &c.truth)?;
     let files = sfm::input::photographs(&dir)?;
-    let cfg = config(c.max_features, c.camera.is_none(), c.guided_matching);
+    let cfg = config(c.max_features, c.camera.is_none(), &c.refine, c.guided_matching)?;
     let recipes = photo_recipes(&files, &cfg)?;
     if ctx.cache.pass() == Some(Pass::Renders) {
         // A share of the renders pass: the features of the photographs it owns.
@@ -419,12 +448,12 @@ pub fn read(c: &Config, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), 
         input.images[0].grey.height,
         truth_dir.display()
     )];
-    Ok((input, Truth { poses, focal }, Findings { notes, ..Default::default() }))
+    Ok((input, Truth { poses, focal, k1: None }, Findings { notes, ..Default::default() }))
 }
 
 pub fn solve(c: &Config, input: &sfm::Input) -> Result<sfm::Output, StageError> {
     // `read` took the same settings for the prepared features and pairs.
-    Ok(sfm::run(input, &config(c.max_features, c.camera.is_none(), c.guided_matching))?)
+    Ok(sfm::run(input, &config(c.max_features, c.camera.is_none(), &c.refine, c.guided_matching)?)?)
 }
 
 pub fn validate(out: &sfm::Output, truth: &Truth) -> Findings {
@@ -475,6 +504,16 @@ pub fn validate(out: &sfm::Output, truth: &Truth) -> Findings {
                 "Focal length {v:.2} px refined from the guess, against the true {true_f:.2} px."
             ));
         }
+        if let Some(c) = out.cameras.first().filter(|c| c.distortion.k1 != 0.0 || c.distortion.k2 != 0.0) {
+            f.notes.push(format!(
+                "Radial distortion refined: k1 = {:.5}, k2 = {:.5}.",
+                c.distortion.k1, c.distortion.k2
+            ));
+        }
+    }
+    if let Some(true_k1) = truth.k1 {
+        let k1 = out.cameras.first().map(|c| (c.distortion.k1 - true_k1).abs());
+        m.push(Metric::maybe("k1_err", k1, "", Better::Lower, "no image"));
     }
     for (i, why) in &rec.unregistered {
         f.notes.push(format!("image {i} not registered: {why}"));
