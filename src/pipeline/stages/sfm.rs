@@ -6,7 +6,8 @@
 //! scene's own camera gives the intrinsics); the solver gets the images and the true
 //! intrinsics, as it gets K.txt on photographs, or with `guess_intrinsics = true` what
 //! `lumen sfm` assumes without `--camera` (focal length 1.2 × the longer side, principal point
-//! at the centre), refining the focal length in bundle adjustment.
+//! at the centre, no distortion), refining in bundle adjustment what `refine` names (default
+//! `sfm::GUESSED_REFINE`: the focal length and k1).
 //! Photographs (an entry with `images`): reads the folder and its camera as `lumen sfm` does
 //! (`sfm::input`; without `camera`, the same guess as above, refined). Both run the same
 //! `sfm::run` and compare the registered cameras with the
@@ -25,7 +26,7 @@
 //! Metrics: `registered_images`, `unregistered_images`, `points`, `mean_track_length`,
 //! `reprojection_rms_px`, `rotation_err_median_deg`, `rotation_err_max_deg`,
 //! `centre_err_max_rel`; with guessed intrinsics `focal_err_rel`, |f − f_true|/f_true against
-//! the true fx; and the phases' times as a note.
+//! the true fx, and on renders `k1_err`, |k1 − k1_true|; and the phases' times as a note.
 
 use super::{apply_overrides, Context, Findings, SettingsKey, StageError, MAX_RENDERS};
 use crate::math::Pose as CameraPose;
