@@ -6,7 +6,9 @@ Usage (the peers' virtual environment, ../shared/tools/peers-venv.sh):
 
 With MODEL (SIMPLE_PINHOLE, SIMPLE_RADIAL, …) K.txt is not read: COLMAP guesses the focal
 length (1.2 × the longer side) and refines it and the model's extra parameters, as
-`lumen sfm` without --camera.
+`lumen sfm` without --camera. MODEL=PARAMS (for example OPENCV=960,960,512,384,-0.12,0,0,0,
+COLMAP's pixel centres) gives the camera instead, held fixed, as `lumen sfm --camera` with
+distortion.
 
 Prints extraction, matching and mapping times, registered images, points, the pairwise
 relative rotation errors (median, max) against gt_dense_cameras/, and with MODEL the camera
@@ -41,7 +43,11 @@ def main(root, threads="2", model=None):
     opts = pycolmap.FeatureExtractionOptions()
     opts.num_threads = int(threads)
     reader = pycolmap.ImageReaderOptions()
-    if model:
+    fixed = model is not None and "=" in model
+    if fixed:
+        reader.camera_model, reader.camera_params = model.split("=", 1)
+        model = None
+    elif model:
         reader.camera_model = model
     else:
         k = [float(x) for x in open(os.path.join(images, "K.txt")).read().split()]
