@@ -163,6 +163,11 @@ fn absent_real_data_is_skipped_and_dataset_keys_are_checked() {
     assert!(code == 1 && err.contains("forward = 3.5") && err.contains("less than the radius"), "{err}");
     let (code, err) = run(&sfm("guess_intrinsics = true\nrefine = [\"focal\", \"skew\"]\n"), &out);
     assert!(code == 1 && err.contains("refine: \"skew\": expected focal"), "{err}");
+    let (code, err) = run(&sfm("pairs = \"sequential:0\"\n"), &out);
+    assert!(
+        code == 1 && err.contains("pairs = \"sequential:0\": expected exhaustive or sequential:N"),
+        "{err}"
+    );
     let (code, err) = run(&sfm("refine = [\"k1\"]\n"), &out);
     assert!(code == 1 && err.contains("refine: only with guessed intrinsics"), "{err}");
 }

@@ -309,6 +309,10 @@ fn cli_refusals_and_an_unreconstructable_pair() {
             "\"k3\": expected focal",
         ),
         (
+            vec!["--images".into(), two_s.clone(), "--pairs".into(), "vocab-tree".into()],
+            "--pairs \"vocab-tree\": expected",
+        ),
+        (
             vec![
                 "--images".into(),
                 two_s.clone(),

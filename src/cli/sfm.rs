@@ -26,6 +26,11 @@ pub struct SfmArgs {
     /// COLMAP's SIMPLE_RADIAL camera).
     #[arg(long, value_delimiter = ',')]
     pub refine: Option<Vec<String>>,
+    /// Which pairs of images are matched: exhaustive (every pair, the default) or
+    /// sequential:N, for images taken in sequence (name order): each with the next N and with
+    /// those 2^k after it for k < N (COLMAP's sequential matcher with quadratic overlap).
+    #[arg(long, default_value = "exhaustive")]
+    pub pairs: String,
     /// Match each verified pair again among only the keypoints near each other's epipolar
     /// lines (COLMAP's guided matching; off by default, as there: on the renders and
     /// Herz-Jesu it adds matches and costs accuracy, README "Structure from motion").
@@ -50,6 +55,7 @@ pub fn run(a: &SfmArgs) -> Result<()> {
     let input = sfm::input::read_images(&files, given, |n, total, f| {
         eprintln!("reading {}/{total}: {}", n + 1, f.display())
     })?;
+    let pairs: sfm::mapper::PairSelection = a.pairs.parse().map_err(|e| anyhow::anyhow!("--pairs {e}"))?;
     let refine = match (&given, &a.refine) {
         (Some(_), Some(_)) => bail!("--refine: only without --camera (a given camera is kept as it is)"),
         (Some(_), None) => sfm::bundle::Refine::NONE,
@@ -63,7 +69,12 @@ pub fn run(a: &SfmArgs) -> Result<()> {
     }
     let config = sfm::Config {
         features: sfm::features::Options { max_features: a.max_features, ..Default::default() },
-        mapper: sfm::mapper::Options { refine, guided_matching: a.guided_matching, ..Default::default() },
+        mapper: sfm::mapper::Options {
+            refine,
+            guided_matching: a.guided_matching,
+            pairs,
+            ..Default::default()
+        },
     };
     eprintln!("extracting features and matching {} images …", input.images.len());
     let out = sfm::run(&input, &config)?;

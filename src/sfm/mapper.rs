@@ -1,7 +1,8 @@
 //! Incremental reconstruction (as COLMAP's mapper, Schönberger & Frahm, "Structure-from-
 //! motion revisited", CVPR 2016), from per-image features and known intrinsics:
 //!
-//! 1. every pair is matched (`matching`) and verified by its two-view geometry
+//! 1. every pair (or those `Options::pairs` selects) is matched (`matching`) and verified by
+//!    its two-view geometry
 //!    (`two_view`), pairs in parallel, each independent of the others (`verify_pair`); the
 //!    inliers of E (general pairs) or of H (planar or rotation pairs) are the verified
 //!    matches, joined into tracks (`tracks`);
@@ -73,7 +74,71 @@ pub struct Options {
     /// keeping the new matches its pose explains when they are more (COLMAP's
     /// `guided_matching`, off there by default).
     pub guided_matching: bool,
+    /// Which pairs of images are matched (default all).
+    pub pairs: PairSelection,
     pub seed: u64,
+}
+
+/// Which pairs of images are matched and verified: every pair (COLMAP's exhaustive matcher),
+/// or, for images taken in sequence (a path, a video), each image with the next `overlap` and
+/// with those 2^k after it for k < `overlap` (COLMAP's sequential matcher with its quadratic
+/// overlap, which also links images of a loop or a revisit further along). Exhaustive
+/// matching grows as n²/2 pairs; sequential as about 2n·`overlap`, which is what lets the
+/// mapper take thousands of images in sequence.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PairSelection {
+    #[default]
+    Exhaustive,
+    Sequential {
+        overlap: usize,
+    },
+}
+
+impl PairSelection {
+    /// Whether the pair (a, b), a < b, is matched.
+    pub fn selects(&self, a: usize, b: usize) -> bool {
+        match *self {
+            PairSelection::Exhaustive => a < b,
+            PairSelection::Sequential { overlap } => {
+                let d = b.saturating_sub(a);
+                a < b && (d <= overlap || (d.is_power_of_two() && d.trailing_zeros() < overlap as u32))
+            }
+        }
+    }
+
+    /// The pairs (a, b), a < b, of `n` images it selects, ordered by a, then b.
+    pub fn pairs(&self, n: usize) -> Vec<(usize, usize)> {
+        match *self {
+            PairSelection::Exhaustive => (0..n).flat_map(|a| (a + 1..n).map(move |b| (a, b))).collect(),
+            PairSelection::Sequential { overlap } => {
+                let mut out = Vec::new();
+                for a in 0..n {
+                    let near = (a + 1..n).take_while(|&b| b - a <= overlap);
+                    let far = (0..overlap.min(usize::BITS as usize - 1))
+                        .map(|k| a.saturating_add(1 << k))
+                        .filter(|&b| b - a > overlap && b < n);
+                    out.extend(near.chain(far).map(|b| (a, b)));
+                }
+                out
+            }
+        }
+    }
+}
+
+impl std::str::FromStr for PairSelection {
+    type Err = String;
+    /// `exhaustive`, or `sequential:N` with N ≥ 1.
+    fn from_str(s: &str) -> Result<PairSelection, String> {
+        let bad = || format!("\"{s}\": expected exhaustive or sequential:N with N at least 1");
+        match s.split_once(':') {
+            None if s == "exhaustive" => Ok(PairSelection::Exhaustive),
+            Some(("sequential", n)) => match n.parse::<usize>() {
+                Ok(overlap) if overlap >= 1 => Ok(PairSelection::Sequential { overlap }),
+                _ => Err(bad()),
+            },
+            _ => Err(bad()),
+        }
+    }
 }
 
 impl Default for Options {
@@ -91,6 +156,7 @@ impl Default for Options {
             global_ratio: 1.1,
             refine: bundle::Refine::NONE,
             guided_matching: false,
+            pairs: PairSelection::Exhaustive,
             seed: 1,
         }
     }
@@ -363,10 +429,10 @@ pub fn verify_pairs(
     out
 }
 
-/// Reconstructs cameras and points from `features` of images with intrinsics `k`.
+/// Reconstructs cameras and points from `features` of images with intrinsics `k`, matching
+/// the pairs `opts.pairs` selects.
 pub fn reconstruct(features: &[Features], k: &[Matrix3<f64>], opts: &Options) -> Reconstruction {
-    let n = features.len();
-    let pairs: Vec<(usize, usize)> = (0..n).flat_map(|a| (a + 1..n).map(move |b| (a, b))).collect();
+    let pairs = opts.pairs.pairs(features.len());
     let verified = verify_pairs(features, k, &pairs, opts);
     reconstruct_verified(features, k, verified, opts)
 }
@@ -715,6 +781,35 @@ mod tests {
             })
             .collect();
         (features, vec![k; 16])
+    }
+
+    /// Sequential pairs are COLMAP's: the next `overlap` images and those 2^k after, k <
+    /// `overlap`; `selects` agrees with `pairs`; exhaustive is every pair; bad names refused.
+    #[test]
+    fn pair_selections() {
+        let seq = PairSelection::Sequential { overlap: 3 };
+        let from_0: Vec<usize> = seq.pairs(20).iter().filter(|p| p.0 == 0).map(|p| p.1).collect();
+        assert_eq!(from_0, vec![1, 2, 3, 4]);
+        let from_15: Vec<usize> = seq.pairs(20).iter().filter(|p| p.0 == 15).map(|p| p.1).collect();
+        assert_eq!(from_15, vec![16, 17, 18, 19]);
+        for sel in [seq, PairSelection::Sequential { overlap: 1 }, PairSelection::Exhaustive] {
+            let listed = sel.pairs(40);
+            let mut all: Vec<(usize, usize)> = (0..40)
+                .flat_map(|a| (0..40).map(move |b| (a, b)))
+                .filter(|&(a, b)| sel.selects(a, b))
+                .collect();
+            all.sort_unstable();
+            assert_eq!(listed, all, "{sel:?}");
+        }
+        assert_eq!(PairSelection::Exhaustive.pairs(40).len(), 780);
+        assert_eq!(PairSelection::Sequential { overlap: 1 }.pairs(40).len(), 39);
+        // Large overlaps neither overflow nor repeat a pair.
+        assert_eq!(PairSelection::Sequential { overlap: 200 }.pairs(40).len(), 780);
+        assert_eq!("sequential:10".parse(), Ok(PairSelection::Sequential { overlap: 10 }));
+        assert_eq!("exhaustive".parse(), Ok(PairSelection::Exhaustive));
+        for bad in ["sequential:0", "sequential:", "sequential", "vocab-tree", "sequential:x"] {
+            assert!(bad.parse::<PairSelection>().unwrap_err().contains("expected exhaustive"), "{bad}");
+        }
     }
 
     /// Local adjustments between whole ones (here after images 12 and 14 of 16) end at the

@@ -191,14 +191,14 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     let mut pairs = Vec::new();
     for p in &input.prepared.pairs {
         let (a, b) = (p.report.a, p.report.b);
-        if a < b && b < n && !done[a * n + b] {
+        if a < b && b < n && !done[a * n + b] && config.mapper.pairs.selects(a, b) {
             done[a * n + b] = true;
             pairs.push(p.clone());
         }
     }
     let prepared_pairs = pairs.len();
     let todo: Vec<(usize, usize)> =
-        (0..n).flat_map(|a| (a + 1..n).map(move |b| (a, b))).filter(|&(a, b)| !done[a * n + b]).collect();
+        config.mapper.pairs.pairs(n).into_iter().filter(|&(a, b)| !done[a * n + b]).collect();
     pairs.extend(mapper::verify_pairs(&undistorted, &k, &todo, &config.mapper));
     let reconstruction = mapper::reconstruct_verified(&undistorted, &k, pairs, &config.mapper);
     let cameras = input

@@ -75,6 +75,9 @@ pub struct RenderConfig {
     /// default false).
     #[serde(default)]
     pub guided_matching: bool,
+    /// Which pairs are matched: "exhaustive" (default) or "sequential:N", the views in order
+    /// along the arc (`mapper::PairSelection`).
+    pub pairs: Option<String>,
 }
 
 fn default_views() -> usize {
@@ -151,7 +154,7 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth,
     let mut settings = render::Settings::from_scene(&scene);
     apply_overrides(&mut settings, c.spp, None)?;
     let camera = scene.camera;
-    let cfg = config(c.max_features, c.guess_intrinsics, &c.refine, c.guided_matching)?;
+    let cfg = config(c.max_features, c.guess_intrinsics, &c.refine, c.guided_matching, &c.pairs)?;
     let mut recipes = Vec::new();
     let target = DVec3::from_array(c.target);
     let bar = render::progress_bar(c.views as u64, &format!("{} views", ctx.case), ctx.progress);
@@ -273,6 +276,13 @@ fn prepare<R: Serialize>(
     let mut pairs = Vec::new();
     for i0 in (0..n).step_by(PAIR_BLOCK) {
         for j0 in (i0..n).step_by(PAIR_BLOCK) {
+            let block: Vec<(usize, usize)> = (i0..n.min(i0 + PAIR_BLOCK))
+                .flat_map(|a| (j0.max(a + 1)..n.min(j0 + PAIR_BLOCK)).map(move |b| (a, b)))
+                .filter(|&(a, b)| cfg.mapper.pairs.selects(a, b))
+                .collect();
+            if block.is_empty() {
+                continue;
+            }
             let mut members: Vec<usize> = (i0..n.min(i0 + PAIR_BLOCK)).collect();
             if j0 != i0 {
                 members.extend(j0..n.min(j0 + PAIR_BLOCK));
@@ -308,9 +318,6 @@ fn prepare<R: Serialize>(
                 });
                 ideal[m] = sfm::ideal_features(&images[m], f).ideal;
             }
-            let block: Vec<(usize, usize)> = (i0..n.min(i0 + PAIR_BLOCK))
-                .flat_map(|a| (j0.max(a + 1)..n.min(j0 + PAIR_BLOCK)).map(move |b| (a, b)))
-                .collect();
             let block = sfm::mapper::verify_pairs(&ideal, &k, &block, &cfg.mapper);
             ctx.cache.store_bytes(&recipe, &sfm::bytes::encode_pairs(&block));
         }
@@ -338,14 +345,19 @@ fn photo_recipes(
 }
 
 /// The solver's settings for a case: its keypoints per image, what it refines of guessed
-/// intrinsics (`refine` names, or none when they are given), and whether verified pairs are
-/// matched again guided by their geometry.
+/// intrinsics (`refine` names, or none when they are given), whether verified pairs are
+/// matched again guided by their geometry, and which pairs are matched.
 fn config(
     max_features: usize,
     guessed: bool,
     refine: &Option<Vec<String>>,
     guided_matching: bool,
+    pairs: &Option<String>,
 ) -> Result<sfm::Config, StageError> {
+    let pairs = match pairs {
+        None => sfm::mapper::PairSelection::Exhaustive,
+        Some(p) => p.parse().map_err(|e| StageError::Config(format!("pairs = {e}")))?,
+    };
     let refine = match (guessed, refine) {
         (false, None) => sfm::bundle::Refine::NONE,
         (false, Some(_)) => {
@@ -360,12 +372,12 @@ fn config(
     };
     Ok(sfm::Config {
         features: sfm::features::Options { max_features, ..Default::default() },
-        mapper: sfm::mapper::Options { refine, guided_matching, ..Default::default() },
+        mapper: sfm::mapper::Options { refine, guided_matching, pairs, ..Default::default() },
     })
 }
 
 pub fn solve_render(c: &RenderConfig, input: &sfm::Input) -> Result<sfm::Output, StageError> {
-    Ok(sfm::run(input, &config(c.max_features, c.guess_intrinsics, &c.refine, c.guided_matching)?)?)
+    Ok(sfm::run(input, &config(c.max_features, c.guess_intrinsics, &c.refine, c.guided_matching, &c.pairs)?)?)
 }
 
 #[derive(Debug, Deserialize)]
@@ -386,6 +398,8 @@ pub struct Config {
     pub guided_matching: bool,
     /// As the render entry's `refine`; only without `camera`.
     pub refine: Option<Vec<String>>,
+    /// As the render entry's `pairs`, the photographs in name order.
+    pub pairs: Option<String>,
 }
 
 fn default_features() -> usize {
@@ -409,7 +423,7 @@ pub fn read(c: &Config, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), 
     let camera = camera_path.as_deref().map(sfm::input::read_camera).transpose()?;
     let truth_dir = super::dataset_path(ctx, &c.truth)?;
     let files = sfm::input::photographs(&dir)?;
-    let cfg = config(c.max_features, c.camera.is_none(), &c.refine, c.guided_matching)?;
+    let cfg = config(c.max_features, c.camera.is_none(), &c.refine, c.guided_matching, &c.pairs)?;
     let recipes = photo_recipes(&files, &cfg)?;
     if ctx.cache.pass() == Some(Pass::Renders) {
         // A share of the renders pass: the features of the photographs it owns.
@@ -454,7 +468,7 @@ pub fn read(c: &Config, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), 
 
 pub fn solve(c: &Config, input: &sfm::Input) -> Result<sfm::Output, StageError> {
     // `read` took the same settings for the prepared features and pairs.
-    Ok(sfm::run(input, &config(c.max_features, c.camera.is_none(), &c.refine, c.guided_matching)?)?)
+    Ok(sfm::run(input, &config(c.max_features, c.camera.is_none(), &c.refine, c.guided_matching, &c.pairs)?)?)
 }
 
 pub fn validate(out: &sfm::Output, truth: &Truth) -> Findings {
@@ -525,7 +539,7 @@ pub fn validate(out: &sfm::Output, truth: &Truth) -> Findings {
             "Made beforehand by the pipeline's shares and read from the cache: the features of {} of {n} images, the matches and two-view geometry of {} of {} pairs (the phase times below leave that work out).",
             out.prepared_images,
             out.prepared_pairs,
-            n * n.saturating_sub(1) / 2
+            rec.pairs.len()
         ));
     }
     f.notes.push(format!(
