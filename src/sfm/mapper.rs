@@ -2,10 +2,9 @@
 //! motion revisited", CVPR 2016), from per-image features and known intrinsics:
 //!
 //! 1. every pair (or those `Options::pairs` selects) is matched (`matching`) and verified by
-//!    its two-view geometry
-//!    (`two_view`), pairs in parallel, each independent of the others (`verify_pair`); the
-//!    inliers of E (general pairs) or of H (planar or rotation pairs) are the verified
-//!    matches, joined into tracks (`tracks`);
+//!    its two-view geometry (`two_view`), pairs in parallel, each independent of the others
+//!    (`verify_pair`); the inliers of E (general pairs) or of H (planar or rotation pairs)
+//!    are the verified matches, joined into tracks (`tracks`);
 //! 2. the first pair: among general pairs whose median triangulation angle is at least
 //!    `init_min_angle_deg`, the one with the most inliers; its tracks are triangulated;
 //! 3. then, repeatedly, the unregistered image that sees the most triangulated tracks is
