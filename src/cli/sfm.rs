@@ -75,6 +75,7 @@ pub fn run(a: &SfmArgs) -> Result<()> {
             pairs,
             ..Default::default()
         },
+        progress: true,
     };
     eprintln!("extracting features and matching {} images …", input.images.len());
     let out = sfm::run(&input, &config)?;
@@ -124,6 +125,14 @@ pub fn run(a: &SfmArgs) -> Result<()> {
         let guess = input.images[0].camera.intrinsics.fx;
         if c.intrinsics.fx != guess {
             println!("  focal length refined from {guess:.1} to {:.1} px", c.intrinsics.fx);
+            let (d, k) = (&c.distortion, &c.intrinsics);
+            if d.k1 != 0.0 || d.k2 != 0.0 {
+                println!("  radial distortion refined: k1 = {:.5}, k2 = {:.5}", d.k1, d.k2);
+            }
+            let centre = &input.images[0].camera.intrinsics;
+            if (k.cx, k.cy) != (centre.cx, centre.cy) {
+                println!("  principal point refined to ({:.2}, {:.2}) px", k.cx, k.cy);
+            }
         } else {
             println!("  focal length kept at the guess, {guess:.1} px: it is refined only for images of one size, once three are registered");
         }

@@ -405,18 +405,27 @@ fn guided_matches(
     })
 }
 
-/// `verify_pair` over `pairs`, in parallel, results in their order. The pairs' matching and
-/// verification times are scaled so that together they add up to the wall time spent, split
-/// between the two in the proportion of their times on the threads.
+/// `verify_pair` over `pairs`, in parallel, results in their order, `progress` advanced by one
+/// per pair. The pairs' matching and verification times are scaled so that together they add
+/// up to the wall time spent, split between the two in the proportion of their times on the
+/// threads.
 pub fn verify_pairs(
     features: &[Features],
     k: &[Matrix3<f64>],
     pairs: &[(usize, usize)],
     opts: &Options,
+    progress: &indicatif::ProgressBar,
 ) -> Vec<VerifiedPair> {
     use rayon::prelude::*;
     let t = std::time::Instant::now();
-    let mut out: Vec<VerifiedPair> = pairs.par_iter().map(|&p| verify_pair(features, k, p, opts)).collect();
+    let mut out: Vec<VerifiedPair> = pairs
+        .par_iter()
+        .map(|&p| {
+            let v = verify_pair(features, k, p, opts);
+            progress.inc(1);
+            v
+        })
+        .collect();
     let threads: f64 = out.iter().map(|p| p.matching_s + p.verification_s).sum();
     if threads > 0.0 {
         let scale = t.elapsed().as_secs_f64() / threads;
@@ -432,7 +441,7 @@ pub fn verify_pairs(
 /// the pairs `opts.pairs` selects.
 pub fn reconstruct(features: &[Features], k: &[Matrix3<f64>], opts: &Options) -> Reconstruction {
     let pairs = opts.pairs.pairs(features.len());
-    let verified = verify_pairs(features, k, &pairs, opts);
+    let verified = verify_pairs(features, k, &pairs, opts, &indicatif::ProgressBar::hidden());
     reconstruct_verified(features, k, verified, opts)
 }
 

@@ -69,6 +69,9 @@ pub struct Prepared {
 pub struct Config {
     pub features: features::Options,
     pub mapper: mapper::Options,
+    /// Progress bars on stderr for feature extraction and matching (`lumen sfm`'s; hidden
+    /// when stderr is not a terminal).
+    pub progress: bool,
 }
 
 pub struct Output {
@@ -173,6 +176,7 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     let mut undistorted = Vec::new();
     let mut colours = Vec::new();
     let mut prepared_images = 0;
+    let bar = crate::render::progress_bar(n as u64, "features", config.progress);
     for (i, im) in input.images.iter().enumerate() {
         let given = input.prepared.features.get(i).and_then(Option::as_ref);
         prepared_images += usize::from(given.is_some());
@@ -183,7 +187,9 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
         features.push(f.kept);
         undistorted.push(f.ideal);
         colours.push(f.colours);
+        bar.inc(1);
     }
+    bar.finish_and_clear();
     let extraction_s = t.elapsed().as_secs_f64();
     let k: Vec<nalgebra::Matrix3<f64>> = input.images.iter().map(|im| intrinsics(&im.camera)).collect();
     // The prepared pairs (the first of any repeated one), then every other pair.
@@ -199,7 +205,9 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     let prepared_pairs = pairs.len();
     let todo: Vec<(usize, usize)> =
         config.mapper.pairs.pairs(n).into_iter().filter(|&(a, b)| !done[a * n + b]).collect();
-    pairs.extend(mapper::verify_pairs(&undistorted, &k, &todo, &config.mapper));
+    let bar = crate::render::progress_bar(todo.len() as u64, "pairs", config.progress);
+    pairs.extend(mapper::verify_pairs(&undistorted, &k, &todo, &config.mapper, &bar));
+    bar.finish_and_clear();
     let reconstruction = mapper::reconstruct_verified(&undistorted, &k, pairs, &config.mapper);
     let cameras = input
         .images

@@ -318,7 +318,8 @@ fn prepare<R: Serialize>(
                 });
                 ideal[m] = sfm::ideal_features(&images[m], f).ideal;
             }
-            let block = sfm::mapper::verify_pairs(&ideal, &k, &block, &cfg.mapper);
+            let block =
+                sfm::mapper::verify_pairs(&ideal, &k, &block, &cfg.mapper, &indicatif::ProgressBar::hidden());
             ctx.cache.store_bytes(&recipe, &sfm::bytes::encode_pairs(&block));
         }
     }
@@ -373,6 +374,7 @@ fn config(
     Ok(sfm::Config {
         features: sfm::features::Options { max_features, ..Default::default() },
         mapper: sfm::mapper::Options { refine, guided_matching, pairs, ..Default::default() },
+        progress: false,
     })
 }
 
