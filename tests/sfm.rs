@@ -3,7 +3,10 @@
 mod common;
 
 use common::png;
+use exif::experimental::Writer;
+use exif::{Field, In, Rational, Tag, Value};
 use lumen::image::filter::Grey;
+use lumen::sfm::exif::{focal_px, Focal};
 use lumen::sfm::{bundle::Pose, eval, features, mapper, matching, two_view};
 use nalgebra::{Matrix3, Vector3};
 use std::path::Path;
@@ -355,4 +358,102 @@ fn cli_refusals_and_an_unreconstructable_pair() {
         cameras.contains("PINHOLE 160 120 192 192") && cameras.contains("PINHOLE 120 90 144 144"),
         "{cameras}"
     );
+}
+
+/// A JPEG of `w` × `h` pixels (noise seeded by `seed`) carrying `fields` as EXIF: an APP1
+/// segment after SOI.
+fn jpeg_with_exif(w: u32, h: u32, seed: u64, fields: &[Field]) -> Vec<u8> {
+    let img = image::RgbImage::from_fn(w, h, |x, y| {
+        let v = lumen::render::sampler::mix64(seed ^ (x as u64 * 7919 + y as u64 * 104729));
+        image::Rgb([(v >> 56) as u8, (v >> 48) as u8, (v >> 40) as u8])
+    });
+    let mut jpeg = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut jpeg), image::ImageFormat::Jpeg).unwrap();
+    let mut tiff = std::io::Cursor::new(Vec::new());
+    let mut writer = Writer::new();
+    for f in fields {
+        writer.push_field(f);
+    }
+    writer.write(&mut tiff, false).unwrap();
+    let tiff = tiff.into_inner();
+    let mut out = jpeg[..2].to_vec();
+    out.extend_from_slice(&[0xff, 0xe1]);
+    out.extend_from_slice(&((2 + 6 + tiff.len()) as u16).to_be_bytes());
+    out.extend_from_slice(b"Exif\0\0");
+    out.extend_from_slice(&tiff);
+    out.extend_from_slice(&jpeg[2..]);
+    out
+}
+
+fn field(tag: Tag, value: Value) -> Field {
+    Field { tag, ifd_num: In::PRIMARY, value }
+}
+
+fn rational(num: u32, denom: u32) -> Value {
+    Value::Rational(vec![Rational { num, denom }])
+}
+
+/// `sfm::exif`: the 35 mm equivalent through the diagonal; the focal plane's resolution in
+/// each unit, and scaled to an image resized since; nothing usable gives `None`. `lumen sfm`
+/// without --camera starts from it and says so.
+#[test]
+fn exif_focal_lengths() {
+    let dir = tempfile::tempdir().unwrap();
+    let read = |bytes: &[u8], w: u32, h: u32| -> Option<Focal> {
+        let path = dir.path().join("a.jpg");
+        std::fs::write(&path, bytes).unwrap();
+        focal_px(&path, w, h)
+    };
+    let f35 = [field(Tag::FocalLengthIn35mmFilm, Value::Short(vec![36]))];
+    let got = read(&jpeg_with_exif(120, 80, 1, &f35), 120, 80).unwrap();
+    assert!((got.px - 120.0).abs() < 1e-9, "{got:?}");
+    // 8.8 mm at 1000 px per cm, the image at half the size the camera wrote.
+    let plane = [
+        field(Tag::FocalLength, rational(88, 10)),
+        field(Tag::FocalPlaneXResolution, rational(1000, 1)),
+        field(Tag::FocalPlaneResolutionUnit, Value::Short(vec![3])),
+        field(Tag::PixelXDimension, Value::Long(vec![240])),
+    ];
+    let got = read(&jpeg_with_exif(120, 80, 1, &plane), 120, 80).unwrap();
+    assert!((got.px - 8.8 * 100.0 * 0.5).abs() < 1e-9, "{got:?}");
+    // Inches by default.
+    let inch =
+        [field(Tag::FocalLength, rational(254, 10)), field(Tag::FocalPlaneXResolution, rational(100, 1))];
+    let got = read(&jpeg_with_exif(120, 80, 1, &inch), 120, 80).unwrap();
+    assert!((got.px - 100.0).abs() < 1e-9, "{got:?}");
+    // No resolution, a zero focal length, a zero denominator, an unknown unit.
+    let unusable: [&[Field]; 4] = [
+        &[field(Tag::FocalLength, rational(50, 1))],
+        &[field(Tag::FocalLengthIn35mmFilm, Value::Short(vec![0]))],
+        &[field(Tag::FocalLength, rational(50, 0)), field(Tag::FocalPlaneXResolution, rational(100, 1))],
+        &[
+            field(Tag::FocalLength, rational(50, 1)),
+            field(Tag::FocalPlaneXResolution, rational(100, 1)),
+            field(Tag::FocalPlaneResolutionUnit, Value::Short(vec![9])),
+        ],
+    ];
+    for fields in unusable {
+        assert_eq!(read(&jpeg_with_exif(120, 80, 1, fields), 120, 80), None, "{fields:?}");
+    }
+    assert_eq!(read(b"not a picture", 8, 8), None);
+    // Through the command: two unrelated JPEGs with a 35 mm equivalent of 54 mm (1.5 × 120 =
+    // 180 px), one camera for both, written to cameras.txt and summary.json.
+    let photos = dir.path().join("photos");
+    std::fs::create_dir(&photos).unwrap();
+    let f54 = [field(Tag::FocalLengthIn35mmFilm, Value::Short(vec![54]))];
+    for (name, seed) in [("a.jpg", 1), ("b.jpg", 2)] {
+        std::fs::write(photos.join(name), jpeg_with_exif(120, 80, seed, &f54)).unwrap();
+    }
+    let out = dir.path().join("model");
+    let (code, err) =
+        common::lumen(&["sfm", "--images", photos.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("focal length from EXIF FocalLengthIn35mmFilm 54 mm for 2 image(s)"), "{err}");
+    let cameras = std::fs::read_to_string(out.join("cameras.txt")).unwrap();
+    let first: Vec<&str> = cameras.lines().find(|l| l.starts_with("1 ")).unwrap().split(' ').collect();
+    assert_eq!(first[1..4], ["PINHOLE", "120", "80"], "{cameras}");
+    let fx: f64 = first[4].parse().unwrap();
+    assert!((fx - 180.0).abs() < 1e-9, "{cameras}");
+    let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
+    assert!(summary.contains("EXIF FocalLengthIn35mmFilm 54 mm"), "{summary}");
 }

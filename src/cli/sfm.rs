@@ -13,9 +13,11 @@ pub struct SfmArgs {
     #[arg(long)]
     pub images: PathBuf,
     /// The camera: a calibration from `lumen calibrate` or OpenCV (.yaml/.yml/.json), or a
-    /// text file holding the 3×3 camera matrix K (no distortion). Without it: a focal length
-    /// of 1.2 × the longer side (COLMAP's guess) and a centred principal point, the focal
-    /// length then refined by bundle adjustment (images of one size share it).
+    /// text file holding the 3×3 camera matrix K (no distortion). Without it: the focal
+    /// length the file's EXIF gives (FocalLengthIn35mmFilm, or FocalLength with the focal
+    /// plane's resolution), else 1.2 × the longer side (COLMAP's guess), a centred principal
+    /// point and no distortion, refined by bundle adjustment (`--refine`; images of one size
+    /// share one camera).
     #[arg(long)]
     pub camera: Option<PathBuf>,
     /// Keypoints per image at most (COLMAP: 8192).
@@ -65,7 +67,19 @@ pub fn run(a: &SfmArgs) -> Result<()> {
         }
     };
     if given.is_none() {
-        eprintln!("no --camera: starting from a focal length of 1.2 × the longer side and no distortion, refined by bundle adjustment ({refine:?})");
+        // Each way a focal length was guessed, with how many images it was guessed for.
+        let mut sources: Vec<(&str, usize)> = Vec::new();
+        for s in input.images.iter().filter_map(|im| im.guess.as_deref()) {
+            match sources.iter_mut().find(|e| e.0 == s) {
+                Some(e) => e.1 += 1,
+                None => sources.push((s, 1)),
+            }
+        }
+        let sources: Vec<String> = sources.iter().map(|(s, n)| format!("{s} for {n} image(s)")).collect();
+        eprintln!(
+            "no --camera: focal length from {}; principal point at the centre, no distortion; refined by bundle adjustment ({refine:?})",
+            sources.join(", ")
+        );
     }
     let config = sfm::Config {
         features: sfm::features::Options { max_features: a.max_features, ..Default::default() },
@@ -90,7 +104,7 @@ pub fn run(a: &SfmArgs) -> Result<()> {
         "mean_track_length": if kept > 0 { observations as f64 / kept as f64 } else { 0.0 },
         "mean_observations_per_image": if registered > 0 { observations as f64 / registered as f64 } else { 0.0 },
         "reprojection_rms_px": rec.rms_px,
-        "cameras": out.cameras.iter().zip(&input.images).map(|(c, im)| serde_json::json!({"image": im.name, "fx": c.intrinsics.fx, "fy": c.intrinsics.fy, "cx": c.intrinsics.cx, "cy": c.intrinsics.cy, "k1": c.distortion.k1, "k2": c.distortion.k2, "refined": c != &im.camera})).collect::<Vec<_>>(),
+        "cameras": out.cameras.iter().zip(&input.images).map(|(c, im)| serde_json::json!({"image": im.name, "fx": c.intrinsics.fx, "fy": c.intrinsics.fy, "cx": c.intrinsics.cx, "cy": c.intrinsics.cy, "k1": c.distortion.k1, "k2": c.distortion.k2, "refined": c != &im.camera, "guess": im.guess})).collect::<Vec<_>>(),
         "unregistered": rec.unregistered.iter().map(|(i, why)| serde_json::json!({"image": input.images[*i].name, "reason": why})).collect::<Vec<_>>(),
         "pairs": rec.pairs.iter().map(|p| serde_json::json!({"a": input.images[p.a].name, "b": input.images[p.b].name, "matches": p.matches, "inliers": p.inliers, "configuration": p.configuration})).collect::<Vec<_>>(),
         "time_s": {
@@ -134,7 +148,7 @@ pub fn run(a: &SfmArgs) -> Result<()> {
                 println!("  principal point refined to ({:.2}, {:.2}) px", k.cx, k.cy);
             }
         } else {
-            println!("  focal length kept at the guess, {guess:.1} px: it is refined only for images of one size, once three are registered");
+            println!("  focal length kept at the guess, {guess:.1} px: it is refined only where the images share one camera (one size and one guess), once three are registered");
         }
     }
     for (i, why) in &rec.unregistered {

@@ -62,12 +62,22 @@ pub fn photographs(dir: &Path) -> Result<Vec<PathBuf>, Error> {
     Ok(files)
 }
 
-/// The focal length assumed without a camera: 1.2 × the longer side, as COLMAP's default.
+/// The focal length assumed without a camera or EXIF: 1.2 × the longer side, as COLMAP's
+/// default.
 pub fn assumed_camera(width: u32, height: u32) -> CameraModel {
     CameraModel::centred(width, height, 1.2 * width.max(height) as f64)
 }
 
-/// Reads `files` with their camera (`None`: `assumed_camera`, per image and its size),
+/// The camera guessed for a photograph without one: centred, no distortion, the focal length
+/// from its EXIF metadata (`exif::focal_px`) or else `assumed_camera`'s; and where it came from.
+pub fn guessed_camera(path: &Path, width: u32, height: u32) -> (CameraModel, String) {
+    match super::exif::focal_px(path, width, height) {
+        Some(f) => (CameraModel::centred(width, height, f.px), f.source),
+        None => (assumed_camera(width, height), "1.2 × the longer side (no EXIF focal length)".into()),
+    }
+}
+
+/// Reads `files` with their camera (`None`: `guessed_camera`, per image and its size),
 /// calling `on_image(k, n, file)` before each. A camera matrix without a size (K.txt) takes
 /// the first image's: one K fits one image size, so an image of another size is refused by
 /// `sfm::run`, named, rather than given a principal point off its centre.
@@ -80,18 +90,21 @@ pub fn read_images(
     for (n, f) in files.iter().enumerate() {
         on_image(n, files.len(), f);
         let img = crate::image::io::read(f)?;
-        let camera = match &mut camera {
+        let (camera, guess) = match &mut camera {
             Some(cam) => {
                 if cam.width == 0 {
                     cam.width = img.width;
                     cam.height = img.height;
                 }
-                *cam
+                (*cam, None)
             }
-            None => assumed_camera(img.width, img.height),
+            None => {
+                let (cam, source) = guessed_camera(f, img.width, img.height);
+                (cam, Some(source))
+            }
         };
         let name = f.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-        images.push(image(name, &img, camera));
+        images.push(Image { guess, ..image(name, &img, camera) });
     }
     Ok(Input { images, prepared: Default::default() })
 }
@@ -107,7 +120,7 @@ pub fn image(name: String, img: &crate::image::Image, camera: CameraModel) -> Im
         .chunks_exact(c)
         .map(|p| if c >= 3 { [q(p[0]), q(p[1]), q(p[2])] } else { [q(p[0]); 3] })
         .collect();
-    Image { name, grey, rgb8, camera }
+    Image { name, grey, rgb8, camera, guess: None }
 }
 
 /// K, the camera-to-world rotation R and the centre C.

@@ -2,7 +2,7 @@
 //! two-view geometry (`two_view`), tracks (`tracks`), PnP (`pnp`), bundle adjustment
 //! (`bundle`), the incremental mapper (`mapper`), the COLMAP text model (`colmap`) and the
 //! comparison with ground truth (`eval`); reading photographs, cameras and ground truth
-//! (`input`).
+//! (`input`), and a photograph's focal length from its EXIF metadata (`exif`).
 //!
 //! [`run`] is what `lumen sfm` calls: features per image, keypoints undistorted through each
 //! image's camera model, then the mapper on the given intrinsics (refining the shared ones
@@ -12,6 +12,7 @@ pub mod bundle;
 pub mod bytes;
 pub mod colmap;
 pub mod eval;
+pub mod exif;
 pub mod features;
 pub mod five_point;
 pub mod input;
@@ -45,6 +46,9 @@ pub struct Image {
     pub grey: Grey,
     pub rgb8: Vec<[u8; 3]>,
     pub camera: CameraModel,
+    /// Where a guessed camera's focal length came from (`input::read_images`); `None` for a
+    /// camera given.
+    pub guess: Option<String>,
 }
 
 pub struct Input {
