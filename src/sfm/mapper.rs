@@ -70,8 +70,8 @@ pub struct Options {
     pub refine: bundle::Refine,
     /// Match each pair verified as general again, guided by its geometry: among only the
     /// keypoints within `two_view_px` of each other's epipolar lines (`matching::match_guided`),
-    /// keeping the new matches its pose explains when they are more (COLMAP's
-    /// `guided_matching`, off there by default).
+    /// keeping the new matches its pose explains (Sampson distance within 1 px, in front of
+    /// both cameras) when they are more (COLMAP's `guided_matching`, off there by default).
     pub guided_matching: bool,
     /// Which pairs of images are matched (default all).
     pub pairs: PairSelection,
