@@ -136,19 +136,22 @@ pub fn run(a: &SfmArgs) -> Result<()> {
         a.out.display()
     );
     if let (None, Some(c)) = (given, out.cameras.first()) {
-        let guess = input.images[0].camera.intrinsics.fx;
-        if c.intrinsics.fx != guess {
-            println!("  focal length refined from {guess:.1} to {:.1} px", c.intrinsics.fx);
-            let (d, k) = (&c.distortion, &c.intrinsics);
-            if d.k1 != 0.0 || d.k2 != 0.0 {
-                println!("  radial distortion refined: k1 = {:.5}, k2 = {:.5}", d.k1, d.k2);
-            }
-            let centre = &input.images[0].camera.intrinsics;
-            if (k.cx, k.cy) != (centre.cx, centre.cy) {
-                println!("  principal point refined to ({:.2}, {:.2}) px", k.cx, k.cy);
-            }
-        } else {
-            println!("  focal length kept at the guess, {guess:.1} px: it is refined only where the images share one camera (one size and one guess), once three are registered");
+        let start = &input.images[0].camera;
+        let (k, k0, d) = (&c.intrinsics, &start.intrinsics, &c.distortion);
+        if c == start {
+            println!("  intrinsics kept at the guess (focal length {:.1} px): they are refined only where the images share one camera (one size and one guess), once three are registered", k0.fx);
+        }
+        if k.fx != k0.fx {
+            println!("  focal length refined from {:.1} to {:.1} px", k0.fx, k.fx);
+        }
+        if (k.cx, k.cy) != (k0.cx, k0.cy) {
+            println!(
+                "  principal point refined from ({:.2}, {:.2}) to ({:.2}, {:.2}) px",
+                k0.cx, k0.cy, k.cx, k.cy
+            );
+        }
+        if d.k1 != 0.0 || d.k2 != 0.0 {
+            println!("  radial distortion refined: k1 = {:.5}, k2 = {:.5}", d.k1, d.k2);
         }
     }
     for (i, why) in &rec.unregistered {
