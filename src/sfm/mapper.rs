@@ -238,12 +238,23 @@ fn undistorted(raw: &Pixels, k: &[Matrix3<f64>], radial: &[[f64; 2]]) -> Pixels 
     raw.iter()
         .zip(k.iter().zip(radial))
         .map(|(pxs, (k, r))| {
-            let d = crate::math::camera::Distortion { k1: r[0], k2: r[1], ..Default::default() };
-            let (fx, fy, cx, cy) = (k[(0, 0)], k[(1, 1)], k[(0, 2)], k[(1, 2)]);
+            let camera = crate::math::CameraModel {
+                width: 0,
+                height: 0,
+                intrinsics: crate::math::Intrinsics {
+                    fx: k[(0, 0)],
+                    fy: k[(1, 1)],
+                    cx: k[(0, 2)],
+                    cy: k[(1, 2)],
+                },
+                distortion: crate::math::Distortion { k1: r[0], k2: r[1], ..Default::default() },
+            };
             pxs.iter()
                 .map(|p| {
-                    let n = glam::DVec2::new((p[0] - cx) / fx, (p[1] - cy) / fy);
-                    d.undistort(n).filter(|u| u.is_finite()).map_or(*p, |u| [fx * u.x + cx, fy * u.y + cy])
+                    let ideal = camera
+                        .undistort_pixel(glam::DVec2::new(p[0], p[1]))
+                        .map(|n| camera.normalized_to_pixel(n));
+                    ideal.filter(|u| u.is_finite()).map_or(*p, |u| [u.x, u.y])
                 })
                 .collect()
         })
@@ -523,12 +534,14 @@ pub fn reconstruct_verified(
     };
     triangulate_new(&mut out, &mut point_of, &ideal);
     let mut bundle_s = 0.0;
-    let mut adjust = |out: &mut Reconstruction, ideal: &mut Pixels, first: usize, local: Option<usize>| {
-        let t = std::time::Instant::now();
-        adjust_bundle(out, &raw, ideal, first, local, opts, opts.bundle.max_iterations);
-        bundle_s += t.elapsed().as_secs_f64();
-    };
-    adjust(&mut out, &mut ideal, *a, None);
+    let iterations = opts.bundle.max_iterations;
+    let mut adjust =
+        |out: &mut Reconstruction, ideal: &mut Pixels, local: Option<usize>, iterations: usize| {
+            let t = std::time::Instant::now();
+            adjust_bundle(out, &raw, ideal, *a, local, opts, iterations);
+            bundle_s += t.elapsed().as_secs_f64();
+        };
+    adjust(&mut out, &mut ideal, None, iterations);
     // Registered images at the last whole adjustment.
     let mut whole_at = 2usize;
     // 3. Register the others, most 2D–3D matches first.
@@ -564,10 +577,10 @@ pub fn reconstruct_verified(
                 triangulate_new(&mut out, &mut point_of, &ideal);
                 let registered = out.registered_count();
                 if registered as f64 >= opts.global_ratio * whole_at as f64 {
-                    adjust(&mut out, &mut ideal, *a, None);
+                    adjust(&mut out, &mut ideal, None, iterations);
                     whole_at = registered;
                 } else {
-                    adjust(&mut out, &mut ideal, *a, Some(i));
+                    adjust(&mut out, &mut ideal, Some(i), iterations);
                 }
             }
             Some(reg) => out.unregistered.push((
@@ -585,16 +598,14 @@ pub fn reconstruct_verified(
         }
     }
     if out.registered_count() > whole_at {
-        adjust(&mut out, &mut ideal, *a, None);
+        adjust(&mut out, &mut ideal, None, iterations);
     }
     // Refined intrinsics converge slowly along the focal length's valley with depth: a last
     // whole adjustment continues where the others stopped, with `FINAL_ROUNDS` times the
     // iterations (Herz-Jesu without K, f and k1: the focal length −0.19 % short after the
     // usual rounds, −0.04 % after this one).
     if opts.refine.any() && out.registered_count() >= 3 {
-        let t = std::time::Instant::now();
-        adjust_bundle(&mut out, &raw, &mut ideal, *a, None, opts, FINAL_ROUNDS * opts.bundle.max_iterations);
-        bundle_s += t.elapsed().as_secs_f64();
+        adjust(&mut out, &mut ideal, None, FINAL_ROUNDS * iterations);
     }
     out.unregistered.sort_by_key(|u| u.0);
     out.bundle_s = bundle_s;

@@ -298,6 +298,12 @@ pub fn decompose(
     best
 }
 
+/// The normalised image point of pixel `p` through the inverse intrinsics `k_inv`.
+fn ray(k_inv: &Matrix3<f64>, p: [f64; 2]) -> [f64; 2] {
+    let v = k_inv * Vector3::new(p[0], p[1], 1.0);
+    [v[0] / v[2], v[1] / v[2]]
+}
+
 /// A pair is planar or a rotation when a homography explains more than this fraction of
 /// E's inliers (COLMAP's default).
 pub const MAX_H_INLIER_RATIO: f64 = 0.8;
@@ -318,10 +324,6 @@ pub fn estimate(
         return None;
     }
     let (k1i, k2i) = (k1.try_inverse()?, k2.try_inverse()?);
-    let ray = |k: &Matrix3<f64>, p: [f64; 2]| {
-        let v = k * Vector3::new(p[0], p[1], 1.0);
-        [v[0] / v[2], v[1] / v[2]]
-    };
     let x1: Vec<[f64; 2]> = p1.iter().map(|&p| ray(&k1i, p)).collect();
     let x2: Vec<[f64; 2]> = p2.iter().map(|&p| ray(&k2i, p)).collect();
     let to_f = |e: &Matrix3<f64>| k2i.transpose() * e * k1i;
@@ -406,10 +408,6 @@ pub fn consistent(
 ) -> Vec<usize> {
     let (Some(k1i), Some(k2i)) = (k1.try_inverse(), k2.try_inverse()) else {
         return Vec::new();
-    };
-    let ray = |k: &Matrix3<f64>, p: [f64; 2]| {
-        let v = k * Vector3::new(p[0], p[1], 1.0);
-        [v[0] / v[2], v[1] / v[2]]
     };
     let f = k2i.transpose() * essential_of(pose) * k1i;
     (0..p1.len().min(p2.len()))
