@@ -55,12 +55,12 @@ pub enum Response {
     Film { stops: f64 },
     /// A measured curve: the green channel of the response recovered from the Memorial
     /// Church photographs (`data/responses/memorial-green.csv`: film scanned to 8 bits, with a
-    /// long toe and a soft shoulder), f linear in ln x between its 256 values, 0 below the
-    /// first.
+    /// long toe and a soft shoulder), f linear in ln x between its values 0 to 254 (the
+    /// measured ones: 255 is the scan's clip), 0 below the first, full scale at 254.
     Memorial,
 }
 
-/// `data/responses/memorial-green.csv`: ln exposure (full scale 0) of each of 256 values.
+/// `data/responses/memorial-green.csv`: ln exposure (full scale 0) of each of 255 values.
 fn memorial() -> &'static [f64] {
     static TABLE: std::sync::OnceLock<Vec<f64>> = std::sync::OnceLock::new();
     TABLE.get_or_init(|| {
@@ -297,8 +297,8 @@ mod tests {
             }
         }
         let table = memorial();
-        assert_eq!(table.len(), 256);
-        assert!(table.windows(2).all(|w| w[1] > w[0]) && table[255] == 0.0);
+        assert_eq!(table.len(), 255);
+        assert!(table.windows(2).all(|w| w[1] > w[0]) && table[254] == 0.0);
         assert!(Response::Gamma { gamma: 0.0 }.validate().is_err());
         let img = Image { width: 4, height: 1, channels: 3, data: vec![0.25; 12] };
         let s = Sensor { bits: 10, photon_noise: false, response: Response::Srgb, ..Sensor::default() };
