@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
+pub mod run;
+
 use lumen::render::{self, Scene};
 use std::path::{Path, PathBuf};
 
