@@ -87,31 +87,38 @@ fn mirror(i: isize, n: usize) -> usize {
 
 const TAPS: [f32; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
 
-/// Blurs with the 5-tap kernel and keeps every second sample: ⌈w/2⌉ × ⌈h/2⌉. The vertical
-/// pass runs first, over whole rows (which vectorises), the horizontal one on its output.
-fn pyr_down(src: &Plane) -> Plane {
+/// Blurs with the 5-tap kernel and keeps every second sample into `dst` (⌈w/2⌉ × ⌈h/2⌉, as
+/// many channels). The vertical pass runs first, over whole rows (which vectorises), the
+/// horizontal one on its output; `line` holds one row of it.
+fn pyr_down_into(src: &Plane, dst: &mut Plane, line: &mut Vec<f32>) {
     let (w, h, c) = (src.w, src.h, src.c);
-    let (dw, dh) = (w.div_ceil(2), h.div_ceil(2));
+    debug_assert!(dst.w == w.div_ceil(2) && dst.h == h.div_ceil(2) && dst.c == c);
     let row = |y: isize| {
         let sy = mirror(y, h);
         &src.data[sy * w * c..(sy + 1) * w * c]
     };
-    let mut dst = Plane::zeros(dw, dh, c);
-    let mut tmp = vec![0.0f32; w * c];
-    for (y, out) in dst.data.chunks_exact_mut(dw * c).enumerate() {
+    line.resize(w * c, 0.0);
+    for (y, out) in dst.data.chunks_exact_mut(dst.w * c).enumerate() {
         let y = 2 * y as isize;
         let (a, b, m, d, e) = (row(y - 2), row(y - 1), row(y), row(y + 1), row(y + 2));
         let outer = a.iter().zip(e).zip(b.iter().zip(d));
-        for ((t, m), ((a, e), (b, d))) in tmp.iter_mut().zip(m).zip(outer) {
+        for ((t, m), ((a, e), (b, d))) in line.iter_mut().zip(m).zip(outer) {
             *t = (a + e + 4.0 * (b + d) + 6.0 * m) * (1.0 / 16.0);
         }
         // Planes hold one channel (weights) or three (RGB).
         if c == 1 {
-            down_row::<1>(&tmp, out, w)
+            down_row::<1>(line, out, w)
         } else {
-            down_row::<3>(&tmp, out, w)
+            down_row::<3>(line, out, w)
         }
     }
+}
+
+/// `pyr_down_into` a new plane.
+#[cfg(test)]
+fn pyr_down(src: &Plane) -> Plane {
+    let mut dst = Plane::zeros(src.w.div_ceil(2), src.h.div_ceil(2), src.c);
+    pyr_down_into(src, &mut dst, &mut Vec::new());
     dst
 }
 
@@ -167,12 +174,20 @@ fn up_taps(x: usize, n_src: usize, n_dst: usize) -> Vec<(usize, f32)> {
 /// (row index, values): zeros inserted between the samples, then the 5-tap kernel times 4, so
 /// a constant stays constant. Inside, even x = 2s gets (src[s−1] + 6 src[s] + src[s+1])/8 and
 /// odd x = 2s + 1 the mean of src[s] and src[s+1]; rows likewise. Row by row, so a caller
-/// adds or subtracts the expand without a full-size copy of it.
-fn pyr_up_rows(src: &Plane, w: usize, h: usize, mut each: impl FnMut(usize, &[f32])) {
+/// adds or subtracts the expand without a full-size copy of it; `rows` and `out` are working
+/// buffers (the horizontal pass, one output row), kept by the caller from call to call.
+fn pyr_up_rows(
+    src: &Plane,
+    w: usize,
+    h: usize,
+    (rows, out): (&mut Vec<f32>, &mut Vec<f32>),
+    mut each: impl FnMut(usize, &[f32]),
+) {
     let c = src.c;
     let (sw, sh) = (src.w, src.h);
     // The horizontal pass over the source's rows (half the output's height).
-    let mut rows = vec![0.0f32; w * sh * c];
+    rows.resize(w * sh * c, 0.0);
+    out.resize(w * c, 0.0);
     for (line, out) in src.data.chunks_exact(sw * c).zip(rows.chunks_exact_mut(w * c)) {
         if c == 1 {
             up_row::<1>(line, out, w)
@@ -181,7 +196,6 @@ fn pyr_up_rows(src: &Plane, w: usize, h: usize, mut each: impl FnMut(usize, &[f3
         }
     }
     let row = |s: usize| &rows[s * w * c..(s + 1) * w * c];
-    let mut out = vec![0.0f32; w * c];
     for y in 0..h {
         let s = y / 2;
         if s >= 1 && s + 1 < sh {
@@ -201,7 +215,7 @@ fn pyr_up_rows(src: &Plane, w: usize, h: usize, mut each: impl FnMut(usize, &[f3
                 out.iter_mut().zip(row(sy)).for_each(|(o, v)| *o += t * v);
             }
         }
-        each(y, &out);
+        each(y, out);
     }
 }
 
@@ -240,19 +254,16 @@ fn up_edge(line: &[f32], o: &mut [f32], x: usize, w: usize, c: usize) {
 fn pyr_up(src: &Plane, w: usize, h: usize) -> Plane {
     let mut dst = Plane::zeros(w, h, src.c);
     let n = w * src.c;
-    pyr_up_rows(src, w, h, |y, row| dst.data[y * n..(y + 1) * n].copy_from_slice(row));
+    let mut scratch = (Vec::new(), Vec::new());
+    pyr_up_rows(src, w, h, (&mut scratch.0, &mut scratch.1), |y, row| {
+        dst.data[y * n..(y + 1) * n].copy_from_slice(row)
+    });
     dst
 }
 
 /// Levels below the full image: ⌊log₂ min(w, h)⌋ (OpenCV's choice), at least 0.
 fn levels(w: usize, h: usize) -> usize {
     (w.min(h).max(1) as f64).log2().floor() as usize
-}
-
-/// Frame `j`'s values in [0, 1], interleaved RGB.
-fn values(input: &Input, j: usize, tables: &Tables) -> Plane {
-    let data = input.frames[j].codes.iter().map(|&z| tables.value[z as usize]).collect();
-    Plane { w: input.width, h: input.height, c: 3, data }
 }
 
 /// Per code value: the value in [0, 1], and the well-exposedness exp(−(v − ½)²/(2·0.2²)), so
@@ -321,16 +332,43 @@ fn weights_with<const ONES: bool>(
     out
 }
 
+/// One frame's pyramids, kept from frame to frame by each part of the blend (`mertens`):
+/// allocated anew for every frame, their pages were faulted in and, freed from several
+/// threads, shot down from every core's TLB, most of the fusion's time on a 0.4-megapixel
+/// stack.
+struct Scratch {
+    /// The frame's values and their Gaussian pyramid, RGB.
+    gauss: Vec<Plane>,
+    /// Its normalised weights and their Gaussian pyramid.
+    weights: Vec<Plane>,
+    /// Working rows of `pyr_down_into` and `pyr_up_rows`.
+    line: Vec<f32>,
+    rows: Vec<f32>,
+    out: Vec<f32>,
+}
+
+impl Scratch {
+    fn new(sizes: &[(usize, usize)]) -> Scratch {
+        Scratch {
+            gauss: sizes.iter().map(|&(w, h)| Plane::zeros(w, h, 3)).collect(),
+            weights: sizes.iter().map(|&(w, h)| Plane::zeros(w, h, 1)).collect(),
+            line: Vec::new(),
+            rows: Vec::new(),
+            out: Vec::new(),
+        }
+    }
+}
+
 /// One frame's share of the result: its Laplacian pyramid times its weights' Gaussian
-/// pyramid, added into `acc` (one plane per level).
-fn blend_into(acc: &mut [Plane], img: Plane, weights: Plane, depth: usize) {
-    let mut gauss = vec![img];
-    let mut wpyr = vec![weights];
+/// pyramid, added into `acc` (one plane per level). `s.gauss[0]` and `s.weights[0]` hold the
+/// frame's values and normalised weights.
+fn blend_into(acc: &mut [Plane], s: &mut Scratch) {
+    let depth = acc.len() - 1;
     for l in 0..depth {
-        let next = pyr_down(&gauss[l]);
-        gauss.push(next);
-        let next = pyr_down(&wpyr[l]);
-        wpyr.push(next);
+        let (fine, coarse) = s.gauss.split_at_mut(l + 1);
+        pyr_down_into(&fine[l], &mut coarse[0], &mut s.line);
+        let (fine, coarse) = s.weights.split_at_mut(l + 1);
+        pyr_down_into(&fine[l], &mut coarse[0], &mut s.line);
     }
     // acc += (G_l − expand(G_{l+1}))·W_l, a row at a time; the coarsest level adds G·W.
     let mac = |acc: &mut [f32], g: &[f32], up: Option<&[f32]>, wt: &[f32]| {
@@ -352,11 +390,11 @@ fn blend_into(acc: &mut [Plane], img: Plane, weights: Plane, depth: usize) {
             }
         }
     };
-    for l in 0..=depth {
-        let (w, h) = (gauss[l].w, gauss[l].h);
-        let (g, wt, a) = (&gauss[l].data, &wpyr[l].data, &mut acc[l].data);
+    for (l, a) in acc.iter_mut().enumerate() {
+        let (w, h) = (a.w, a.h);
+        let (g, wt, a) = (&s.gauss[l].data, &s.weights[l].data, &mut a.data);
         if l < depth {
-            pyr_up_rows(&gauss[l + 1], w, h, |y, up| {
+            pyr_up_rows(&s.gauss[l + 1], w, h, (&mut s.rows, &mut s.out), |y, up| {
                 let (r, p) = (y * w * 3..(y + 1) * w * 3, y * w..(y + 1) * w);
                 mac(&mut a[r.clone()], &g[r], Some(up), &wt[p]);
             });
@@ -366,6 +404,11 @@ fn blend_into(acc: &mut [Plane], img: Plane, weights: Plane, depth: usize) {
     }
 }
 
+/// The blend's partial sums: frame j goes to part j mod PARTS, each part blends its frames in
+/// order into its own pyramid, and the parts are added in order, so the result does not
+/// depend on the thread count; up to PARTS threads blend at once.
+const PARTS: usize = 4;
+
 /// Mertens et al.'s fusion of the stack (module docs): interleaved RGB in [0, 1].
 pub fn mertens(input: &Input, p: &Mertens) -> Vec<f32> {
     let (w, h) = (input.width, input.height);
@@ -373,7 +416,7 @@ pub fn mertens(input: &Input, p: &Mertens) -> Vec<f32> {
     let frames = input.frames.len();
     let tables = Tables::new(input.levels);
     // Every frame's weights first (one f32 per pixel and frame, as OpenCV keeps), for their
-    // sum; then the frames blended in parallel, each thread into its own pyramid.
+    // sum; then the frames blended.
     let all: Vec<Vec<f32>> =
         (0..frames).into_par_iter().map(|j| weights(&input.frames[j].codes, w, h, &tables, p)).collect();
     let mut total = vec![0.0f32; w * h];
@@ -385,29 +428,45 @@ pub fn mertens(input: &Input, p: &Mertens) -> Vec<f32> {
             .take(depth + 1)
             .collect();
     let zeros = || sizes.iter().map(|&(a, b)| Plane::zeros(a, b, 3)).collect::<Vec<Plane>>();
-    let mut acc = all
+    let parts: Vec<Vec<Plane>> = (0..PARTS.min(frames))
         .into_par_iter()
-        .enumerate()
-        .fold(zeros, |mut acc, (j, mut wj)| {
-            wj.iter_mut().zip(&total).for_each(|(v, t)| *v /= t);
-            blend_into(&mut acc, values(input, j, &tables), Plane { w, h, c: 1, data: wj }, depth);
+        .map(|part| {
+            let mut acc = zeros();
+            let mut s = Scratch::new(&sizes);
+            for j in (part..frames).step_by(PARTS) {
+                let values = tables.value.as_slice();
+                s.gauss[0]
+                    .data
+                    .iter_mut()
+                    .zip(&input.frames[j].codes)
+                    .for_each(|(v, &z)| *v = values[z as usize]);
+                s.weights[0]
+                    .data
+                    .iter_mut()
+                    .zip(all[j].iter().zip(&total))
+                    .for_each(|(v, (a, t))| *v = a / t);
+                blend_into(&mut acc, &mut s);
+            }
             acc
         })
-        .reduce(zeros, |mut a, b| {
-            for (x, y) in a.iter_mut().zip(&b) {
-                x.data.iter_mut().zip(&y.data).for_each(|(u, v)| *u += v);
-            }
-            a
-        });
+        .collect();
+    let mut parts = parts.into_iter();
+    let Some(mut acc) = parts.next() else { return Vec::new() };
+    for part in parts {
+        for (x, y) in acc.iter_mut().zip(&part) {
+            x.data.iter_mut().zip(&y.data).for_each(|(u, v)| *u += v);
+        }
+    }
+    let (mut rows, mut out) = (Vec::new(), Vec::new());
     for l in (1..acc.len()).rev() {
         let (finer, coarser) = acc.split_at_mut(l);
         let fine = &mut finer[l - 1];
         let n = fine.w * 3;
-        pyr_up_rows(&coarser[0], fine.w, fine.h, |y, up| {
+        pyr_up_rows(&coarser[0], fine.w, fine.h, (&mut rows, &mut out), |y, up| {
             fine.data[y * n..(y + 1) * n].iter_mut().zip(up).for_each(|(a, b)| *a += b);
         });
     }
-    let Some(top) = acc.into_iter().next() else { return Vec::new() };
+    let top = acc.swap_remove(0);
     top.data.into_iter().map(|v| if v.is_finite() { v.clamp(0.0, 1.0) } else { 0.0 }).collect()
 }
 
