@@ -282,15 +282,30 @@ impl Tables {
     }
 }
 
-/// The unnormalised weight of every pixel of one frame (module docs): `codes` interleaved
-/// RGB, `w` × `h`.
-fn weights(codes: &[u16], w: usize, h: usize, tables: &Tables, p: &Mertens) -> Vec<f32> {
+/// The unnormalised weight of every pixel of one frame (module docs) into `out` (`w` × `h`):
+/// `codes` interleaved RGB; `grey` a working buffer for the frame's grey values.
+fn weights(
+    codes: &[u16],
+    w: usize,
+    h: usize,
+    tables: &Tables,
+    p: &Mertens,
+    out: &mut [f32],
+    grey: &mut Vec<f32>,
+) {
+    let value = &tables.value;
+    grey.clear();
+    grey.extend(
+        codes.chunks_exact(3).map(|z| {
+            0.299 * value[z[0] as usize] + 0.587 * value[z[1] as usize] + 0.114 * value[z[2] as usize]
+        }),
+    );
     // The paper's exponents (all 1) get a loop without `powf`: a branch on the exponent
     // inside the loop is compiled to a select that calls `powf` anyway.
     if *p == Mertens::default() {
-        weights_with::<true>(codes, w, h, tables, p)
+        weights_with::<true>(codes, w, h, tables, p, out, grey)
     } else {
-        weights_with::<false>(codes, w, h, tables, p)
+        weights_with::<false>(codes, w, h, tables, p, out, grey)
     }
 }
 
@@ -300,14 +315,17 @@ fn weights_with<const ONES: bool>(
     h: usize,
     tables: &Tables,
     p: &Mertens,
-) -> Vec<f32> {
+    out: &mut [f32],
+    grey: &[f32],
+) {
+    if w == 0 {
+        return;
+    }
     let (value, exposedness) = (&tables.value, &tables.exposedness);
-    let grey: Vec<f32> = codes
-        .chunks_exact(3)
-        .map(|z| 0.299 * value[z[0] as usize] + 0.587 * value[z[1] as usize] + 0.114 * value[z[2] as usize])
-        .collect();
     let (ec, es, ee) = (p.contrast as f32, p.saturation as f32, p.exposedness as f32);
-    let mut out = vec![0.0f32; w * h];
+    // One row at a time: the table look-ups first (R, G, B apart, and the well-exposedness),
+    // then the rest in a loop over plain arrays, which vectorises.
+    let (mut rgb, mut expo) = (vec![[0.0f32; 3]; w], vec![0.0f32; w]);
     for (y, row) in out.chunks_exact_mut(w).enumerate() {
         let line = |dy: isize| {
             let sy = mirror(y as isize + dy, h);
@@ -315,33 +333,49 @@ fn weights_with<const ONES: bool>(
         };
         let (up, mid, down) = (line(-1), line(0), line(1));
         let pixels = codes[y * w * 3..(y + 1) * w * 3].chunks_exact(3);
-        for (x, (o, z)) in row.iter_mut().zip(pixels).enumerate() {
-            let q = [value[z[0] as usize], value[z[1] as usize], value[z[2] as usize]];
-            // Mirrored neighbours (reflect-101) without a division per pixel.
-            let left = if x > 0 { x - 1 } else { 1.min(w - 1) };
-            let right = if x + 1 < w { x + 1 } else { x.saturating_sub(1) };
-            let lap = up[x] + down[x] + mid[left] + mid[right] - 4.0 * mid[x];
+        for ((q, e), z) in rgb.iter_mut().zip(expo.iter_mut()).zip(pixels) {
+            *q = [value[z[0] as usize], value[z[1] as usize], value[z[2] as usize]];
+            *e = exposedness[z[0] as usize] * exposedness[z[1] as usize] * exposedness[z[2] as usize];
+        }
+        let weight = |q: &[f32; 3], e: f32, lap: f32| {
             let mean = (q[0] + q[1] + q[2]) * (1.0 / 3.0);
             let sat = (((q[0] - mean).powi(2) + (q[1] - mean).powi(2) + (q[2] - mean).powi(2)) / 3.0).sqrt();
-            let expo = exposedness[z[0] as usize] * exposedness[z[1] as usize] * exposedness[z[2] as usize];
-            *o =
-                if ONES { lap.abs() * sat * expo } else { lap.abs().powf(ec) * sat.powf(es) * expo.powf(ee) }
-                    + 1e-12;
+            if ONES {
+                lap.abs() * sat * e + 1e-12
+            } else {
+                lap.abs().powf(ec) * sat.powf(es) * e.powf(ee) + 1e-12
+            }
+        };
+        // Mirrored neighbours (reflect-101) at both ends, the inside from shifted slices.
+        let lap_at = |x: usize| {
+            let left = if x > 0 { x - 1 } else { 1.min(w - 1) };
+            let right = if x + 1 < w { x + 1 } else { x.saturating_sub(1) };
+            up[x] + down[x] + mid[left] + mid[right] - 4.0 * mid[x]
+        };
+        for x in [0, w - 1] {
+            row[x] = weight(&rgb[x], expo[x], lap_at(x));
+        }
+        if w > 2 {
+            let inside = row[1..w - 1].iter_mut().zip(&rgb[1..w - 1]).zip(&expo[1..w - 1]);
+            let around = up[1..w - 1].iter().zip(&down[1..w - 1]).zip(mid[..w - 2].iter().zip(&mid[2..]));
+            for (((o, q), &e), (((u, d), (l, r)), m)) in inside.zip(around.zip(&mid[1..w - 1])) {
+                *o = weight(q, e, u + d + l + r - 4.0 * m);
+            }
         }
     }
-    out
 }
 
 /// One frame's pyramids, kept from frame to frame by each part of the blend (`mertens`):
-/// allocated anew for every frame, their pages were faulted in and, freed from several
-/// threads, shot down from every core's TLB, most of the fusion's time on a 0.4-megapixel
-/// stack.
+/// allocated anew for every frame and level, the first touch of their fresh pages (and, freed
+/// from several threads, the TLB shootdowns) cost more than the arithmetic on them.
 struct Scratch {
     /// The frame's values and their Gaussian pyramid, RGB.
     gauss: Vec<Plane>,
     /// Its normalised weights and their Gaussian pyramid.
     weights: Vec<Plane>,
-    /// Working rows of `pyr_down_into` and `pyr_up_rows`.
+    /// The frame's grey values (`weights`), and working rows of `pyr_down_into` and
+    /// `pyr_up_rows`.
+    grey: Vec<f32>,
     line: Vec<f32>,
     rows: Vec<f32>,
     out: Vec<f32>,
@@ -352,6 +386,7 @@ impl Scratch {
         Scratch {
             gauss: sizes.iter().map(|&(w, h)| Plane::zeros(w, h, 3)).collect(),
             weights: sizes.iter().map(|&(w, h)| Plane::zeros(w, h, 1)).collect(),
+            grey: Vec::new(),
             line: Vec::new(),
             rows: Vec::new(),
             out: Vec::new(),
@@ -404,9 +439,9 @@ fn blend_into(acc: &mut [Plane], s: &mut Scratch) {
     }
 }
 
-/// The blend's partial sums: frame j goes to part j mod PARTS, each part blends its frames in
-/// order into its own pyramid, and the parts are added in order, so the result does not
-/// depend on the thread count; up to PARTS threads blend at once.
+/// The partial sums of the weights and of the blend: frame j goes to part j mod PARTS, each
+/// part takes its frames in order into its own sum, and the parts are added in order, so the
+/// result does not depend on the thread count; up to PARTS threads work at once.
 const PARTS: usize = 4;
 
 /// Mertens et al.'s fusion of the stack (module docs): interleaved RGB in [0, 1].
@@ -415,36 +450,42 @@ pub fn mertens(input: &Input, p: &Mertens) -> Vec<f32> {
     let depth = levels(w, h);
     let frames = input.frames.len();
     let tables = Tables::new(input.levels);
-    // Every frame's weights first (one f32 per pixel and frame, as OpenCV keeps), for their
-    // sum; then the frames blended.
-    let all: Vec<Vec<f32>> =
-        (0..frames).into_par_iter().map(|j| weights(&input.frames[j].codes, w, h, &tables, p)).collect();
-    let mut total = vec![0.0f32; w * h];
-    for wj in &all {
-        total.iter_mut().zip(wj).for_each(|(t, v)| *t += v);
+    let parts = PARTS.min(frames);
+    // The weights' sum over the frames first; each frame's weights are computed again as it
+    // is blended, which costs less than keeping them (an f32 per pixel and frame, freshly
+    // allocated memory whose first touch costs more than the arithmetic).
+    let totals: Vec<Vec<f32>> = (0..parts)
+        .into_par_iter()
+        .map(|part| {
+            let (mut total, mut wj, mut grey) = (vec![0.0f32; w * h], vec![0.0f32; w * h], Vec::new());
+            for j in (part..frames).step_by(PARTS) {
+                weights(&input.frames[j].codes, w, h, &tables, p, &mut wj, &mut grey);
+                total.iter_mut().zip(&wj).for_each(|(t, v)| *t += v);
+            }
+            total
+        })
+        .collect();
+    let mut totals = totals.into_iter();
+    let Some(mut total) = totals.next() else { return Vec::new() };
+    for t in totals {
+        total.iter_mut().zip(&t).for_each(|(a, b)| *a += b);
     }
     let sizes: Vec<(usize, usize)> =
         std::iter::successors(Some((w, h)), |&(a, b)| Some((a.div_ceil(2), b.div_ceil(2))))
             .take(depth + 1)
             .collect();
     let zeros = || sizes.iter().map(|&(a, b)| Plane::zeros(a, b, 3)).collect::<Vec<Plane>>();
-    let parts: Vec<Vec<Plane>> = (0..PARTS.min(frames))
+    let parts: Vec<Vec<Plane>> = (0..parts)
         .into_par_iter()
         .map(|part| {
             let mut acc = zeros();
             let mut s = Scratch::new(&sizes);
             for j in (part..frames).step_by(PARTS) {
+                let codes = &input.frames[j].codes;
+                weights(codes, w, h, &tables, p, &mut s.weights[0].data, &mut s.grey);
+                s.weights[0].data.iter_mut().zip(&total).for_each(|(v, t)| *v /= t);
                 let values = tables.value.as_slice();
-                s.gauss[0]
-                    .data
-                    .iter_mut()
-                    .zip(&input.frames[j].codes)
-                    .for_each(|(v, &z)| *v = values[z as usize]);
-                s.weights[0]
-                    .data
-                    .iter_mut()
-                    .zip(all[j].iter().zip(&total))
-                    .for_each(|(v, (a, t))| *v = a / t);
+                s.gauss[0].data.iter_mut().zip(codes).for_each(|(v, &z)| *v = values[z as usize]);
                 blend_into(&mut acc, &mut s);
             }
             acc
