@@ -129,33 +129,77 @@ fn rgb_f32(m: &Mat) -> Result<Vec<f32>, String> {
     Ok(data.iter().flat_map(|p| [p[2], p[1], p[0]]).collect())
 }
 
+/// An exposure stack as OpenCV's photo module takes it: frames read by `imread` (8-bit BGR),
+/// times as f32 seconds.
+pub struct CvStack {
+    images: Vector<Mat>,
+    times: Mat,
+    pub width: usize,
+    pub height: usize,
+}
+
+impl CvStack {
+    pub fn read(frames: &[std::path::PathBuf], times: &[f64]) -> Result<CvStack, String> {
+        let mut images = Vector::<Mat>::new();
+        for p in frames {
+            let m = opencv::imgcodecs::imread(&p.to_string_lossy(), opencv::imgcodecs::IMREAD_COLOR)
+                .map_err(err)?;
+            if m.empty() {
+                return Err(format!("{}: OpenCV cannot read it", p.display()));
+            }
+            images.push(m);
+        }
+        let (width, height) = {
+            let s = images.get(0).map_err(err)?.size().map_err(err)?;
+            (s.width as usize, s.height as usize)
+        };
+        let t: Vec<f32> = times.iter().map(|&t| t as f32).collect();
+        let times = Mat::from_slice(&t).map_err(err)?.try_clone().map_err(err)?;
+        Ok(CvStack { images, times, width, height })
+    }
+
+    /// `CalibrateDebevec` with its defaults (70 random samples, λ = 10): exposure per value.
+    pub fn calibrate_debevec(&self) -> Result<Mat, String> {
+        use opencv::photo::CalibrateCRFTrait;
+        let mut response = Mat::default();
+        opencv::photo::create_calibrate_debevec(70, 10.0, false)
+            .map_err(err)?
+            .process(&self.images, &mut response, &self.times)
+            .map_err(err)?;
+        Ok(response)
+    }
+
+    /// `MergeDebevec` through the given response (exposure per value, as OpenCV's fits give).
+    pub fn merge_debevec(&self, response: &Mat) -> Result<Mat, String> {
+        use opencv::photo::MergeDebevecTrait;
+        let mut radiance = Mat::default();
+        opencv::photo::create_merge_debevec()
+            .map_err(err)?
+            .process_with_response(&self.images, &mut radiance, &self.times, response)
+            .map_err(err)?;
+        Ok(radiance)
+    }
+
+    /// `MergeMertens` with Mertens et al.'s exponents (1, 1, 1; OpenCV's default exposure
+    /// exponent is 0).
+    pub fn merge_mertens(&self) -> Result<Mat, String> {
+        use opencv::photo::MergeMertensTrait;
+        let mut fusion = Mat::default();
+        let mut mertens = opencv::photo::create_merge_mertens(1.0, 1.0, 1.0).map_err(err)?;
+        MergeMertensTrait::process(&mut mertens, &self.images, &mut fusion).map_err(err)?;
+        Ok(fusion)
+    }
+}
+
 /// OpenCV's Debevec calibration, Debevec merge and Mertens fusion of the frames (`CvHdr`).
 pub fn hdr_stack(
     frames: &[std::path::PathBuf],
     times: &[f64],
     merge_response: Option<&[Vec<f64>]>,
 ) -> Result<CvHdr, String> {
-    use opencv::photo::{CalibrateCRFTrait, MergeDebevecTrait, MergeMertensTrait};
-    let mut images = Vector::<Mat>::new();
-    for p in frames {
-        let m =
-            opencv::imgcodecs::imread(&p.to_string_lossy(), opencv::imgcodecs::IMREAD_COLOR).map_err(err)?;
-        if m.empty() {
-            return Err(format!("{}: OpenCV cannot read it", p.display()));
-        }
-        images.push(m);
-    }
-    let (width, height) = {
-        let s = images.get(0).map_err(err)?.size().map_err(err)?;
-        (s.width as usize, s.height as usize)
-    };
-    let t: Vec<f32> = times.iter().map(|&t| t as f32).collect();
-    let times = Mat::from_slice(&t).map_err(err)?;
-    let mut response = Mat::default();
-    opencv::photo::create_calibrate_debevec(70, 10.0, false)
-        .map_err(err)?
-        .process(&images, &mut response, &times)
-        .map_err(err)?;
+    let stack = CvStack::read(frames, times)?;
+    let (width, height) = (stack.width, stack.height);
+    let response = stack.calibrate_debevec()?;
     let curve = response.data_typed::<opencv::core::Vec3f>().map_err(err)?.to_vec();
     let ln = |c: usize| -> Vec<f64> {
         curve.iter().map(|p| if p[2 - c] > 0.0 { (p[2 - c] as f64).ln() } else { f64::NAN }).collect()
@@ -186,13 +230,7 @@ pub fn hdr_stack(
         }
         None => &response,
     };
-    let mut radiance = Mat::default();
-    opencv::photo::create_merge_debevec()
-        .map_err(err)?
-        .process_with_response(&images, &mut radiance, &times, merge_with)
-        .map_err(err)?;
-    let mut fusion = Mat::default();
-    let mut mertens = opencv::photo::create_merge_mertens(1.0, 1.0, 1.0).map_err(err)?;
-    MergeMertensTrait::process(&mut mertens, &images, &mut fusion).map_err(err)?;
+    let radiance = stack.merge_debevec(merge_with)?;
+    let fusion = stack.merge_mertens()?;
     Ok(CvHdr { response_ln, radiance: rgb_f32(&radiance)?, fusion: rgb_f32(&fusion)?, width, height })
 }

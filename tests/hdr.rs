@@ -408,4 +408,29 @@ fn cli_inputs_and_refusals() {
         lumen(&["hdr", "--images", &a, &b, "--times", "1", "2", "--out", d.join("r.png").to_str().unwrap()]);
     assert_eq!(code, 1);
     assert!(err.contains("written as .exr"), "{err}");
+
+    // `lumen bench hdr` times the same solver on a list; bad input is named.
+    let list16 = d.join("list16.txt");
+    std::fs::write(&list16, "f0.png 1\nf1.png 1/4\nf2.png 6.25e-2\n").unwrap();
+    let bench = |extra: &[&str]| {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_lumen"))
+            .args(["bench", "hdr", "--repeat", "1"])
+            .args(extra)
+            .output()
+            .unwrap();
+        (
+            o.status.code(),
+            String::from_utf8_lossy(&o.stdout).into_owned(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    let (code, table, err) = bench(&["--list", list16.to_str().unwrap()]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(table.contains("3 frames of 40×30") && table.contains("| lumen "), "{table}");
+    let (code, _, err) = bench(&["--list", "/nonexistent/list.txt"]);
+    assert_eq!(code, Some(1));
+    assert!(err.contains("/nonexistent/list.txt"), "{err}");
+    let (code, _, err) = bench(&["--list", list16.to_str().unwrap(), "--exclude-color", "1,2"]);
+    assert_eq!(code, Some(1));
+    assert!(err.contains("--exclude-color 1,2"), "{err}");
 }

@@ -185,3 +185,74 @@ pub fn bench_calibrate(patterns: &[String], board: &str, repeat: u32) -> Result<
     }
     Ok(())
 }
+
+/// `lumen bench hdr`: the response fits, the merge and the exposure fusion on a stack (the
+/// frames decoded before timing), best of `repeat`; with the `opencv` feature, OpenCV's
+/// `CalibrateDebevec`, `MergeDebevec` and `MergeMertens` on the same files in the same run.
+pub fn bench_hdr(list: &Path, exclude: Option<[u16; 3]>, repeat: u32) -> Result<()> {
+    use lumen::hdr::{self, Method};
+    let frames = hdr::input::read_list(list)?;
+    let input = hdr::input::read_stack(&frames, exclude)?;
+    let pixel_frames = (input.width * input.height * input.frames.len()) as f64 / 1e6;
+    let best = |method: Method, fusion: bool| -> Result<hdr::Summary> {
+        let config = hdr::Config {
+            method,
+            fusion: fusion.then(hdr::fusion::Mertens::default),
+            ..hdr::Config::default()
+        };
+        let mut best: Option<hdr::Summary> = None;
+        for _ in 0..repeat.max(1) {
+            let s = hdr::run(&input, &config)?.summary;
+            best = Some(match best {
+                None => s,
+                Some(b) => hdr::Summary {
+                    response_s: b.response_s.min(s.response_s),
+                    merge_s: b.merge_s.min(s.merge_s),
+                    fusion_s: b.fusion_s.min(s.fusion_s),
+                    ..b
+                },
+            });
+        }
+        Ok(best.expect("at least one run"))
+    };
+    let debevec = best(hdr::Config::default().method, true)?;
+    let robertson = best(Method::Robertson { iterations: 50 }, false)?;
+    println!(
+        "{} frames of {}×{} ({:.1} Mpixel-frames), best of {}",
+        input.frames.len(),
+        input.width,
+        input.height,
+        pixel_frames,
+        repeat.max(1)
+    );
+    println!("| library | Debevec fit (ms) | Robertson fit (ms) | merge (ms) | merge (Mpixel-frames/s) | Mertens fusion (ms) |");
+    println!("|---|---:|---:|---:|---:|---:|");
+    println!(
+        "| lumen {} ({} threads) | {:.1} | {:.1} | {:.1} | {:.0} | {:.1} |",
+        env!("CARGO_PKG_VERSION"),
+        rayon::current_num_threads(),
+        debevec.response_s * 1e3,
+        robertson.response_s * 1e3,
+        debevec.merge_s * 1e3,
+        pixel_frames / debevec.merge_s.max(1e-9),
+        debevec.fusion_s * 1e3
+    );
+    #[cfg(feature = "opencv")]
+    {
+        let (files, times): (Vec<_>, Vec<f64>) = frames.iter().cloned().unzip();
+        let stack = lumen::cv::CvStack::read(&files, &times).map_err(anyhow::Error::msg)?;
+        let (fit_s, response) = best_of(repeat, || stack.calibrate_debevec().map_err(anyhow::Error::msg))?;
+        let (merge_s, _) = best_of(repeat, || stack.merge_debevec(&response).map_err(anyhow::Error::msg))?;
+        let (fusion_s, _) = best_of(repeat, || stack.merge_mertens().map_err(anyhow::Error::msg))?;
+        println!(
+            "| OpenCV {} ({} threads) | {:.1} | | {:.1} | {:.0} | {:.1} |",
+            opencv::core::CV_VERSION,
+            opencv::core::get_num_threads().unwrap_or(0),
+            fit_s * 1e3,
+            merge_s * 1e3,
+            pixel_frames / merge_s.max(1e-9),
+            fusion_s * 1e3
+        );
+    }
+    Ok(())
+}

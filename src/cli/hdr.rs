@@ -57,6 +57,13 @@ pub struct HdrArgs {
     pub out: PathBuf,
 }
 
+/// `--exclude-color R,G,B`: three code values.
+pub fn parse_color(s: &str) -> Result<[u16; 3]> {
+    let v: Option<Vec<u16>> = s.split(',').map(|x| x.trim().parse::<u16>().ok()).collect();
+    v.and_then(|v| <[u16; 3]>::try_from(v).ok())
+        .ok_or_else(|| anyhow::anyhow!("--exclude-color {s}: expected three code values R,G,B"))
+}
+
 /// The frames and their times from `--images`/`--times` or `--list` (a name and a time per
 /// line, names relative to the list's folder, `#` comments).
 fn stack(a: &HdrArgs) -> Result<Vec<(PathBuf, f64)>> {
@@ -115,16 +122,7 @@ pub fn run(a: &HdrArgs) -> Result<()> {
     if a.samples_per_value == 0 || a.samples_per_value > 1000 {
         bail!("--samples-per-value {}: expected 1 to 1000", a.samples_per_value);
     }
-    let exclude = a
-        .exclude_color
-        .as_deref()
-        .map(|s| {
-            let v: Vec<u16> =
-                s.split(',').map(|x| x.trim().parse::<u16>()).collect::<Result<_, _>>().map_err(|_| ())?;
-            <[u16; 3]>::try_from(v).map_err(|_| ())
-        })
-        .transpose()
-        .map_err(|_| anyhow::anyhow!("--exclude-color: expected three code values R,G,B"))?;
+    let exclude = a.exclude_color.as_deref().map(parse_color).transpose()?;
     let t = std::time::Instant::now();
     let input = input::read_stack(&frames_in, exclude)?;
     let read_s = t.elapsed().as_secs_f64();

@@ -7,7 +7,7 @@ mod hdr;
 mod pipeline_cmd;
 mod sfm;
 
-use bench::{bench_calibrate, bench_convergence, bench_render, BenchRender};
+use bench::{bench_calibrate, bench_convergence, bench_hdr, bench_render, BenchRender};
 use pipeline_cmd::{merge_cmd, render_share, run_pipeline, slurm_cmd, SlurmArgs};
 
 use anyhow::{bail, Context, Result};
@@ -289,6 +289,20 @@ enum Bench {
         #[arg(long, default_value_t = 5)]
         repeat: u32,
     },
+    /// Response fits (Debevec, Robertson), merge and Mertens fusion on an exposure stack; with
+    /// the `opencv` feature, OpenCV's CalibrateDebevec, MergeDebevec and MergeMertens on the
+    /// same files in the same run. Frames are decoded before timing.
+    Hdr {
+        /// A file with a frame name and an exposure time per line, as `lumen hdr --list`.
+        #[arg(long, default_value = "../shared/data/hdr/memorial/exposure_times_seconds.txt")]
+        list: PathBuf,
+        /// Leave pixels of this colour (R,G,B code values) out of the fit, as `lumen hdr`.
+        #[arg(long, default_value = "0,0,255")]
+        exclude_color: String,
+        /// Repetitions; the best is reported.
+        #[arg(long, default_value_t = 5)]
+        repeat: u32,
+    },
 }
 
 pub fn main() -> i32 {
@@ -366,6 +380,9 @@ pub fn main() -> i32 {
         }
         Command::Bench { what: Bench::Calibrate { images, board, repeat } } => {
             bench_calibrate(&images, &board, repeat).map(|_| 0)
+        }
+        Command::Bench { what: Bench::Hdr { list, exclude_color, repeat } } => {
+            hdr::parse_color(&exclude_color).and_then(|c| bench_hdr(&list, Some(c), repeat)).map(|_| 0)
         }
     };
     match result {
