@@ -216,7 +216,7 @@ pub fn bench_hdr(list: &Path, exclude: Option<[u16; 3]>, repeat: u32) -> Result<
         Ok(best.expect("at least one run"))
     };
     let debevec = best(hdr::Config::default().method, true)?;
-    let robertson = best(Method::Robertson { iterations: 50 }, false)?;
+    let robertson = best(Method::Robertson { iterations: hdr::ROBERTSON_MAX_ITERATIONS }, false)?;
     println!(
         "{} frames of {}×{} ({:.1} Mpixel-frames), best of {}",
         input.frames.len(),

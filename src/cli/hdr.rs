@@ -129,7 +129,7 @@ pub fn run(a: &HdrArgs) -> Result<()> {
     let (w, h) = (input.width as u32, input.height as u32);
     let method = match a.response.as_str() {
         "debevec" => Method::Debevec { lambda: a.lambda, samples_per_value: a.samples_per_value, smoothness },
-        "robertson" => Method::Robertson { iterations: 50 },
+        "robertson" => Method::Robertson { iterations: hdr::ROBERTSON_MAX_ITERATIONS },
         file => {
             let text = std::fs::read_to_string(file)
                 .with_context(|| format!("--response {file}: not debevec, robertson or a readable file"))?;

@@ -77,6 +77,9 @@ pub enum Method {
 pub const DEFAULT_LAMBDA: f64 = 1e4;
 /// Debevec's default sample pixels per value.
 pub const DEFAULT_SAMPLES_PER_VALUE: usize = 4;
+/// Robertson's iteration cap: the fit stops earlier once g changes by less than 10⁻⁴ between
+/// iterations (on the Memorial stack it does before 50).
+pub const ROBERTSON_MAX_ITERATIONS: usize = 200;
 
 #[derive(Clone, Debug)]
 pub struct Config {

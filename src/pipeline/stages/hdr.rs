@@ -257,7 +257,7 @@ fn fit(
 ) -> Result<Method, StageError> {
     Ok(match name {
         "debevec" => Method::Debevec { lambda, samples_per_value: samples_per_value.max(1), smoothness },
-        "robertson" => Method::Robertson { iterations: 200 },
+        "robertson" => Method::Robertson { iterations: hdr::ROBERTSON_MAX_ITERATIONS },
         other => {
             return Err(StageError::Config(format!("method = \"{other}\": expected debevec or robertson")))
         }
