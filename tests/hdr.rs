@@ -424,7 +424,7 @@ fn cli_inputs_and_refusals() {
             String::from_utf8_lossy(&o.stderr).into_owned(),
         )
     };
-    let (code, table, err) = bench(&["--list", list16.to_str().unwrap()]);
+    let (code, table, err) = bench(&["--list", list16.to_str().unwrap(), "--exclude-color", "none"]);
     assert_eq!(code, Some(0), "{err}");
     assert!(table.contains("3 frames of 40×30") && table.contains("| lumen "), "{table}");
     let (code, _, err) = bench(&["--list", "/nonexistent/list.txt"]);

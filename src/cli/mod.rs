@@ -296,7 +296,8 @@ enum Bench {
         /// A file with a frame name and an exposure time per line, as `lumen hdr --list`.
         #[arg(long, default_value = "../shared/data/hdr/memorial/exposure_times_seconds.txt")]
         list: PathBuf,
-        /// Leave pixels of this colour (R,G,B code values) out of the fit, as `lumen hdr`.
+        /// Leave pixels of this colour (R,G,B code values) out of the fit, as `lumen hdr`
+        /// (default: the Memorial stack's blue borders), or `none`.
         #[arg(long, default_value = "0,0,255")]
         exclude_color: String,
         /// Repetitions; the best is reported.
@@ -382,7 +383,8 @@ pub fn main() -> i32 {
             bench_calibrate(&images, &board, repeat).map(|_| 0)
         }
         Command::Bench { what: Bench::Hdr { list, exclude_color, repeat } } => {
-            hdr::parse_color(&exclude_color).and_then(|c| bench_hdr(&list, Some(c), repeat)).map(|_| 0)
+            let exclude = (exclude_color != "none").then(|| hdr::parse_color(&exclude_color)).transpose();
+            exclude.and_then(|c| bench_hdr(&list, c, repeat)).map(|_| 0)
         }
     };
     match result {
