@@ -7,7 +7,8 @@
 //!   photographs (its tutorial's 23×23 window gives 0.409 px);
 //! - `calibrate`: `calibrateCamera` with k1, k2, p1, p2, k3 free and the stopping criteria
 //!   given, returning what lumen's calibration returns;
-//! - `hdr_stack`: `CalibrateDebevec`, `MergeDebevec` and `MergeMertens` on an exposure stack.
+//! - `CvStack`: an exposure stack through `CalibrateDebevec`, `MergeDebevec` and `MergeMertens`,
+//!   one step at a time (for `lumen bench hdr`), and `hdr_stack`: the three in turn.
 //!
 //! Corners cross the boundary as f32 (`Point2f`), which is what `calibrateCamera` takes.
 
