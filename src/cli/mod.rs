@@ -297,7 +297,7 @@ enum Bench {
         #[arg(long, default_value = "../shared/data/hdr/memorial/exposure_times_seconds.txt")]
         list: PathBuf,
         /// Leave pixels of this colour (R,G,B code values) out of the fit, as `lumen hdr`
-        /// (default: the Memorial stack's blue borders), or `none`.
+        /// (0,0,255: the Memorial stack's blue borders), or `none`.
         #[arg(long, default_value = "0,0,255")]
         exclude_color: String,
         /// Repetitions; the best is reported.
