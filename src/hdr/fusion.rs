@@ -539,6 +539,31 @@ mod tests {
         }
     }
 
+    /// The same fusion, to the bit, on 1, 2 or 3 threads (the partial sums are fixed), for
+    /// frames of odd and even size and a stack of fewer frames than parts.
+    #[test]
+    fn fusion_does_not_depend_on_the_thread_count() {
+        for (w, h, n) in [(37, 23, 7), (16, 16, 2)] {
+            let frames = (0..n)
+                .map(|k| {
+                    let codes =
+                        (0..w * h * 3).map(|i| ((i * 37 + i / 3 * 11 + k * 50) % 256) as u16).collect();
+                    crate::hdr::Frame { name: format!("f{k}"), time_s: 1.0 / (k + 1) as f64, codes }
+                })
+                .collect();
+            let input = Input { width: w, height: h, levels: 256, frames, usable: None };
+            let on = |threads: usize| {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                pool.install(|| mertens(&input, &Mertens::default()))
+            };
+            let one = on(1);
+            assert_eq!(one.len(), w * h * 3);
+            assert!(one.iter().all(|v| (0.0..=1.0).contains(v)));
+            assert_eq!(one, on(2), "{w}×{h}, {n} frames");
+            assert_eq!(one, on(3), "{w}×{h}, {n} frames");
+        }
+    }
+
     #[test]
     fn mirror_reflects_without_repeating_the_edge() {
         assert_eq!([-2, -1, 0, 4, 5, 6].map(|i| mirror(i, 5)), [2, 1, 0, 4, 3, 2]);
