@@ -70,6 +70,35 @@ fn shards_merge_into_the_one_process_report() {
     shard(2, &text);
     let (code, err) = merge();
     assert_eq!(code, 0, "{err}");
+    // A fragment edited by hand: a case count beyond what the fragments hold is refused
+    // before anything is allocated for it; a kept file outside the fragment's folder is refused
+    // before anything is read or written.
+    let fragment = out.join("shards/1-of-3/report.json");
+    let good = std::fs::read_to_string(&fragment).unwrap();
+    let edit = |f: &dyn Fn(&mut serde_json::Value)| {
+        let mut j: serde_json::Value = serde_json::from_str(&good).unwrap();
+        f(&mut j);
+        std::fs::write(&fragment, j.to_string()).unwrap();
+    };
+    let paths: Vec<_> = (1..=3).map(|k| out.join(format!("shards/{k}-of-3/report.json"))).collect();
+    let texts: Vec<String> = paths.iter().map(|p| std::fs::read_to_string(p).unwrap()).collect();
+    for (p, t) in paths.iter().zip(&texts) {
+        let mut j: serde_json::Value = serde_json::from_str(t).unwrap();
+        j["fragment"]["cases"] = serde_json::json!(1_000_000_000_000u64);
+        std::fs::write(p, j.to_string()).unwrap();
+    }
+    let (code, err) = merge();
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("claims 1000000000000 cases in the pipeline, but the 3 fragments hold 5"), "{err}");
+    for (p, t) in paths.iter().zip(&texts) {
+        std::fs::write(p, t).unwrap();
+    }
+    edit(&|j| j["fragment"]["kept"] = serde_json::json!(["../../x.txt"]));
+    std::fs::write(dir.path().join("x.txt"), "outside").unwrap();
+    let (code, err) = merge();
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("kept file `../../x.txt` is not a relative path inside the fragment's folder"), "{err}");
+    assert_eq!(std::fs::read_to_string(dir.path().join("x.txt")).unwrap(), "outside");
 }
 
 /// `lumen slurm` writes a job array's script and a merge script; run as Slurm would run them

@@ -438,7 +438,7 @@ fn render_cmd(a: &RenderArgs) -> Result<()> {
     settings.threads = threads;
     settings.progress = true;
     let t = std::time::Instant::now();
-    let film = render::render(&scene, &settings);
+    let film = render::try_render(&scene, &settings)?;
     let secs = t.elapsed().as_secs_f64();
     // Everything this command writes appears together or not at all.
     let dir = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));

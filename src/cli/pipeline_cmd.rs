@@ -5,7 +5,8 @@ use anyhow::{bail, Context, Result};
 use lumen::pipeline;
 use std::path::{Path, PathBuf};
 
-/// Exit code of `lumen run` when a metric missed its bound without a declared expected miss.
+/// Exit code of `lumen run` when a metric missed its bound without a declared expected miss,
+/// or met a bound declared a miss.
 const EXIT_METRIC_MISSED: i32 = 3;
 
 pub fn run_pipeline(path: &Path, out: Option<PathBuf>, opts: pipeline::RunOptions) -> Result<i32> {

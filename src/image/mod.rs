@@ -22,6 +22,16 @@ impl Image {
         Image { width, height, channels, data: vec![0.0; (width * height * channels) as usize] }
     }
 
+    /// A zero image, or `None` (with nothing allocated) when its memory cannot be had: for
+    /// sizes a user chooses, where `new` would abort the process.
+    pub fn try_new(width: u32, height: u32, channels: u32) -> Option<Image> {
+        let n = (width as usize).checked_mul(height as usize)?.checked_mul(channels as usize)?;
+        let mut data = Vec::new();
+        data.try_reserve_exact(n).ok()?;
+        data.resize(n, 0.0);
+        Some(Image { width, height, channels, data })
+    }
+
     pub fn pixel(&self, x: u32, y: u32) -> &[f32] {
         let i = ((y * self.width + x) * self.channels) as usize;
         &self.data[i..i + self.channels as usize]

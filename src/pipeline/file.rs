@@ -12,13 +12,16 @@
 //! seed = 2                # optional
 //! scene = "scenes/calib-board.toml"   # the stage's own fields; paths relative to this file
 //! views = 64
-//! bounds = { fx_rel_err = 0.001 }     # metric → bound (upper or lower: the metric's own)
-//! expected_miss = { some_metric = "why it is not met yet" }
+//! bounds = { fx_rel_err = 0.001, views_missed = { max = 0 }, points = { min = 100, max = 900 } }
+//!                         # metric → bound: a number is the end the metric's direction makes it
+//!                         # (upper on an error, lower on a count found); a table says its ends
+//! expected_miss = { some_metric = "why it is not met yet" }   # fails the run once it is met
 //! sweep = { views = [8, 16, 32, 64] } # one case per value, named "barrel-noisy[views=8]" …
 //! plot = "fx_rel_err"     # the error a sweep's plot shows (default: the stage's headline)
 //! expect_error = "numerical"          # the case must fail with this kind of error
 //! ```
 
+use super::metric::BoundSpec;
 use super::stages::{self, ERROR_KINDS};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -86,10 +89,12 @@ pub struct Common {
     pub case: String,
     /// Seed (default: the pipeline's).
     pub seed: Option<u64>,
-    /// Bound per metric name. Whether it is an upper or lower bound is the metric's own.
+    /// Bound per metric name: a number (an upper or lower bound, as the metric's direction
+    /// makes it) or `{ min = a, max = b }`.
     #[serde(default)]
-    pub bounds: BTreeMap<String, f64>,
-    /// Metric name → why its bound is not met yet. Shown in the report; does not fail the run.
+    pub bounds: BTreeMap<String, BoundSpec>,
+    /// Metric name → why its bound is not met yet. Shown in the report; a miss does not fail
+    /// the run, the bound met does (the declaration is then out of date).
     #[serde(default)]
     pub expected_miss: BTreeMap<String, String>,
     /// Stage field → values: one case per value (per combination, with several fields).
@@ -237,8 +242,11 @@ fn check_common(c: &Common) -> Result<(), String> {
         return Err("`case` is empty: give the case a name".into());
     }
     for (name, b) in &c.bounds {
-        if !b.is_finite() {
-            return Err(format!("bounds.{name} = {b}: expected a finite number"));
+        b.check().map_err(|e| format!("bounds.{name}{e}"))?;
+    }
+    for name in c.expected_miss.keys() {
+        if !c.bounds.contains_key(name) {
+            return Err(format!("expected_miss.{name}: `{name}` has no bound, so there is nothing to miss"));
         }
     }
     if let Some(k) = &c.expect_error {

@@ -1,7 +1,14 @@
 //! A stage's measured quantities, each with the direction that is better, its bound and its
 //! verdict. A value that could not be measured is `None` with the reason, never a sentinel
 //! such as NaN or infinity: a missing or non-finite value misses any bound it has.
+//!
+//! A bound is a range, `{ min = a, max = b }` with either end optional; a plain number in a
+//! pipeline file is the end the metric's own direction makes it (an upper bound on an error,
+//! a lower bound on a count of what was found). A declared miss is a claim too: once every
+//! case of its entry meets the bound, the run fails until the declaration goes, as a strict
+//! expected failure does (`Report::misses_now_met`).
 
+use super::report::fmt_value;
 use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
@@ -19,7 +26,7 @@ pub struct Metric {
     pub unit: String,
     /// Whether the bound is an upper (`lower` is better) or a lower bound.
     pub better: Better,
-    pub bound: Option<f64>,
+    pub bound: Option<Bound>,
     pub pass: Option<bool>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub missing: Option<String>,
@@ -74,12 +81,8 @@ impl Metric {
     }
 
     /// Whether the value meets `bound`; a missing value meets none.
-    pub fn meets(&self, bound: f64) -> bool {
-        match (self.value, self.better) {
-            (Some(v), Better::Lower) => v <= bound,
-            (Some(v), Better::Higher) => v >= bound,
-            (None, _) => false,
-        }
+    pub fn meets(&self, bound: Bound) -> bool {
+        self.value.is_some_and(|v| bound.min.is_none_or(|lo| v >= lo) && bound.max.is_none_or(|hi| v <= hi))
     }
 
     /// A metric that missed its bound without a declared expected miss.
@@ -87,3 +90,95 @@ impl Metric {
         self.pass == Some(false) && self.expected_miss.is_none()
     }
 }
+
+/// An accepted range of a metric's value; either end may be open.
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct Bound {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub min: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max: Option<f64>,
+}
+
+impl Bound {
+    /// `≤ b`, `≥ a`, or `a to b`, as the report shows it.
+    pub fn text(&self) -> String {
+        match (self.min, self.max) {
+            (Some(a), Some(b)) => format!("{} to {}", fmt_value(a), fmt_value(b)),
+            (Some(a), None) => format!("≥ {}", fmt_value(a)),
+            (None, Some(b)) => format!("≤ {}", fmt_value(b)),
+            (None, None) => "—".into(),
+        }
+    }
+}
+
+/// A bound as a pipeline file writes it: a number (its end set by the metric's direction) or
+/// a table `{ min = a, max = b }`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum BoundSpec {
+    Plain(f64),
+    Range(Bound),
+}
+
+impl BoundSpec {
+    /// The range this bound is for a metric whose better direction is `better`.
+    pub fn resolve(self, better: Better) -> Bound {
+        match (self, better) {
+            (BoundSpec::Plain(b), Better::Lower) => Bound { min: None, max: Some(b) },
+            (BoundSpec::Plain(b), Better::Higher) => Bound { min: Some(b), max: None },
+            (BoundSpec::Range(r), _) => r,
+        }
+    }
+
+    /// Refuses a non-finite end, an empty table, or min above max.
+    pub fn check(&self) -> Result<(), String> {
+        let ends = match self {
+            BoundSpec::Plain(b) => vec![("", *b)],
+            BoundSpec::Range(r) => {
+                let ends: Vec<(&str, f64)> =
+                    [(".min", r.min), (".max", r.max)].into_iter().filter_map(|(k, v)| v.map(|v| (k, v))).collect();
+                if ends.is_empty() {
+                    return Err(" = {}: expected a number, or `min`, `max` or both".into());
+                }
+                ends
+            }
+        };
+        for (key, v) in &ends {
+            if !v.is_finite() {
+                return Err(format!("{key} = {v}: expected a finite number"));
+            }
+        }
+        if let BoundSpec::Range(Bound { min: Some(a), max: Some(b) }) = self {
+            if a > b {
+                return Err(format!(" = {{ min = {a}, max = {b} }}: min is above max, so no value meets it"));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl<'de> Deserialize<'de> for BoundSpec {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Raw {
+            Plain(f64),
+            Range(RangeRaw),
+        }
+        #[derive(Deserialize)]
+        #[serde(deny_unknown_fields)]
+        struct RangeRaw {
+            min: Option<f64>,
+            max: Option<f64>,
+        }
+        // Untagged enums lose the inner message; say what is accepted instead.
+        match Raw::deserialize(d) {
+            Ok(Raw::Plain(b)) => Ok(BoundSpec::Plain(b)),
+            Ok(Raw::Range(r)) => Ok(BoundSpec::Range(Bound { min: r.min, max: r.max })),
+            Err(_) => Err(serde::de::Error::custom(
+                "expected a number, or a table with `min`, `max` or both (numbers), e.g. { max = 0 }",
+            )),
+        }
+    }
+}
+

@@ -267,6 +267,7 @@ fn run_cases(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Repo
             indices: taken,
             kept: files.iter().map(|(name, _)| name.clone()).collect(),
         });
+        report.judge();
     }
     report.files = files;
     report.started = start_time;
@@ -350,6 +351,7 @@ fn apply_bounds(mut metrics: Vec<Metric>, common: &file::Common) -> Result<Vec<M
     }
     for m in &mut metrics {
         if let Some(&b) = common.bounds.get(&m.name) {
+            let b = b.resolve(m.better);
             m.bound = Some(b);
             if m.skipped.is_none() {
                 m.pass = Some(m.meets(b));

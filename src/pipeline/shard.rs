@@ -148,6 +148,30 @@ pub fn merge(out: &Path) -> Result<Report, Error> {
             ));
         }
     }
+    // Every case sits in exactly one fragment, so the fragments' stages count the cases: a
+    // count claimed beyond them is refused before anything is allocated for it.
+    let held: usize = parts.iter().map(|(_, _, r, _)| r.stages.len()).sum();
+    if first_f.cases != held {
+        return Err(err(
+            first_path,
+            format!(
+                "claims {} cases in the pipeline, but the {n} fragments hold {held}: rerun every shard",
+                first_f.cases
+            ),
+        ));
+    }
+    for (_, path, _, f) in &parts {
+        if let Some(bad) = f.kept.iter().find(|k| !inside(k)) {
+            return Err(err(
+                path,
+                format!(
+                    "kept file `{}` is not a relative path inside the fragment's folder: refused, so that nothing is read or written outside {}",
+                    bad.display(),
+                    out.display()
+                ),
+            ));
+        }
+    }
     let mut slots: Vec<Option<super::report::StageReport>> = vec![None; first_f.cases];
     let (mut files, mut warnings) = (Vec::new(), Vec::new());
     let mut total_s: f64 = 0.0;
@@ -182,6 +206,11 @@ pub fn merge(out: &Path) -> Result<Report, Error> {
     report.warnings = warnings;
     report.files = files;
     Ok(report)
+}
+
+/// Whether `p` is a non-empty relative path made only of names (no `..`, root or prefix).
+fn inside(p: &Path) -> bool {
+    p.components().next().is_some() && p.components().all(|c| matches!(c, std::path::Component::Normal(_)))
 }
 
 #[cfg(test)]

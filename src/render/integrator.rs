@@ -362,8 +362,28 @@ pub fn render(scene: &Scene, settings: &Settings) -> Film {
     let (w, h) = (scene.camera.width, scene.camera.height);
     let [x0, y0, x1, y1] = settings.crop.unwrap_or([0, 0, w, h]);
     let (fw, fh) = (x1.saturating_sub(x0), y1.saturating_sub(y0));
-    let mut mean = Image::new(fw, fh, 3);
-    let mut variance = Image::new(fw, fh, 3);
+    render_into(scene, settings, Image::new(fw, fh, 3), Image::new(fw, fh, 3))
+}
+
+/// `render`, refusing with `Error::OutOfMemory` (nothing allocated) a film whose memory
+/// cannot be had, where `render` would abort: for films of a size a user chose.
+pub fn try_render(scene: &Scene, settings: &Settings) -> Result<Film, super::Error> {
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let [x0, y0, x1, y1] = settings.crop.unwrap_or([0, 0, w, h]);
+    let (fw, fh) = (x1.saturating_sub(x0), y1.saturating_sub(y0));
+    let oom = || super::Error::OutOfMemory {
+        what: format!("a {fw}×{fh} film (mean and variance, 3 float32 channels each)"),
+        bytes: 2 * 3 * 4 * fw as u64 * fh as u64,
+    };
+    let mean = Image::try_new(fw, fh, 3).ok_or_else(oom)?;
+    let variance = Image::try_new(fw, fh, 3).ok_or_else(oom)?;
+    Ok(render_into(scene, settings, mean, variance))
+}
+
+fn render_into(scene: &Scene, settings: &Settings, mut mean: Image, mut variance: Image) -> Film {
+    let (x0, y0) = settings.crop.map_or((0, 0), |c| (c[0], c[1]));
+    let (fw, fh) = (mean.width, mean.height);
+    let x1 = x0 + fw;
     let bar = super::progress_bar(fh as u64, "render", settings.progress);
     let dropped = std::sync::atomic::AtomicU64::new(0);
     let lanes = if settings.lanes { super::lanes::Tracer::new(scene, settings) } else { None };

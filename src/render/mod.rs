@@ -22,7 +22,7 @@ pub mod surfaces;
 pub mod texture;
 pub mod truth;
 
-pub use integrator::{render, Film, Settings};
+pub use integrator::{render, try_render, Film, Settings};
 pub use scene::{load, Scene};
 pub use truth::{truth, Truth};
 
@@ -42,6 +42,9 @@ pub enum Error {
     EmptyMesh { path: PathBuf },
     #[error(transparent)]
     Image(#[from] crate::image::io::Error),
+    /// The film (or another buffer a render needs) could not be allocated.
+    #[error("{what} needs {bytes} bytes ({gib:.2} GiB), which could not be allocated: render fewer pixels (the camera's width and height)", gib = *bytes as f64 / (1u64 << 30) as f64)]
+    OutOfMemory { what: String, bytes: u64 },
 }
 
 /// A progress bar on stderr when `show` is set and stderr is a terminal; hidden otherwise.

@@ -116,3 +116,36 @@ pub fn footprint_normals(scene: &Scene, pixels: &[(u32, u32)], k: u32) -> Vec<Op
         })
         .collect()
 }
+
+/// Per pixel (row-major over the whole image), whether any of `k`×`k` rays spread over its
+/// square sees emission directly: an emitter's emitting side, or the environment past the
+/// scene. A render limited to one segment (`max_depth = 1`) may be non-black only there.
+/// The rays are the pinhole's (`Scene::camera_ray`), so `None` for a scene with a thin lens.
+pub fn emitter_footprint(scene: &Scene, k: u32) -> Option<Vec<bool>> {
+    use rayon::prelude::*;
+    if scene.lens.is_some() {
+        return None;
+    }
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let sees = |px: DVec2| -> bool {
+        let Some((o, d)) = scene.camera_ray(px) else { return false };
+        let ray = Ray { origin: Vec3A::from(o.as_vec3()), dir: Vec3A::from(d.as_vec3()) };
+        match scene.bvh.intersect(&ray, 0.0, f32::INFINITY) {
+            None => scene.environment(ray.dir).is_some(),
+            Some(hit) => {
+                let surf = scene.surface(&ray, &hit);
+                scene.materials[surf.material as usize].emission.is_some() && surf.n.dot(-ray.dir) > 0.0
+            }
+        }
+    };
+    Some(
+        (0..w * h)
+            .into_par_iter()
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                let off = |s: u32| (s as f64 + 0.5) / k as f64 - 0.5;
+                (0..k * k).any(|s| sees(DVec2::new(x as f64 + off(s % k), y as f64 + off(s / k))))
+            })
+            .collect(),
+    )
+}

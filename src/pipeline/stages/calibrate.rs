@@ -319,7 +319,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Fin
             sensor: sensor.is_some(),
         };
         let grey = ctx.cache.images(ctx.case, &name, &recipe, || {
-            let film = render::render(&scene, &settings);
+            let film = render::try_render(&scene, &settings)?;
             let grey = match &sensor {
                 Some(sn) => {
                     let codes = sn.expose(&film.mean, settings.seed);

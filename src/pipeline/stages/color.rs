@@ -254,7 +254,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(color::Input, Truth, Fin
             settings: SettingsKey::from(&settings),
         };
         let film = ctx.cache.images(ctx.case, &format!("wavelengths {}", b), &recipe, || {
-            Ok::<_, StageError>(vec![render::render(&scene, &settings).mean])
+            Ok::<_, StageError>(vec![render::try_render(&scene, &settings)?.mean])
         })?;
         let Some(film) = film else { continue };
         let Some(img) = film.first().filter(|f: &&Image| f.data.len() == 3 * w * h) else {

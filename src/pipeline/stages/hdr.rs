@@ -167,7 +167,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(hdr::Input, Truth, Findi
     settings.seed = ctx.seed;
     let recipe = FilmRecipe { product: "hdr-film", scene: &digest, settings: SettingsKey::from(&settings) };
     let film = ctx.cache.images(ctx.case, "radiance", &recipe, || {
-        Ok::<_, StageError>(vec![render::render(&scene, &settings).mean])
+        Ok::<_, StageError>(vec![render::try_render(&scene, &settings)?.mean])
     })?;
     let film = film.ok_or(StageError::RendersOnly)?;
     let Some(radiance) = film.into_iter().next() else {

@@ -22,7 +22,7 @@
 //! `../shared` beside a fresh clone) the case is skipped with the reason.
 //!
 //! Metrics: `mean_angular_error_deg`, `median_angular_error_deg`, `masked_pixels` (mask
-//! pixels left without a normal), `mean_albedo_rel_err` (|π·ρ − kd|/kd against the truth
+//! pixels left without a normal) and `masked_share` (their share of the mask), `mean_albedo_rel_err` (|π·ρ − kd|/kd against the truth
 //! albedo image, over channels and solved pixels), `light_condition_number`, `pixel_lights_per_s`,
 //! `time_per_megapixel_s`; with `model = "blinn-phong"` also the robust Lambertian model's
 //! error on the same images (`robust_lambertian_mean_angular_error_deg`), the ratio of the
@@ -292,7 +292,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Trut
             settings: SettingsKey::from(&settings),
         };
         let film = ctx.cache.images(ctx.case, &format!("light {j}"), &recipe, || {
-            Ok::<_, StageError>(vec![render::render(&scene, &settings).mean])
+            Ok::<_, StageError>(vec![render::try_render(&scene, &settings)?.mean])
         })?;
         let Some(film) = film else { continue };
         let Some(img) = film.first().filter(|f: &&Image| f.data.len() == 3 * w * h) else {
@@ -406,6 +406,15 @@ pub fn validate(out: &Output, truth: &Truth) -> Findings {
         none,
     ));
     m.push(Metric::new("masked_pixels", sm.masked_pixels as f64, "pixels", Better::Lower));
+    // The share refused: an error over the solved pixels alone could fall by refusing more.
+    let mask = sm.pixels + sm.masked_pixels;
+    m.push(Metric::maybe(
+        "masked_share",
+        (mask > 0).then(|| sm.masked_pixels as f64 / mask as f64),
+        "",
+        Better::Lower,
+        "the mask is empty",
+    ));
     // Albedo: the solvers' ρ is kd/π in the renderer's terms (observations are radiance over
     // irradiance), so π·ρ is compared with the truth albedo, relative, per channel.
     if let Some(albedo) = &truth.albedo {

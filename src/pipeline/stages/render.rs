@@ -9,6 +9,13 @@
 //!   (Šidák-corrected, α = 0.01; see `image::metrics::agreement`);
 //! - `rmse`: root-mean-square difference from the reference over pixel channels;
 //! - `max_rel_err`, `mean_rel_err`: against a uniform expected radiance;
+//! - `mean_err_sigmas`: against a uniform expected radiance, the image mean's distance from it
+//!   in standard errors of that mean (from the film's per-pixel variance), the largest over
+//!   channels: a test of bias that noise alone passes (|z| ≤ 4 but once in 16 000);
+//! - `lit_pixels`: pixels with any channel above zero;
+//! - `lit_pixels_off_emitters`: with `max_depth = 1`, lit pixels farther than one pixel from
+//!   any pixel whose square sees an emitter or the environment (`render::truth::emitter_footprint`,
+//!   8×8 rays; the one-pixel margin holds a sliver of emitter the rays pass by): must be 0;
 //! - `nonfinite_samples`: samples that came out NaN or infinite (must be 0);
 //! - `mpaths_per_s`: million camera paths per second (no bound: speed is for benchmarks).
 //!
@@ -60,6 +67,9 @@ pub enum Reference {
 pub struct Truth {
     reference: Reference,
     uniform: Option<[f64; 3]>,
+    /// With `max_depth = 1`, the pixels that may be lit (`emitter_footprint`); `Err` says why
+    /// it is not known.
+    footprint: Option<Result<Vec<bool>, String>>,
 }
 
 pub struct Output {
@@ -123,7 +133,27 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(Input, Truth, Findings),
             c.scene
         ));
     }
-    Ok((Input { scene, settings }, Truth { reference, uniform: c.expect_uniform }, found))
+    let footprint = (settings.max_depth == 1).then(|| {
+        render::truth::emitter_footprint(&scene, 8)
+            .map(|f| dilate(&f, scene.camera.width as usize))
+            .ok_or_else(|| "the scene has a thin lens; the footprint is traced through a pinhole".to_string())
+    });
+    Ok((Input { scene, settings }, Truth { reference, uniform: c.expect_uniform, footprint }, found))
+}
+
+/// `mask` (row-major, `w` wide) grown by one pixel in each of the eight directions.
+fn dilate(mask: &[bool], w: usize) -> Vec<bool> {
+    let h = mask.len() / w.max(1);
+    let mut out = vec![false; mask.len()];
+    for (i, _) in mask.iter().enumerate().filter(|(_, &m)| m) {
+        let (x, y) = (i % w, i / w);
+        for yy in y.saturating_sub(1)..(y + 2).min(h) {
+            for xx in x.saturating_sub(1)..(x + 2).min(w) {
+                out[yy * w + xx] = true;
+            }
+        }
+    }
+    out
 }
 
 /// A path without `dir/../` detours, for messages.
@@ -142,7 +172,7 @@ pub fn clean(p: &std::path::Path) -> PathBuf {
 
 pub fn solve(_c: &Config, input: &Input) -> Result<Output, StageError> {
     let t = std::time::Instant::now();
-    let film = render::render(&input.scene, &input.settings);
+    let film = render::try_render(&input.scene, &input.settings)?;
     Ok(Output { film, settings: input.settings.clone(), seconds: t.elapsed().as_secs_f64() })
 }
 
@@ -213,9 +243,44 @@ pub fn validate(c: &Config, out: &Output, truth: &Truth) -> Findings {
         let n = film.mean.data.len().max(1) as f64;
         f.metrics.push(Metric::maybe("max_rel_err", finite.then_some(max_rel), "", Better::Lower, why));
         f.metrics.push(Metric::maybe("mean_rel_err", finite.then_some(sum_rel / n), "", Better::Lower, why));
+        f.metrics.push(Metric::maybe("mean_err_sigmas", bias_sigmas(film, e), "σ", Better::Lower, why));
+    }
+    let lit: Vec<bool> = film.mean.data.chunks_exact(3).map(|px| px.iter().any(|&v| v > 0.0)).collect();
+    f.metrics.push(Metric::new("lit_pixels", lit.iter().filter(|&&l| l).count() as f64, "pixels", Better::Higher));
+    match &truth.footprint {
+        None => {}
+        Some(Err(why)) => f.metrics.push(Metric::missing("lit_pixels_off_emitters", "pixels", Better::Lower, why)),
+        Some(Ok(may)) if may.len() != lit.len() => f.metrics.push(Metric::missing(
+            "lit_pixels_off_emitters",
+            "pixels",
+            Better::Lower,
+            "the film is a crop of the image",
+        )),
+        Some(Ok(may)) => {
+            let off = lit.iter().zip(may).filter(|&(&l, &m)| l && !m).count();
+            f.metrics.push(Metric::new("lit_pixels_off_emitters", off as f64, "pixels", Better::Lower));
+        }
     }
     if let Some(name) = &c.save {
         f.files.push((PathBuf::from(name), Kept::Image(film.mean.clone())));
     }
     f
+}
+
+/// The largest over channels of |image mean − expected| over the standard error of the image
+/// mean (pixels are independent, so the variances of their means add); `None` when the film
+/// holds a non-finite value. A noiseless film exactly on the expected value is 0 σ away.
+fn bias_sigmas(film: &render::Film, expected: [f64; 3]) -> Option<f64> {
+    let n = (film.mean.data.len() / 3).max(1) as f64;
+    let mut worst = 0.0f64;
+    for (ch, e) in expected.iter().enumerate() {
+        let sum: f64 = film.mean.data.iter().skip(ch).step_by(3).map(|&v| v as f64).sum();
+        let var: f64 = film.variance.data.iter().skip(ch).step_by(3).map(|&v| v as f64).sum();
+        let (diff, se) = ((sum / n - e).abs(), var.sqrt() / n);
+        if !(diff.is_finite() && se.is_finite()) {
+            return None;
+        }
+        worst = worst.max(if diff == 0.0 { 0.0 } else { diff / se });
+    }
+    Some(worst)
 }

@@ -23,7 +23,9 @@
 //! matches pass verifies the blocks of `PAIR_BLOCK` × `PAIR_BLOCK` image pairs each owns; the
 //! case then reads both from the cache (`prepare`, `sfm::Prepared`) and only maps.
 //!
-//! Metrics: `registered_images`, `unregistered_images`, `points`, `mean_track_length`,
+//! Metrics: `registered_images`, `unregistered_images`, `points`, `planar_pairs` and
+//! `pure_rotation_pairs` (verified pairs a homography explains, and of those the ones without
+//! parallax: no baseline to start from), `mean_track_length`,
 //! `reprojection_rms_px`, `rotation_err_median_deg`, `rotation_err_max_deg`,
 //! `centre_err_max_rel`; with guessed intrinsics `focal_err_rel`, |f − f_true|/f_true against
 //! the true fx, and on renders `k1_err`, |k1 − k1_true|; and the phases' times as a note.
@@ -187,7 +189,7 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth,
             options: format!("{:?}", cfg.features),
         };
         let rendered = ctx.cache.images(ctx.case, &name, &recipe.view, || {
-            Ok::<_, StageError>(vec![render::render(&scene, &settings).mean])
+            Ok::<_, StageError>(vec![render::try_render(&scene, &settings)?.mean])
         })?;
         let given = if c.guess_intrinsics {
             sfm::input::assumed_camera(camera.width, camera.height)
@@ -482,6 +484,13 @@ pub fn validate(out: &sfm::Output, truth: &Truth) -> Findings {
     m.push(Metric::new("registered_images", registered as f64, "images", Better::Higher));
     m.push(Metric::new("unregistered_images", rec.unregistered.len() as f64, "images", Better::Lower));
     m.push(Metric::new("points", points as f64, "points", Better::Higher));
+    // How the verified pairs were classified: the reason a reconstruction without a baseline
+    // gives for registering nothing.
+    let count = |c: sfm::two_view::Configuration| rec.pairs.iter().filter(|p| p.configuration == Some(c)).count();
+    let planar = count(sfm::two_view::Configuration::Planar);
+    m.push(Metric::new("planar_pairs", planar as f64, "pairs", Better::Lower));
+    let rotation = count(sfm::two_view::Configuration::PureRotation);
+    m.push(Metric::new("pure_rotation_pairs", rotation as f64, "pairs", Better::Lower));
     let track = (points > 0).then(|| observations as f64 / points as f64);
     m.push(Metric::maybe("mean_track_length", track, "images", Better::Higher, "no point"));
     let rms = (points > 0).then_some(rec.rms_px);
