@@ -397,3 +397,59 @@ fn textures_and_specular_are_held_to_their_constants_range() {
     );
     assert!(e.contains("materials[1] (g).specular") && e.contains("[0, 1]"), "{e}");
 }
+
+/// Outputs a command writes together appear together or not at all: an output path late in
+/// the set that cannot be written (a folder where a file goes) leaves none of the others
+/// behind, for `lumen hdr`, `lumen color spectral` and `lumen sfm`, and the error names it.
+#[test]
+fn a_late_output_that_is_a_folder_leaves_nothing_behind() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let s = |p: &std::path::Path| p.to_str().unwrap().to_string();
+    let blocked = |out: &std::path::Path, name: &str| {
+        std::fs::create_dir_all(out.join(name)).unwrap();
+    };
+    let only = |out: &std::path::Path, name: &str| {
+        let left: Vec<String> = std::fs::read_dir(out)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n != name)
+            .collect();
+        assert!(left.is_empty(), "left behind beside {name}: {left:?}");
+    };
+    // hdr: summary.json is the last file written.
+    common::png(&d.join("a.png"), 40, 30, |x, y| [(x * 5 + y) as u8, 80, 90]);
+    common::png(&d.join("b.png"), 40, 30, |x, y| [(x * 2 + y) as u8, 30, 40]);
+    let hdr_out = d.join("hdr");
+    blocked(&hdr_out, "summary.json");
+    let (a, b) = (s(&d.join("a.png")), s(&d.join("b.png")));
+    let (code, err) =
+        lumen(&["hdr", "--images", &a, &b, "--times", "1", "0.25", "--out", &s(&hdr_out.join("radiance.exr"))]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("summary.json") && err.contains("is a folder"), "{err}");
+    only(&hdr_out, "summary.json");
+    // color spectral: white.csv is the last.
+    let color_out = d.join("color");
+    blocked(&color_out, "white.csv");
+    let (code, err) = lumen(&["color", "spectral", "--out", &s(&color_out)]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("white.csv") && err.contains("is a folder"), "{err}");
+    only(&color_out, "white.csv");
+    // sfm on two unrelated images (nothing registered, the files still written): summary.json.
+    let photos = d.join("photos");
+    std::fs::create_dir(&photos).unwrap();
+    let noise = |seed: u64| {
+        move |x: u32, y: u32| {
+            let v = lumen::render::sampler::mix64(seed ^ (x as u64 * 7919 + y as u64 * 104729));
+            [(v >> 56) as u8, (v >> 48) as u8, (v >> 40) as u8]
+        }
+    };
+    common::png(&photos.join("a.png"), 160, 120, noise(1));
+    common::png(&photos.join("b.png"), 160, 120, noise(2));
+    let sfm_out = d.join("sfm");
+    blocked(&sfm_out, "summary.json");
+    let (code, err) = lumen(&["sfm", "--images", &s(&photos), "--out", &s(&sfm_out)]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("summary.json") && err.contains("is a folder"), "{err}");
+    only(&sfm_out, "summary.json");
+}

@@ -345,6 +345,10 @@ fn cli_refusals_and_an_unreconstructable_pair() {
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["registered_images"], 0);
+    // Nothing to measure is null with its reason, never a 0 that reads as perfect.
+    for k in ["reprojection_rms_px", "mean_track_length", "mean_observations_per_image"] {
+        assert!(summary[k].is_null() && summary["missing"][k].is_string(), "{k}: {summary}");
+    }
     let why = summary["unregistered"][0]["reason"].as_str().unwrap_or("");
     assert!(why.contains("no pair of images"), "{summary}");
     for f in ["cameras.txt", "images.txt", "points3D.txt", "points.ply"] {

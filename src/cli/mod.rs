@@ -663,18 +663,20 @@ fn write_overlays(
     views: &[(String, Vec<glam::DVec2>)],
     board: lumen::calib::detect::BoardSize,
 ) -> Result<()> {
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("--debug {}: cannot create the folder", dir.display()))?;
-    let mut used = std::collections::HashSet::new();
-    for (k, (name, img)) in images.iter().enumerate() {
-        let corners = views.iter().find(|(n, _)| n == name).map(|(_, c)| c.as_slice());
-        let canvas = lumen::calib::overlay::draw(img, board, corners);
-        let stem = Path::new(name).file_stem().and_then(|s| s.to_str()).unwrap_or("view").to_string();
-        let file = if used.insert(stem.clone()) { format!("{stem}.png") } else { format!("{stem}-{k}.png") };
-        let values: Vec<u16> = canvas.rgb.iter().map(|&v| v as u16).collect();
-        lumen::image::io::write_png_raw(&dir.join(file), canvas.width, canvas.height, 3, &values, 8)?;
-    }
-    Ok(())
+    // The overlays are written together: on an error none is left behind.
+    lumen::image::io::write_together(dir, |staged| -> Result<()> {
+        let mut used = std::collections::HashSet::new();
+        for (k, (name, img)) in images.iter().enumerate() {
+            let corners = views.iter().find(|(n, _)| n == name).map(|(_, c)| c.as_slice());
+            let canvas = lumen::calib::overlay::draw(img, board, corners);
+            let stem = Path::new(name).file_stem().and_then(|s| s.to_str()).unwrap_or("view").to_string();
+            let file = if used.insert(stem.clone()) { format!("{stem}.png") } else { format!("{stem}-{k}.png") };
+            let values: Vec<u16> = canvas.rgb.iter().map(|&v| v as u16).collect();
+            lumen::image::io::write_png_raw(&staged.join(file), canvas.width, canvas.height, 3, &values, 8)?;
+        }
+        Ok(())
+    })
+    .with_context(|| format!("--debug {}", dir.display()))
 }
 
 fn ps_cmd(dir: &Path, model: &str, start_iterations: Option<u64>, out: &Path) -> Result<()> {

@@ -101,9 +101,18 @@ pub fn run(a: &SfmArgs) -> Result<()> {
         "images": input.images.len(),
         "registered_images": registered,
         "points": kept,
-        "mean_track_length": if kept > 0 { observations as f64 / kept as f64 } else { 0.0 },
-        "mean_observations_per_image": if registered > 0 { observations as f64 / registered as f64 } else { 0.0 },
-        "reprojection_rms_px": rec.rms_px,
+        // Quantities without a point or an image to measure are null, with the reason in
+        // `missing`, never a 0 that reads as a perfect result.
+        "mean_track_length": (kept > 0).then(|| observations as f64 / kept as f64),
+        "mean_observations_per_image": (registered > 0).then(|| observations as f64 / registered as f64),
+        "reprojection_rms_px": (kept > 0).then_some(rec.rms_px),
+        "missing": if kept > 0 { serde_json::json!({}) } else {
+            serde_json::json!({
+                "mean_track_length": "no point was triangulated",
+                "mean_observations_per_image": if registered > 0 { "no point was triangulated" } else { "no image was registered" },
+                "reprojection_rms_px": "no point was triangulated",
+            })
+        },
         "cameras": out.cameras.iter().zip(&input.images).map(|(c, im)| serde_json::json!({"image": im.name, "fx": c.intrinsics.fx, "fy": c.intrinsics.fy, "cx": c.intrinsics.cx, "cy": c.intrinsics.cy, "k1": c.distortion.k1, "k2": c.distortion.k2, "refined": c != &im.camera, "guess": im.guess})).collect::<Vec<_>>(),
         "unregistered": rec.unregistered.iter().map(|(i, why)| serde_json::json!({"image": input.images[*i].name, "reason": why})).collect::<Vec<_>>(),
         "pairs": rec.pairs.iter().map(|p| serde_json::json!({"a": input.images[p.a].name, "b": input.images[p.b].name, "matches": p.matches, "inliers": p.inliers, "configuration": p.configuration})).collect::<Vec<_>>(),
@@ -129,12 +138,8 @@ pub fn run(a: &SfmArgs) -> Result<()> {
         }
         Ok(())
     })?;
-    println!(
-        "registered {registered} of {} images, {kept} points, reprojection RMS {:.3} px; wrote {}",
-        input.images.len(),
-        rec.rms_px,
-        a.out.display()
-    );
+    let rms = if kept > 0 { format!("reprojection RMS {:.3} px", rec.rms_px) } else { "no reprojection error (no point)".into() };
+    println!("registered {registered} of {} images, {kept} points, {rms}; wrote {}", input.images.len(), a.out.display());
     if let (None, Some(c)) = (given, out.cameras.first()) {
         let start = &input.images[0].camera;
         let (k, k0, d) = (&c.intrinsics, &start.intrinsics, &c.distortion);

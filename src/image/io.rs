@@ -64,6 +64,9 @@ pub fn write_together<T, E: From<Error>>(
     let _ = std::fs::remove_dir_all(&stage);
     std::fs::create_dir_all(&stage).map_err(|e| err(&stage, e))?;
     let result = write(&stage).and_then(|value| {
+        // Every target is checked before the first is moved: a later one that cannot be
+        // replaced (a folder where a file goes) would otherwise leave the first ones behind.
+        check_targets(&stage, dir)?;
         move_into(&stage, dir)?;
         Ok(value)
     });
@@ -73,6 +76,27 @@ pub fn write_together<T, E: From<Error>>(
 
 fn write_error(path: &Path, e: std::io::Error) -> Error {
     Error::Write { path: path.to_path_buf(), message: e.to_string() }
+}
+
+/// Refuses, naming it, a target in `to` a file of `from` cannot replace: a folder where a file
+/// goes, or anything but a folder where a folder goes.
+fn check_targets(from: &Path, to: &Path) -> Result<(), Error> {
+    let err = |path: &Path, message: &str| Error::Write { path: path.to_path_buf(), message: message.into() };
+    match std::fs::symlink_metadata(to) {
+        Ok(m) if !m.is_dir() => return Err(err(to, "is not a folder: expected a folder to write into")),
+        Ok(_) => {}
+        Err(_) => return Ok(()), // created afresh
+    }
+    for entry in std::fs::read_dir(from).map_err(|e| write_error(from, e))? {
+        let source = entry.map_err(|e| write_error(from, e))?.path();
+        let target = to.join(source.file_name().unwrap_or_default());
+        if source.is_dir() {
+            check_targets(&source, &target)?;
+        } else if target.is_dir() {
+            return Err(err(&target, "is a folder: expected a file name to write to (nothing was written)"));
+        }
+    }
+    Ok(())
 }
 
 /// Moves the files of `from` into `to`, subfolders merged into existing ones.
