@@ -485,7 +485,7 @@ fn declared_errors_are_outcomes() {
     assert!(err.contains("expect_error = \"flood\""), "{err}");
     for bad in ["100000", "0"] {
         let (code, err, _) = run_with(&entry(""), dir.path(), "e", &["--threads", bad]);
-        assert_eq!(code, 1, "{err}");
+        assert_eq!(code, 2, "{err}");
         assert!(err.contains(&format!("'{bad}'")) && err.contains("from 1 to 1024"), "{err}");
     }
 }
