@@ -368,6 +368,20 @@ fn cli_inputs_and_refusals() {
         d.join("b.png").to_str().unwrap().to_string(),
         d.join("small.png").to_str().unwrap().to_string(),
     );
+    png(&d.join("u.png"), 40, 30, |_, _| [10, 10, 10]);
+    png(&d.join("u2.png"), 40, 30, |_, _| [40, 40, 40]);
+    png(&d.join("one.png"), 1, 1, |_, _| [100, 100, 100]);
+    png(&d.join("one2.png"), 1, 1, |_, _| [50, 50, 50]);
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    let (u, u2, one, one2) = (p("u.png"), p("u2.png"), p("one.png"), p("one2.png"));
+    let far_csv = d.join("far.csv");
+    let mut text = "value,ln_exposure_r,ln_exposure_g,ln_exposure_b\n0,-1e300,-1e300,-1e300\n".to_string();
+    for z in 1..256 {
+        let g = (z as f64 / 255.0).ln();
+        text += &format!("{z},{g},{g},{g}\n");
+    }
+    std::fs::write(&far_csv, text).unwrap();
+    let far_csv = far_csv.to_str().unwrap().to_string();
     std::fs::write(d.join("list.txt"), "a.png 1/30\nb.png\n").unwrap();
     std::fs::write(d.join("bad.csv"), "value,r,g,b\n0,0,0,0\n1,-1,1,1\n").unwrap();
     let list = d.join("list.txt").to_str().unwrap().to_string();
@@ -395,6 +409,15 @@ fn cli_inputs_and_refusals() {
         (vec!["--images", &a, &b, "--times", "1", "2", "--lambda", "nan"], "--lambda"),
         (vec!["--images", &a, &b, "--times", "1", "2", "--smoothness", "odd"], "--smoothness \"odd\""),
         (vec!["--images", &a, &b, "--times", "1", "2", "--exclude-color", "0,0"], "--exclude-color"),
+        // Impossible stacks: refused by name, never a flat or all-zero answer.
+        (vec!["--images", &b, &a, "--times", "1e300", "2e300"], "exposure time 1e300 s: expected 1e-12 to 1e6 s"),
+        (vec!["--images", &b, &a, "--times", "1e-300", "2e-300"], "exposure time 1e-300 s: expected 1e-12 to 1e6 s"),
+        (vec!["--images", &one2, &one, "--times", "1", "2"], "needs N(P − 1) ≥ 255"),
+        (vec!["--images", &a, &a, &a, "--times", "1", "2", "4"], "hold the same values, yet their times differ"),
+        (vec!["--images", &a, &b, "--times", "1", "2"], "are the times in the frames' order?"),
+        (vec!["--images", &b, &a, "--times", "1", "2", "--lambda", "1e300"], "--lambda 1e300: expected 0 to 1e8"),
+        (vec!["--images", &u, &u2, "--times", "1", "2", "--exclude-color", "10,10,10"], "every pixel is left out"),
+        (vec!["--images", &b, &a, "--times", "1", "2", "--response", &far_csv], "line 2: ln exposure -1e300 is outside ±60"),
     ];
     for (args, want) in cases {
         let mut all = vec!["hdr", "--out", os];

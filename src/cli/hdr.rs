@@ -116,11 +116,11 @@ pub fn run(a: &HdrArgs) -> Result<()> {
     };
     let smoothness: response::Smoothness =
         a.smoothness.parse().map_err(|e: String| anyhow::anyhow!("--{e}"))?;
-    if !(a.lambda.is_finite() && a.lambda >= 0.0) {
-        bail!("--lambda {}: expected a non-negative number", a.lambda);
+    if !(a.lambda.is_finite() && (0.0..=hdr::MAX_LAMBDA).contains(&a.lambda)) {
+        bail!("--lambda {:e}: expected 0 to {:e}", a.lambda, hdr::MAX_LAMBDA);
     }
-    if a.samples_per_value == 0 || a.samples_per_value > 1000 {
-        bail!("--samples-per-value {}: expected 1 to 1000", a.samples_per_value);
+    if !(1..=hdr::MAX_SAMPLES_PER_VALUE).contains(&a.samples_per_value) {
+        bail!("--samples-per-value {}: expected 1 to {}", a.samples_per_value, hdr::MAX_SAMPLES_PER_VALUE);
     }
     let exclude = a.exclude_color.as_deref().map(parse_color).transpose()?;
     let t = std::time::Instant::now();

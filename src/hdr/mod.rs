@@ -75,8 +75,17 @@ pub enum Method {
 /// stage's renders for gamma, film-like and sRGB curves (a noise-free stack with unequal
 /// ratios needs far less).
 pub const DEFAULT_LAMBDA: f64 = 1e4;
+/// Largest smoothness weight taken: 10⁴ times the default, where the fitted curve is already
+/// the smoothness prior's straight line whatever the data say.
+pub const MAX_LAMBDA: f64 = 1e8;
 /// Debevec's default sample pixels per value.
 pub const DEFAULT_SAMPLES_PER_VALUE: usize = 4;
+/// Most sample pixels per value taken.
+pub const MAX_SAMPLES_PER_VALUE: usize = 1000;
+/// Exposure times taken, in seconds: a picosecond to eleven days. Radiance is exp(g)/t in
+/// float32; times far outside these put it beyond float32's range.
+pub const MIN_TIME_S: f64 = 1e-12;
+pub const MAX_TIME_S: f64 = 1e6;
 /// Robertson's iteration cap: the fit stops earlier once g changes by less than 10⁻⁴ between
 /// iterations (on the Memorial stack it does before 50).
 pub const ROBERTSON_MAX_ITERATIONS: usize = 200;
@@ -169,9 +178,17 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
             (r.clone(), "given".to_string())
         }
         Method::Debevec { lambda, samples_per_value, smoothness } => {
-            if !(lambda.is_finite() && *lambda >= 0.0) {
-                return Err(Error::BadInput(format!("lambda = {lambda}: expected a non-negative number")));
+            if !(lambda.is_finite() && (0.0..=MAX_LAMBDA).contains(lambda)) {
+                return Err(Error::BadInput(format!(
+                    "lambda = {lambda:e}: expected 0 to {MAX_LAMBDA:e} (beyond it the curve is the smoothness prior's whatever the frames say)"
+                )));
             }
+            if !(1..=MAX_SAMPLES_PER_VALUE).contains(samples_per_value) {
+                return Err(Error::BadInput(format!(
+                    "samples_per_value = {samples_per_value}: expected 1 to {MAX_SAMPLES_PER_VALUE}"
+                )));
+            }
+            check_fit_data(input)?;
             use rayon::prelude::*;
             let fits = (0..3)
                 .into_par_iter()
@@ -197,6 +214,7 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
             )
         }
         Method::Robertson { iterations } => {
+            check_fit_data(input)?;
             use rayon::prelude::*;
             let g = (0..3)
                 .into_par_iter()
@@ -214,7 +232,12 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     let (radiance, mask) = merge::merge(&frames, &times, &response, config.weights);
     let merge_s = t.elapsed().as_secs_f64();
     if radiance.iter().any(|v| !v.is_finite()) {
-        return Err(Error::Unsolvable("the merge gave a radiance that is not a finite float32".into()));
+        let (lo, hi) = response.g.iter().flatten().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &g| (a.min(g), b.max(g)));
+        return Err(Error::Unsolvable(format!(
+            "the merge gave a radiance beyond float32's range: the response's ln exposure spans {lo:.3e} to {hi:.3e} and the times {:e} to {:e} s, so e^g / t does not fit",
+            times.iter().cloned().fold(f64::INFINITY, f64::min),
+            times.iter().cloned().fold(0.0, f64::max)
+        )));
     }
     let t = std::time::Instant::now();
     let fusion = match &config.fusion {
@@ -260,9 +283,9 @@ fn check(input: &Input) -> Result<(), Error> {
         return Err(Error::BadInput("the frames have no pixels".into()));
     }
     for f in &input.frames {
-        if !(f.time_s.is_finite() && f.time_s > 0.0) {
+        if !(f.time_s.is_finite() && (MIN_TIME_S..=MAX_TIME_S).contains(&f.time_s)) {
             return Err(Error::BadInput(format!(
-                "{}: exposure time {} s: expected a positive number",
+                "{}: exposure time {:e} s: expected {MIN_TIME_S:e} to {MAX_TIME_S:e} s (a picosecond to eleven days; radiance is held as float32, which times far outside cannot represent)",
                 f.name, f.time_s
             )));
         }
@@ -298,6 +321,49 @@ fn check(input: &Input) -> Result<(), Error> {
                 u.len()
             )));
         }
+        if !u.iter().any(|&k| k) {
+            return Err(Error::BadInput(
+                "every pixel is left out of the fit (the excluded colour covers them all)".into(),
+            ));
+        }
+    }
+    if input.frames.windows(2).all(|w| w[0].codes == w[1].codes) {
+        return Err(Error::BadInput(format!(
+            "all {} frames hold the same values, yet their times differ: nothing in the stack changes with exposure (the same file given several times?)",
+            input.frames.len()
+        )));
+    }
+    // A longer exposure collects more light: a stack whose longest frame is darker than its
+    // shortest has its times in another order than its frames.
+    let mean = |f: &Frame| f.codes.iter().map(|&z| z as f64).sum::<f64>() / f.codes.len() as f64;
+    let by_time = |a: &&Frame, b: &&Frame| a.time_s.total_cmp(&b.time_s);
+    if let (Some(short), Some(long)) = (input.frames.iter().min_by(by_time), input.frames.iter().max_by(by_time)) {
+        if mean(long) < mean(short) {
+            return Err(Error::BadInput(format!(
+                "{} ({} s) is darker than {} ({} s) (mean value {:.1} against {:.1}): a longer exposure cannot be darker; are the times in the frames' order?",
+                long.name,
+                long.time_s,
+                short.name,
+                short.time_s,
+                mean(long),
+                mean(short)
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Debevec & Malik's condition for the data alone to determine a response of `bins` values:
+/// N(P − 1) ≥ Z_max − Z_min over N pixels and P frames (their section 2.1).
+fn check_fit_data(input: &Input) -> Result<(), Error> {
+    let bins = input.levels.min(response::MAX_FIT_LEVELS);
+    let (n, p) = (input.width * input.height, input.frames.len());
+    if n * (p - 1) < bins - 1 {
+        return Err(Error::BadInput(format!(
+            "{n} pixel(s) in {p} frames: fitting a response of {bins} values needs N(P − 1) ≥ {} (Debevec & Malik), here {}; give larger frames, more frames, or a response to use as it is",
+            bins - 1,
+            n * (p - 1)
+        )));
     }
     Ok(())
 }

@@ -614,6 +614,14 @@ pub fn from_csv(text: &str) -> Result<Response, String> {
             if !v.is_finite() {
                 return Err(format!("line {}: {v} is not finite", n + 1));
             }
+            // Radiance is e^g / t in float32: with times down to 10⁻¹² s, |g| ≤ 60 keeps it
+            // within float32's range (e^60 · 10¹² ≈ 10³⁸).
+            if v.abs() > 60.0 {
+                return Err(format!(
+                    "line {}: ln exposure {v:e} is outside ±60: e^g would leave float32's range in the radiance",
+                    n + 1
+                ));
+            }
             g[c].push(v);
         }
     }

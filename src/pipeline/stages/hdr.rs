@@ -256,7 +256,7 @@ fn fit(
     smoothness: hdr::response::Smoothness,
 ) -> Result<Method, StageError> {
     Ok(match name {
-        "debevec" => Method::Debevec { lambda, samples_per_value: samples_per_value.max(1), smoothness },
+        "debevec" => Method::Debevec { lambda, samples_per_value, smoothness },
         "robertson" => Method::Robertson { iterations: hdr::ROBERTSON_MAX_ITERATIONS },
         other => {
             return Err(StageError::Config(format!("method = \"{other}\": expected debevec or robertson")))
