@@ -423,8 +423,17 @@ fn a_late_output_that_is_a_folder_leaves_nothing_behind() {
     let hdr_out = d.join("hdr");
     blocked(&hdr_out, "summary.json");
     let (a, b) = (s(&d.join("a.png")), s(&d.join("b.png")));
-    let (code, err) =
-        lumen(&["hdr", "--images", &a, &b, "--times", "1", "0.25", "--out", &s(&hdr_out.join("radiance.exr"))]);
+    let (code, err) = lumen(&[
+        "hdr",
+        "--images",
+        &a,
+        &b,
+        "--times",
+        "1",
+        "0.25",
+        "--out",
+        &s(&hdr_out.join("radiance.exr")),
+    ]);
     assert_eq!(code, 1, "{err}");
     assert!(err.contains("summary.json") && err.contains("is a folder"), "{err}");
     only(&hdr_out, "summary.json");

@@ -410,14 +410,32 @@ fn cli_inputs_and_refusals() {
         (vec!["--images", &a, &b, "--times", "1", "2", "--smoothness", "odd"], "--smoothness \"odd\""),
         (vec!["--images", &a, &b, "--times", "1", "2", "--exclude-color", "0,0"], "--exclude-color"),
         // Impossible stacks: refused by name, never a flat or all-zero answer.
-        (vec!["--images", &b, &a, "--times", "1e300", "2e300"], "exposure time 1e300 s: expected 1e-12 to 1e6 s"),
-        (vec!["--images", &b, &a, "--times", "1e-300", "2e-300"], "exposure time 1e-300 s: expected 1e-12 to 1e6 s"),
+        (
+            vec!["--images", &b, &a, "--times", "1e300", "2e300"],
+            "exposure time 1e300 s: expected 1e-12 to 1e6 s",
+        ),
+        (
+            vec!["--images", &b, &a, "--times", "1e-300", "2e-300"],
+            "exposure time 1e-300 s: expected 1e-12 to 1e6 s",
+        ),
         (vec!["--images", &one2, &one, "--times", "1", "2"], "needs N(P − 1) ≥ 255"),
-        (vec!["--images", &a, &a, &a, "--times", "1", "2", "4"], "hold the same values, yet their times differ"),
+        (
+            vec!["--images", &a, &a, &a, "--times", "1", "2", "4"],
+            "hold the same values, yet their times differ",
+        ),
         (vec!["--images", &a, &b, "--times", "1", "2"], "are the times in the frames' order?"),
-        (vec!["--images", &b, &a, "--times", "1", "2", "--lambda", "1e300"], "--lambda 1e300: expected 0 to 1e8"),
-        (vec!["--images", &u, &u2, "--times", "1", "2", "--exclude-color", "10,10,10"], "every pixel is left out"),
-        (vec!["--images", &b, &a, "--times", "1", "2", "--response", &far_csv], "line 2: ln exposure -1e300 is outside ±60"),
+        (
+            vec!["--images", &b, &a, "--times", "1", "2", "--lambda", "1e300"],
+            "--lambda 1e300: expected 0 to 1e8",
+        ),
+        (
+            vec!["--images", &u, &u2, "--times", "1", "2", "--exclude-color", "10,10,10"],
+            "every pixel is left out",
+        ),
+        (
+            vec!["--images", &b, &a, "--times", "1", "2", "--response", &far_csv],
+            "line 2: ln exposure -1e300 is outside ±60",
+        ),
     ];
     for (args, want) in cases {
         let mut all = vec!["hdr", "--out", os];

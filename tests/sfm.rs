@@ -293,6 +293,13 @@ fn cli_refusals_and_an_unreconstructable_pair() {
     std::fs::write(junk.join("b.jpg"), b"not a picture").unwrap();
     std::fs::write(d.join("k8.txt"), "1 0 1 0 1 1 0 0").unwrap();
     std::fs::write(d.join("kneg.txt"), "-100 0 80 0 100 60 0 0 1").unwrap();
+    std::fs::write(d.join("ktiny.txt"), "1e-300 0 79.5 0 1e-300 59.5 0 0 1").unwrap();
+    std::fs::write(d.join("knan.txt"), "150 0 79.5 0 NaN 59.5 0 0 1").unwrap();
+    std::fs::write(
+        d.join("fold.yaml"),
+        "%YAML:1.0\n---\nimage_width: 160\nimage_height: 120\ncamera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ 150., 0., 79.5, 0., 150., 59.5, 0., 0., 1. ]\ndistortion_coefficients: !!opencv-matrix\n   rows: 1\n   cols: 5\n   dt: d\n   data: [ -50., 0., 0., 0., 0. ]\n",
+    )
+    .unwrap();
     let s = |p: &Path| p.to_str().unwrap().to_string();
     let out = d.join("model");
     let (two_s, out_s) = (s(&two), s(&out));
@@ -302,6 +309,19 @@ fn cli_refusals_and_an_unreconstructable_pair() {
         (vec!["--images".into(), s(&junk)], "b.jpg"),
         (vec!["--images".into(), two_s.clone(), "--camera".into(), s(&d.join("k8.txt"))], "9 numbers"),
         (vec!["--images".into(), two_s.clone(), "--camera".into(), s(&d.join("kneg.txt"))], "positive"),
+        // A camera no photograph can have: named as the camera's fault, not the matches'.
+        (
+            vec!["--images".into(), two_s.clone(), "--camera".into(), s(&d.join("ktiny.txt"))],
+            "fx = 1e-300 px gives a field of view of 180",
+        ),
+        (
+            vec!["--images".into(), two_s.clone(), "--camera".into(), s(&d.join("knan.txt"))],
+            "number 5 is NaN",
+        ),
+        (
+            vec!["--images".into(), two_s.clone(), "--camera".into(), s(&d.join("fold.yaml"))],
+            "the distortion (k1 -50, k2 0, k3 0) folds back before the image's edge",
+        ),
         (
             vec!["--images".into(), two_s.clone(), "--camera".into(), "/nonexistent/cam.yaml".into()],
             "cam.yaml",
@@ -354,6 +374,31 @@ fn cli_refusals_and_an_unreconstructable_pair() {
     for f in ["cameras.txt", "images.txt", "points3D.txt", "points.ply"] {
         assert!(out.join(f).exists(), "{f}");
     }
+    // Three identical images: every pair a pure rotation, and the reason says so.
+    let same = d.join("same");
+    std::fs::create_dir(&same).unwrap();
+    let smooth = |x: u32, y: u32| {
+        // Noise on a 4-pixel grid, interpolated: corners that match from image to image.
+        let at = |i: u32, j: u32| {
+            (lumen::render::sampler::mix64(7 ^ (i as u64 * 7919 + j as u64 * 104729)) >> 56) as f64
+        };
+        let (fx, fy) = (x as f64 / 4.0, y as f64 / 4.0);
+        let (i, j, u, v) = (fx as u32, fy as u32, fx.fract(), fy.fract());
+        let g = at(i, j) * (1.0 - u) * (1.0 - v)
+            + at(i + 1, j) * u * (1.0 - v)
+            + at(i, j + 1) * (1.0 - u) * v
+            + at(i + 1, j + 1) * u * v;
+        [g as u8, (g * 0.5) as u8, 255 - g as u8]
+    };
+    for n in ["a", "b", "c"] {
+        png(&same.join(format!("{n}.png")), 320, 240, smooth);
+    }
+    let (code, err) = common::lumen(&["sfm", "--images", &s(&same), "--out", &s(&d.join("same-model"))]);
+    assert_eq!(code, 0, "{err}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("same-model/summary.json")).unwrap()).unwrap();
+    let why = summary["unregistered"][0]["reason"].as_str().unwrap_or("");
+    assert!(why.contains("3 a pure rotation") && why.contains("0 with too few matches"), "{summary}");
     // Two sizes without a camera: each image its own assumed camera, in cameras.txt.
     let (code, err) = common::lumen(&["sfm", "--images", &s(&sizes), "--out", &s(&d.join("sizes-model"))]);
     assert_eq!(code, 0, "{err}");
@@ -460,4 +505,23 @@ fn exif_focal_lengths() {
     assert!((fx - 180.0).abs() < 1e-9, "{cameras}");
     let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
     assert!(summary.contains("EXIF FocalLengthIn35mmFilm 54 mm"), "{summary}");
+    // A focal length no lens has (65535 mm equivalent: a 0.03° field of view) is left aside,
+    // named, for the assumed one.
+    let implausible = lumen::sfm::input::guessed_camera(
+        &{
+            let p = dir.path().join("far.jpg");
+            let f = [field(Tag::FocalLengthIn35mmFilm, Value::Short(vec![65535]))];
+            std::fs::write(&p, jpeg_with_exif(120, 80, 1, &f)).unwrap();
+            p
+        },
+        120,
+        80,
+    );
+    assert!((implausible.0.intrinsics.fx - 144.0).abs() < 1e-9, "{implausible:?}");
+    assert!(
+        implausible.1.contains("EXIF FocalLengthIn35mmFilm 65535 mm left aside")
+            && implausible.1.contains("field of view"),
+        "{}",
+        implausible.1
+    );
 }

@@ -97,7 +97,10 @@ fn shards_merge_into_the_one_process_report() {
     std::fs::write(dir.path().join("x.txt"), "outside").unwrap();
     let (code, err) = merge();
     assert_eq!(code, 1, "{err}");
-    assert!(err.contains("kept file `../../x.txt` is not a relative path inside the fragment's folder"), "{err}");
+    assert!(
+        err.contains("kept file `../../x.txt` is not a relative path inside the fragment's folder"),
+        "{err}"
+    );
     assert_eq!(std::fs::read_to_string(dir.path().join("x.txt")).unwrap(), "outside");
 }
 

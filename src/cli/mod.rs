@@ -670,7 +670,8 @@ fn write_overlays(
             let corners = views.iter().find(|(n, _)| n == name).map(|(_, c)| c.as_slice());
             let canvas = lumen::calib::overlay::draw(img, board, corners);
             let stem = Path::new(name).file_stem().and_then(|s| s.to_str()).unwrap_or("view").to_string();
-            let file = if used.insert(stem.clone()) { format!("{stem}.png") } else { format!("{stem}-{k}.png") };
+            let file =
+                if used.insert(stem.clone()) { format!("{stem}.png") } else { format!("{stem}-{k}.png") };
             let values: Vec<u16> = canvas.rgb.iter().map(|&v| v as u16).collect();
             lumen::image::io::write_png_raw(&staged.join(file), canvas.width, canvas.height, 3, &values, 8)?;
         }

@@ -138,8 +138,16 @@ pub fn run(a: &SfmArgs) -> Result<()> {
         }
         Ok(())
     })?;
-    let rms = if kept > 0 { format!("reprojection RMS {:.3} px", rec.rms_px) } else { "no reprojection error (no point)".into() };
-    println!("registered {registered} of {} images, {kept} points, {rms}; wrote {}", input.images.len(), a.out.display());
+    let rms = if kept > 0 {
+        format!("reprojection RMS {:.3} px", rec.rms_px)
+    } else {
+        "no reprojection error (no point)".into()
+    };
+    println!(
+        "registered {registered} of {} images, {kept} points, {rms}; wrote {}",
+        input.images.len(),
+        a.out.display()
+    );
     if let (None, Some(c)) = (given, out.cameras.first()) {
         let start = &input.images[0].camera;
         let (k, k0, d) = (&c.intrinsics, &start.intrinsics, &c.distortion);

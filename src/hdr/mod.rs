@@ -232,7 +232,11 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     let (radiance, mask) = merge::merge(&frames, &times, &response, config.weights);
     let merge_s = t.elapsed().as_secs_f64();
     if radiance.iter().any(|v| !v.is_finite()) {
-        let (lo, hi) = response.g.iter().flatten().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &g| (a.min(g), b.max(g)));
+        let (lo, hi) = response
+            .g
+            .iter()
+            .flatten()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &g| (a.min(g), b.max(g)));
         return Err(Error::Unsolvable(format!(
             "the merge gave a radiance beyond float32's range: the response's ln exposure spans {lo:.3e} to {hi:.3e} and the times {:e} to {:e} s, so e^g / t does not fit",
             times.iter().cloned().fold(f64::INFINITY, f64::min),
@@ -337,7 +341,9 @@ fn check(input: &Input) -> Result<(), Error> {
     // shortest has its times in another order than its frames.
     let mean = |f: &Frame| f.codes.iter().map(|&z| z as f64).sum::<f64>() / f.codes.len() as f64;
     let by_time = |a: &&Frame, b: &&Frame| a.time_s.total_cmp(&b.time_s);
-    if let (Some(short), Some(long)) = (input.frames.iter().min_by(by_time), input.frames.iter().max_by(by_time)) {
+    if let (Some(short), Some(long)) =
+        (input.frames.iter().min_by(by_time), input.frames.iter().max_by(by_time))
+    {
         if mean(long) < mean(short) {
             return Err(Error::BadInput(format!(
                 "{} ({} s) is darker than {} ({} s) (mean value {:.1} against {:.1}): a longer exposure cannot be darker; are the times in the frames' order?",

@@ -289,6 +289,22 @@ fn from_table<T: serde::de::DeserializeOwned>(t: toml::Table) -> Result<T, Strin
 }
 
 fn parse_stage(name: &str, own: toml::Table) -> Result<Stage, String> {
+    // A stage on real data is told apart from its rendered variant by one key; both keys
+    // given would blame the other variant's keys, so the pair is refused by name.
+    let real = match name {
+        "calibrate" => Some("images"),
+        "photometric" => Some("dataset"),
+        "hdr" => Some("list"),
+        "sfm" => Some("images"),
+        _ => None,
+    };
+    if let Some(key) = real {
+        if own.contains_key(key) && own.contains_key("scene") {
+            return Err(format!(
+                "`{key}` and `scene` are both given: a {name} entry runs on real data (`{key}`) or on renders of a scene (`scene`), not both"
+            ));
+        }
+    }
     Ok(match name {
         "render" => Stage::Render(from_table(own)?),
         "calibrate" if own.contains_key("images") => Stage::CalibrateData(from_table(own)?),
@@ -330,6 +346,9 @@ mod tests {
         assert!(e.contains("unknown stage `teleport`"), "{e}");
         let e = parse_str(&format!("{ENTRY}{ENTRY}")).unwrap_err().to_string();
         assert!(e.contains("named twice"), "{e}");
+        let photos = "[[stages]]\nstage = \"sfm\"\ncase = \"p\"\nimages = \"d\"\ncamera = \"k.txt\"\nscene = \"s.toml\"\n";
+        let e = parse_str(photos).unwrap_err().to_string();
+        assert!(e.contains("`images` and `scene` are both given"), "{e}");
     }
 
     #[test]

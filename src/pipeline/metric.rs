@@ -135,8 +135,10 @@ impl BoundSpec {
         let ends = match self {
             BoundSpec::Plain(b) => vec![("", *b)],
             BoundSpec::Range(r) => {
-                let ends: Vec<(&str, f64)> =
-                    [(".min", r.min), (".max", r.max)].into_iter().filter_map(|(k, v)| v.map(|v| (k, v))).collect();
+                let ends: Vec<(&str, f64)> = [(".min", r.min), (".max", r.max)]
+                    .into_iter()
+                    .filter_map(|(k, v)| v.map(|v| (k, v)))
+                    .collect();
                 if ends.is_empty() {
                     return Err(" = {}: expected a number, or `min`, `max` or both".into());
                 }
@@ -181,4 +183,3 @@ impl<'de> Deserialize<'de> for BoundSpec {
         }
     }
 }
-

@@ -149,7 +149,14 @@ impl Report {
             }
             for m in s.metrics.iter().filter(|m| m.failed()) {
                 let bound = m.bound.map_or("—".into(), |b| b.text());
-                v.push(format!("{}/{}/{} = {} {}, bound {bound}", s.stage, s.case, m.name, value_text(m), m.unit));
+                v.push(format!(
+                    "{}/{}/{} = {} {}, bound {bound}",
+                    s.stage,
+                    s.case,
+                    m.name,
+                    value_text(m),
+                    m.unit
+                ));
             }
         }
         for (stage, group, name) in self.misses_now_met() {
@@ -324,8 +331,12 @@ impl Report {
                 let whole = whole_entry_met(st, &m.name);
                 let verdict = match (m.pass, &m.expected_miss, &m.skipped) {
                     (_, _, Some(why)) => format!("skipped: {why}"),
-                    (Some(true), Some(why), _) if whole => format!("**DECLARED MISS NOW MET** (declared: {why})"),
-                    (Some(true), Some(why), _) => format!("pass (the entry declares a miss some case still has: {why})"),
+                    (Some(true), Some(why), _) if whole => {
+                        format!("**DECLARED MISS NOW MET** (declared: {why})")
+                    }
+                    (Some(true), Some(why), _) => {
+                        format!("pass (the entry declares a miss some case still has: {why})")
+                    }
                     (Some(true), None, _) => "pass".to_string(),
                     (Some(false), Some(why), _) => format!("expected miss: {why}"),
                     (Some(false), None, _) => "**MISS**".to_string(),

@@ -35,8 +35,21 @@ pub fn read_camera(path: &Path) -> Result<CameraModel, Error> {
         return Ok(c.camera());
     }
     let v = numbers(path, "expected 9 numbers (K, row by row)")?;
-    if v.len() != 9 || v.iter().any(|x| !x.is_finite()) || v[6] != 0.0 || v[7] != 0.0 || v[8] != 1.0 {
-        return Err(file_error(path, "expected a 3×3 camera matrix [fx s cx; 0 fy cy; 0 0 1], 9 numbers"));
+    let k_form = "a 3×3 camera matrix [fx s cx; 0 fy cy; 0 0 1], row by row";
+    if v.len() != 9 {
+        return Err(file_error(path, format!("{} numbers: expected 9 numbers, {k_form}", v.len())));
+    }
+    if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+        return Err(file_error(
+            path,
+            format!("number {} is {}: expected finite numbers, {k_form}", i + 1, v[i]),
+        ));
+    }
+    if v[6] != 0.0 || v[7] != 0.0 || v[8] != 1.0 {
+        return Err(file_error(
+            path,
+            format!("last row {} {} {}: expected 0 0 1, {k_form}", v[6], v[7], v[8]),
+        ));
     }
     if v[0] <= 0.0 || v[4] <= 0.0 {
         return Err(file_error(path, format!("focal lengths {} and {} must be positive", v[0], v[4])));
@@ -72,7 +85,16 @@ pub fn assumed_camera(width: u32, height: u32) -> CameraModel {
 /// from its EXIF metadata (`exif::focal_px`) or else `assumed_camera`'s; and where it came from.
 pub fn guessed_camera(path: &Path, width: u32, height: u32) -> (CameraModel, String) {
     match super::exif::focal_px(path, width, height) {
-        Some(f) => (CameraModel::centred(width, height, f.px), f.source),
+        Some(f) => {
+            let cam = CameraModel::centred(width, height, f.px);
+            match super::plausible(&cam) {
+                Ok(()) => (cam, f.source),
+                Err(why) => (
+                    assumed_camera(width, height),
+                    format!("1.2 × the longer side ({} left aside: {why})", f.source),
+                ),
+            }
+        }
         None => (assumed_camera(width, height), "1.2 × the longer side (no EXIF focal length)".into()),
     }
 }

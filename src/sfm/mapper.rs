@@ -501,7 +501,7 @@ pub fn reconstruct_verified(
         })
         .max_by_key(|(_, _, g, _)| g.matches.len());
     let Some((a, b, tv, _)) = first else {
-        let why = no_first_pair(out.pairs.len(), &geometry, opts.init_min_angle_deg);
+        let why = no_first_pair(&out.pairs, opts.init_min_angle_deg);
         out.unregistered = (0..n).map(|i| (i, why.clone())).collect();
         return out;
     };
@@ -748,22 +748,21 @@ fn adjust_bundle(
     }
 }
 
-/// Why no pair can start the reconstruction, counted over the `pairs` matched: how many of the
-/// verified ones are planar, a pure rotation or too narrow, the rest having too few matches.
-fn no_first_pair(
-    pairs: usize,
-    verified: &[(usize, usize, PairGeometry, two_view::Configuration)],
-    min_angle_deg: f64,
-) -> String {
-    let count = |c: two_view::Configuration| verified.iter().filter(|v| v.3 == c).count();
-    let (planar, rotation) =
-        (count(two_view::Configuration::Planar), count(two_view::Configuration::PureRotation));
-    let narrow = verified.len() - planar - rotation;
+/// Why no pair can start the reconstruction, counted over the pairs matched (their reports):
+/// how many were classified planar or a pure rotation (a pure rotation keeps no geometry, so
+/// it is counted from the report), how many verified as general but too narrow, the rest
+/// having too few matches to be verified.
+fn no_first_pair(pairs: &[PairReport], min_angle_deg: f64) -> String {
+    let count = |c: Option<two_view::Configuration>| pairs.iter().filter(|p| p.configuration == c).count();
+    let planar = count(Some(two_view::Configuration::Planar));
+    let rotation = count(Some(two_view::Configuration::PureRotation));
+    let narrow = count(Some(two_view::Configuration::General));
     format!(
-        "no pair of images with a baseline: of {pairs} pair(s), {planar} planar (a homography explains them), \
+        "no pair of images with a baseline: of {} pair(s), {planar} planar (a homography explains them), \
          {rotation} a pure rotation, {narrow} with a median triangulation angle below {min_angle_deg}°, \
          {} with too few matches",
-        pairs - verified.len()
+        pairs.len(),
+        count(None)
     )
 }
 

@@ -113,6 +113,48 @@ fn check(images: &[Image]) -> Result<(), Error> {
             return Err(Error::BadInput(format!("{}: {w}×{h} pixels, expected at least 64×64", im.name)));
         }
         im.camera.validate().map_err(|m| Error::BadInput(format!("{}: camera: {m}", im.name)))?;
+        plausible(&im.camera).map_err(|m| Error::BadInput(format!("{}: camera: {m}", im.name)))?;
+    }
+    Ok(())
+}
+
+/// Narrowest and widest horizontal field of view taken, in degrees: a 4000 mm lens on a
+/// full-frame sensor sees 0.5°, a fisheye beyond 170° needs a fisheye model, which this
+/// pinhole with radial distortion is not.
+pub const FIELD_OF_VIEW_DEG: [f64; 2] = [0.5, 170.0];
+
+/// Refuses a camera no photograph can have been taken with: a field of view outside
+/// `FIELD_OF_VIEW_DEG`, or a distortion that folds back (stops growing with the radius)
+/// inside the ellipse inscribed in the image, where keypoints could not be undistorted.
+/// Beyond that ellipse, in the corners, a calibration may fold; keypoints there are dropped.
+pub fn plausible(cam: &CameraModel) -> Result<(), String> {
+    let (w, h) = (cam.width as f64, cam.height as f64);
+    let k = &cam.intrinsics;
+    let fov = |size: f64, f: f64| 2.0 * (size / (2.0 * f)).atan().to_degrees();
+    let [lo, hi] = FIELD_OF_VIEW_DEG;
+    let f_range = |size: f64| {
+        (size / (2.0 * (hi / 2.0).to_radians().tan()), size / (2.0 * (lo / 2.0).to_radians().tan()))
+    };
+    for (name, size, f) in [("fx", w, k.fx), ("fy", h, k.fy)] {
+        let (f_lo, f_hi) = f_range(size);
+        if !(f_lo..=f_hi).contains(&f) {
+            return Err(format!(
+                "{name} = {f:e} px gives a field of view of {:.3}° over {size} pixels: expected {lo}° to {hi}° ({name} from {f_lo:.1} to {f_hi:.0} px)",
+                fov(size, f)
+            ));
+        }
+    }
+    if !cam.distortion.is_zero() {
+        let edges = [(0.0, k.cy), (w - 1.0, k.cy), (k.cx, 0.0), (k.cx, h - 1.0)];
+        for (x, y) in edges {
+            if cam.undistort_pixel(glam::DVec2::new(x, y)).is_none_or(|p| !p.is_finite()) {
+                let d = &cam.distortion;
+                return Err(format!(
+                    "the distortion (k1 {}, k2 {}, k3 {}) folds back before the image's edge at pixel ({x:.0}, {y:.0}): no point maps there, so it cannot be this camera's",
+                    d.k1, d.k2, d.k3
+                ));
+            }
+        }
     }
     Ok(())
 }

@@ -18,14 +18,25 @@ pub mod photometric;
 pub mod render;
 pub mod sfm;
 
-/// The folder or file a dataset case reads, relative to the pipeline file: `Absent` (the case
-/// is skipped) when it is not there, with the path shown without `..` detours.
+/// The folder or file a dataset case reads, relative to the pipeline file, shown without `..`
+/// detours. When it is not there the case is skipped (`Absent`) only if the whole data tree
+/// is missing: its nearest existing folder encloses the pipeline file's (as when `../shared`
+/// is not beside a fresh clone). A path missing inside a data tree that is there is a typo,
+/// refused by name.
 pub fn dataset_path(ctx: &Context, path: &str) -> Result<PathBuf, StageError> {
     let p = render::clean(&ctx.dir.join(path));
     if p.exists() {
-        Ok(p)
-    } else {
-        Err(StageError::Absent(p))
+        return Ok(p);
+    }
+    let here = render::clean(&ctx.dir);
+    let existing = p.ancestors().skip(1).find(|a| a.as_os_str().is_empty() || a.exists());
+    match existing {
+        Some(a) if !a.as_os_str().is_empty() && !here.starts_with(a) => Err(StageError::Config(format!(
+            "{} does not exist, though {} does: a mistyped path? (a case is skipped only when its whole data folder is absent)",
+            p.display(),
+            a.display()
+        ))),
+        _ => Err(StageError::Absent(p)),
     }
 }
 

@@ -246,10 +246,17 @@ pub fn validate(c: &Config, out: &Output, truth: &Truth) -> Findings {
         f.metrics.push(Metric::maybe("mean_err_sigmas", bias_sigmas(film, e), "σ", Better::Lower, why));
     }
     let lit: Vec<bool> = film.mean.data.chunks_exact(3).map(|px| px.iter().any(|&v| v > 0.0)).collect();
-    f.metrics.push(Metric::new("lit_pixels", lit.iter().filter(|&&l| l).count() as f64, "pixels", Better::Higher));
+    f.metrics.push(Metric::new(
+        "lit_pixels",
+        lit.iter().filter(|&&l| l).count() as f64,
+        "pixels",
+        Better::Higher,
+    ));
     match &truth.footprint {
         None => {}
-        Some(Err(why)) => f.metrics.push(Metric::missing("lit_pixels_off_emitters", "pixels", Better::Lower, why)),
+        Some(Err(why)) => {
+            f.metrics.push(Metric::missing("lit_pixels_off_emitters", "pixels", Better::Lower, why))
+        }
         Some(Ok(may)) if may.len() != lit.len() => f.metrics.push(Metric::missing(
             "lit_pixels_off_emitters",
             "pixels",

@@ -486,7 +486,8 @@ pub fn validate(out: &sfm::Output, truth: &Truth) -> Findings {
     m.push(Metric::new("points", points as f64, "points", Better::Higher));
     // How the verified pairs were classified: the reason a reconstruction without a baseline
     // gives for registering nothing.
-    let count = |c: sfm::two_view::Configuration| rec.pairs.iter().filter(|p| p.configuration == Some(c)).count();
+    let count =
+        |c: sfm::two_view::Configuration| rec.pairs.iter().filter(|p| p.configuration == Some(c)).count();
     let planar = count(sfm::two_view::Configuration::Planar);
     m.push(Metric::new("planar_pairs", planar as f64, "pairs", Better::Lower));
     let rotation = count(sfm::two_view::Configuration::PureRotation);
