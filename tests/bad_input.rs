@@ -462,3 +462,32 @@ fn a_late_output_that_is_a_folder_leaves_nothing_behind() {
     assert!(err.contains("summary.json") && err.contains("is a folder"), "{err}");
     only(&sfm_out, "summary.json");
 }
+
+/// A film larger than the memory the process may have is refused by name, with what it
+/// needs, rather than aborting the process (here under a 4 GB address-space limit).
+#[cfg(unix)]
+#[test]
+fn a_film_beyond_memory_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("big.toml");
+    let text = CAMERA.replace("width = 8", "width = 16384").replace("height = 8", "height = 16384");
+    std::fs::write(&scene, format!("{text}[[shapes]]\ntype = \"sphere\"\ncenter = [0.0, 0.0, 0.0]\nradius = 1.0\nmaterial = \"white\"\n")).unwrap();
+    let out = dir.path().join("big.exr");
+    let o = std::process::Command::new("sh")
+        .arg("-c")
+        .arg(format!(
+            "ulimit -v 4000000 && exec \"{}\" render \"{}\" --out \"{}\" --spp 1",
+            env!("CARGO_BIN_EXE_lumen"),
+            scene.display(),
+            out.display()
+        ))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("a 16384×16384 film") && err.contains("6.00 GiB), which could not be allocated"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}

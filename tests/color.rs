@@ -298,6 +298,8 @@ fn cli_bad_input() {
     let header = bad_csv("header.csv", "patch,L,a,b\n");
     let short = bad_csv("short.csv", "patch,X,Y,Z\n1,0.1,0.1,0.1\n");
     let words = bad_csv("words.csv", "patch,R,G,B\n1,red,0.1,0.1\n");
+    let zero_text: String = (1..=24).map(|k| format!("{k},0,0,0\n")).collect();
+    let zero = bad_csv("zero.csv", &format!("patch,X,Y,Z\n{zero_text}"));
     let cases: Vec<(Vec<&str>, &str)> = vec![
         (vec!["--patches", r, "--model", "poly-9"], "--model"),
         (vec!["--patches", r, "--model", "cheung-6"], "cheung-N"),
@@ -307,7 +309,14 @@ fn cli_bad_input() {
         (vec!["--image", im, "--corners", "115,5,5,5,5,75,115,75"], "convex"),
         (vec!["--image", im, "--corners", "5,5,15,5,15,10,5,10"], "expected at least 9"),
         (vec!["--image", "/nonexistent/c.exr", "--corners", "5,5,115,5,115,75,5,75"], "/nonexistent/c.exr"),
-        (vec!["--image", im, "--corners", "5,5,115,5,115,75,5,75"], "too few|usable patch"),
+        // A black chart: every patch flagged, and the flags go with the refusal.
+        (vec!["--image", im, "--corners", "5,5,115,5,115,75,5,75"], "is too dark"),
+        // References that would make every ΔE small without saying anything.
+        (
+            vec!["--patches", r, "--reference", &zero, "--white", "0.95,1,1.09"],
+            "every patch's reference Y is 0",
+        ),
+        (vec!["--patches", r, "--white", "1e-300,1e-300,1e-300"], "but the white's Y is 1e-300"),
         (vec!["--patches", r, "--reference", &dup], "--white"),
         (vec!["--patches", r, "--reference", &dup, "--white", "0.95,1,1.09"], "patch 1 is given twice"),
         (vec!["--patches", r, "--reference", &neg, "--white", "0.95,1,1.09"], "non-negative"),
@@ -339,6 +348,9 @@ fn cli_bad_input() {
     let mut v: serde_json::Value = serde_json::from_str(&good).unwrap();
     v["extra"] = serde_json::json!(1);
     let extra = bad_csv("extra.json", &v.to_string());
+    let mut v: serde_json::Value = serde_json::from_str(&good).unwrap();
+    v["fitted"]["matrix"] = serde_json::json!([[1e300, 0.0, 0.0], [0.0, 1e300, 0.0], [0.0, 0.0, 1e300]]);
+    let huge = bad_csv("huge.json", &v.to_string());
     let grey = d.join("grey.png");
     image::GrayImage::new(4, 4).save(&grey).unwrap();
     let res = d.join("res.exr");
@@ -348,6 +360,7 @@ fn cli_bad_input() {
         (vec!["--ccm", &rows, im, rs], "2 coefficients for 3 terms"),
         (vec!["--ccm", &format, im, rs], "format `opencv`"),
         (vec!["--ccm", &extra, im, rs], "extra"),
+        (vec!["--ccm", &huge, im, rs], "maps to XYZ [1e300, 0.0, 0.0]: expected finite values within ±1e6"),
         (vec!["--ccm", "/nonexistent/m.json", im, rs], "/nonexistent/m.json"),
         (vec!["--ccm", o, "--space", "lab", im, rs], "--space lab"),
         (vec!["--ccm", o, im, jpg.to_str().unwrap()], ".exr or .png"),

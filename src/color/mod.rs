@@ -137,7 +137,10 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     let xyz: Vec<[f64; 3]> = used.iter().map(|&i| input.patches[i].reference_xyz).collect();
     let t = std::time::Instant::now();
     let fitted = models::fit(config.model, &rgb, &xyz, input.white, white_patch).map_err(|e| {
-        let msg = format!("model {}: {e}", config.model.name());
+        // The patches left out are often why a fit fails: their warnings go with the error.
+        let left_out =
+            if warnings.is_empty() { String::new() } else { format!(" ({})", warnings.join("; ")) };
+        let msg = format!("model {}: {e}{left_out}", config.model.name());
         match e {
             models::FitError::TooFew { .. } | models::FitError::NoWhite | models::FitError::Overflow => {
                 Error::BadInput(msg)
@@ -272,6 +275,54 @@ fn check_input(input: &Input) -> Result<(), Error> {
             )));
         }
     }
+    // A chart's patches reflect light, and none more than the perfect white the references
+    // are relative to: an all-black reference, or a white darker than the brightest patch,
+    // would make every ΔE small without saying anything.
+    let (k, brightest) = input
+        .patches
+        .iter()
+        .enumerate()
+        .map(|(k, p)| (k, p.reference_xyz[1]))
+        .fold((0, 0.0f64), |a, b| if b.1 > a.1 { b } else { a });
+    if brightest <= 0.0 {
+        return Err(Error::BadInput(
+            "every patch's reference Y is 0: a chart's patches reflect light (Y near 0.03 to 0.9 of the white)".into(),
+        ));
+    }
+    if brightest > WHITE_MARGIN * input.white[1] {
+        return Err(Error::BadInput(format!(
+            "patch {} ({}) has reference Y {brightest} but the white's Y is {:e}: the white is the perfect white the references are relative to, brighter than any patch (Y = 1 with patches near 0.03 to 0.9)",
+            k + 1,
+            input.patches[k].name,
+            input.white[1]
+        )));
+    }
+    Ok(())
+}
+
+/// How far above the white's Y a patch's reference Y may lie: no reflective patch exceeds the
+/// perfect white, but measured references carry a few per cent of error.
+const WHITE_MARGIN: f64 = 1.1;
+
+/// Largest |X|, |Y| or |Z| a fitted model may give for camera values within the unit cube:
+/// a model that sends the camera's white beyond it (a correction to XYZ near 1) is not a
+/// colour correction.
+pub const MAX_MODEL_OUTPUT: f64 = 1e6;
+
+/// Refuses a model whose output for camera values in the unit cube (its corners and greys)
+/// is not finite or beyond `MAX_MODEL_OUTPUT`.
+fn check_model_range(m: &models::Fitted) -> Result<(), String> {
+    let mut probes: Vec<[f64; 3]> =
+        (0..8).map(|c| [(c & 1) as f64, ((c >> 1) & 1) as f64, ((c >> 2) & 1) as f64]).collect();
+    probes.extend([0.01, 0.18, 0.5].map(|g| [g, g, g]));
+    for rgb in probes {
+        let xyz = m.apply(rgb);
+        if !xyz.iter().all(|v| v.is_finite() && v.abs() <= MAX_MODEL_OUTPUT) {
+            return Err(format!(
+                "camera RGB {rgb:?} maps to XYZ {xyz:?}: expected finite values within ±{MAX_MODEL_OUTPUT:e} for camera values from 0 to 1"
+            ));
+        }
+    }
     Ok(())
 }
 
@@ -396,6 +447,7 @@ pub fn read_ccm(path: &Path) -> Result<CcmFile, Error> {
         return Err(err(format!("format `{}`: expected `{CCM_FORMAT}`", file.format)));
     }
     file.fitted.check().map_err(|m| err(format!("fitted: {m}")))?;
+    check_model_range(&file.fitted).map_err(|m| err(format!("fitted: {m}")))?;
     if !file.white.iter().all(|v| v.is_finite() && *v > 0.0) {
         return Err(err(format!("white {:?}: expected three positive numbers", file.white)));
     }
