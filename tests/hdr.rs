@@ -300,13 +300,20 @@ fn memorial_church() {
         for f in ["response.svg", "mask.png", "preview.png"] {
             assert!(out.with_file_name(f).is_file(), "{f}");
         }
-        // The response file runs the merge alone, to the same radiance.
+        // The merge's noise weights come from the stack: their estimate is reported.
+        assert!(summary["weights"].as_str().unwrap().starts_with("noise (from the stack"), "{summary}");
+        let full_well = summary["noise"]["full_well"].as_f64().unwrap();
+        assert!(full_well.is_finite() && full_well > 0.0, "{summary}");
+        // The response file runs the merge alone, to the same radiance (the same pixels left
+        // out, so the same noise estimate).
         let again = dir.path().join(format!("{method}-given")).join("radiance.exr");
         let csv = out.with_file_name("response.csv");
         let (code, err) = lumen(&[
             "hdr",
             "--list",
             list.to_str().unwrap(),
+            "--exclude-color",
+            "0,0,255",
             "--response",
             csv.to_str().unwrap(),
             "--out",
@@ -404,7 +411,7 @@ fn cli_inputs_and_refusals() {
             vec!["--images", &a, &b, "--times", "1", "2", "--response", "/nonexistent/r.csv"],
             "not debevec, robertson",
         ),
-        (vec!["--images", &a, &b, "--times", "1", "2", "--weights", "noise"], "--full-well"),
+        (vec!["--images", &a, &b, "--times", "1", "2", "--read-noise", "3"], "--read-noise 3: give it with --full-well"),
         (vec!["--images", &a, &b, "--times", "1", "2", "--weights", "tent"], "hat or noise"),
         (vec!["--images", &a, &b, "--times", "1", "2", "--lambda", "nan"], "--lambda"),
         (vec!["--images", &a, &b, "--times", "1", "2", "--smoothness", "odd"], "--smoothness \"odd\""),

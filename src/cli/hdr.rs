@@ -33,14 +33,16 @@ pub struct HdrArgs {
     /// laws, toes and shoulders) or even (g″ in z, as the paper and OpenCV).
     #[arg(long, default_value = "logit")]
     pub smoothness: String,
-    /// hat (Debevec & Malik) or noise (inverse variance under photon, read and
-    /// quantisation noise; needs --full-well).
-    #[arg(long, default_value = "hat")]
+    /// noise (inverse variance under photon, read and quantisation noise, with the full
+    /// well and read noise the stack itself shows, or --full-well and --read-noise) or hat
+    /// (Debevec & Malik's).
+    #[arg(long, default_value = "noise")]
     pub weights: String,
-    /// For --weights noise: the sensor's electrons at full scale.
+    /// For --weights noise: the sensor's electrons at full scale, instead of the stack's
+    /// estimate.
     #[arg(long)]
     pub full_well: Option<f64>,
-    /// For --weights noise: the sensor's read noise in electrons.
+    /// For --weights noise with --full-well: the sensor's read noise in electrons.
     #[arg(long, default_value_t = 0.0)]
     pub read_noise: f64,
     /// Leave pixels of this colour (R,G,B code values) in any frame out of the response
@@ -109,9 +111,10 @@ pub fn run(a: &HdrArgs) -> Result<()> {
             "--full-well {fw} --read-noise {}: expected at least 1 electron and a non-negative read noise",
             a.read_noise
         ),
-        ("noise", None) => {
-            bail!("--weights noise needs --full-well (electrons at full scale) and --read-noise (electrons)")
+        ("noise", None) if a.read_noise != 0.0 => {
+            bail!("--read-noise {}: give it with --full-well (without, both come from the stack)", a.read_noise)
         }
+        ("noise", None) => Weights::NoiseFromStack,
         (other, _) => bail!("--weights {other}: expected hat or noise"),
     };
     let smoothness: response::Smoothness =
@@ -177,12 +180,13 @@ pub fn run(a: &HdrArgs) -> Result<()> {
     })?;
     let s = &out.summary;
     eprintln!(
-        "{} frames {w}×{h} ({} levels): response by {} in {:.3} s ({} samples), merged in {:.3} s ({:.0} Mpixel-frames/s); {:.1} stops well exposed; {} pixels saturated in every frame (lower bounds), {} dark in every frame (upper bounds); read {read_s:.2} s; wrote {} and response.csv, response.svg, mask.png (red: saturated, blue: dark), preview.png, summary.json{} beside it",
+        "{} frames {w}×{h} ({} levels): response by {} in {:.3} s ({} samples), weights {}, merged in {:.3} s ({:.0} Mpixel-frames/s); {:.1} stops well exposed; {} pixels saturated in every frame (lower bounds), {} dark in every frame (upper bounds); read {read_s:.2} s; wrote {} and response.csv, response.svg, mask.png (red: saturated, blue: dark), preview.png, summary.json{} beside it",
         s.frames,
         s.levels,
         s.method,
         s.response_s,
         s.samples,
+        s.weights,
         s.merge_s,
         s.merge_megapixel_frames_per_s,
         s.dynamic_range_stops,

@@ -12,7 +12,8 @@
 //!   with k = X(full scale)/full_well the gain (linear units per electron, from the recovered
 //!   response's value at full scale and the sensor's full-well capacity), σ_r = k·read noise
 //!   and X′ the response's step per code; so w = Δtⱼ² / (k·X + σ_r² + X′²/12), averaging Eⱼ
-//!   itself; codes at black or saturation get weight 0.
+//!   itself; codes at black or saturation get weight 0. The full well and read noise are the
+//!   sensor's data sheet's, or the stack's own (`hdr::noise`, `Weights::NoiseFromStack`).
 //!
 //! A pixel whose every frame is saturated in a channel has no estimate: it is given the
 //! shortest frame's value as a lower bound and marked `saturated` in the mask; one black in
@@ -30,6 +31,10 @@ pub enum Weights {
         full_well: f64,
         read_noise: f64,
     },
+    /// `Noise` with the full well and read noise the stack itself gives (`hdr::noise`),
+    /// resolved by `hdr::run` (hat weights where the stack gives no estimate); `merge` given
+    /// it directly uses hat weights.
+    NoiseFromStack,
 }
 
 /// The mask's values per pixel: 0 well exposed in some frame (every channel), 1 saturated
@@ -57,7 +62,7 @@ pub fn merge(frames: &[&[u16]], times: &[f64], response: &Response, weights: Wei
             let w: Vec<f64> = (0..levels)
                 .map(|z| match weights {
                     _ if z == 0 || z == levels - 1 => 0.0,
-                    Weights::Hat => hat(z, levels),
+                    Weights::Hat | Weights::NoiseFromStack => hat(z, levels),
                     Weights::Noise { full_well, read_noise } => {
                         let gain = x[levels - 1] / full_well;
                         let read = gain * read_noise;
@@ -70,7 +75,7 @@ pub fn merge(frames: &[&[u16]], times: &[f64], response: &Response, weights: Wei
         })
         .collect();
     let time_factor = |t: f64| match weights {
-        Weights::Hat => 1.0,
+        Weights::Hat | Weights::NoiseFromStack => 1.0,
         Weights::Noise { .. } => t * t,
     };
     let log_times: Vec<f64> = times.iter().map(|t| t.ln()).collect();
@@ -84,11 +89,11 @@ pub fn merge(frames: &[&[u16]], times: &[f64], response: &Response, weights: Wei
                 let (x, w) = &tables[c];
                 // Hat: Debevec & Malik's average of ln E; noise: the linear average.
                 let estimate = |z: usize, j: usize| match weights {
-                    Weights::Hat => response.g[c][z] - log_times[j],
+                    Weights::Hat | Weights::NoiseFromStack => response.g[c][z] - log_times[j],
                     Weights::Noise { .. } => x[z] / times[j],
                 };
                 let finish = |v: f64| match weights {
-                    Weights::Hat => v.exp(),
+                    Weights::Hat | Weights::NoiseFromStack => v.exp(),
                     Weights::Noise { .. } => v,
                 };
                 let (mut num, mut den) = (0.0f64, 0.0f64);

@@ -13,6 +13,7 @@
 pub mod fusion;
 pub mod input;
 pub mod merge;
+pub mod noise;
 pub mod response;
 pub mod tonemap;
 
@@ -133,6 +134,12 @@ pub struct Summary {
     pub method: String,
     /// Sample pixels of Debevec's fit (0 for the others).
     pub samples: usize,
+    /// The merge's weights, with the noise constants they used and where they came from.
+    pub weights: String,
+    /// The full well and read noise the stack gave (`Weights::NoiseFromStack`).
+    pub noise: Option<noise::Estimate>,
+    /// Seconds for that estimate (0 without it).
+    pub noise_s: f64,
     pub saturated_pixels: usize,
     pub dark_pixels: usize,
     /// log₂ of the brightest over the darkest positive luminance among the pixels not
@@ -228,8 +235,34 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
         }
     };
     let response_s = t.elapsed().as_secs_f64();
+    // Noise weights from the stack itself where asked: hat weights where it gives none.
     let t = std::time::Instant::now();
-    let (radiance, mask) = merge::merge(&frames, &times, &response, config.weights);
+    let (weights, noise, weights_used) = match config.weights {
+        Weights::NoiseFromStack => match noise::estimate(&frames, &times, &response, &usable) {
+            Some(e) => (
+                Weights::Noise { full_well: e.full_well, read_noise: e.read_noise },
+                Some(e),
+                format!(
+                    "noise (from the stack: full well {:.0} e⁻, read noise {:.2} e⁻, from {} pairs of frames in {} levels)",
+                    e.full_well, e.read_noise, e.pairs, e.bins
+                ),
+            ),
+            None => (
+                Weights::Hat,
+                None,
+                "hat (the stack gave no noise estimate: too few pixels inside the range in two frames)".into(),
+            ),
+        },
+        Weights::Hat => (Weights::Hat, None, "hat".into()),
+        Weights::Noise { full_well, read_noise } => (
+            config.weights,
+            None,
+            format!("noise (given: full well {full_well} e⁻, read noise {read_noise} e⁻)"),
+        ),
+    };
+    let noise_s = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let (radiance, mask) = merge::merge(&frames, &times, &response, weights);
     let merge_s = t.elapsed().as_secs_f64();
     if radiance.iter().any(|v| !v.is_finite()) {
         let (lo, hi) = response
@@ -261,6 +294,9 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
         levels: input.levels,
         method,
         samples,
+        weights: weights_used,
+        noise,
+        noise_s,
         saturated_pixels: mask.iter().filter(|&&m| m == merge::SATURATED).count(),
         dark_pixels: mask.iter().filter(|&&m| m == merge::DARK).count(),
         dynamic_range_stops: range.map_or(0.0, |(lo, hi)| (hi / lo).log2()),

@@ -5,8 +5,8 @@
 //! code value  = clamp(round(f(clamp(e / full_well, 0, 1)) · (2^bits − 1)), 0, 2^bits − 1)
 //!
 //! so a radiance of 1/exposure reaches full scale. f is the response (`Response`): linear
-//! by default, or a gamma, the sRGB curve, a film-like S-curve or a measured film curve
-//! (`Memorial`), each increasing from
+//! by default, or a gamma, the sRGB curve, a film-like S-curve, a measured film curve
+//! (`Memorial`) or a sensor's S-curve with a steep toe, per channel (`Sigmoid`), each increasing from
 //! f(0) = 0 to f(1) = 1; `Response::inverse` gives the truth a response recovery is judged
 //! against. Noise is drawn from a generator seeded by (seed, pixel), so it does not depend on
 //! the thread count.
@@ -58,6 +58,9 @@ pub enum Response {
     /// long toe and a soft shoulder), f linear in ln x between its values 0 to 254 (the
     /// measured ones: 255 is the scan's clip), 0 below the first, full scale at 254.
     Memorial,
+    /// A sensor's S-shaped curve with a steep toe, per channel c (R, G, B):
+    /// f(x) = x^γ_c·(1 + a_c)/(x^γ_c + a_c), so f(0) = 0, f(1) = 1, steepest near black.
+    Sigmoid { gamma: [f64; 3], a: [f64; 3] },
 }
 
 /// `data/responses/memorial-green.csv`: ln exposure (full scale 0) of each of 255 values.
@@ -81,14 +84,43 @@ impl Response {
             Response::Film { stops } if !(stops.is_finite() && (0.0..=10.0).contains(&stops)) => {
                 Err(format!("response stops = {stops}: expected 0 to 10"))
             }
+            Response::Sigmoid { gamma, a } => {
+                if let Some(g) = gamma.iter().find(|g| !(g.is_finite() && (0.1..=10.0).contains(*g))) {
+                    return Err(format!("response gamma = {g} (of {gamma:?}): expected 0.1 to 10"));
+                }
+                if let Some(v) = a.iter().find(|v| !(v.is_finite() && (1e-3..=1e3).contains(*v))) {
+                    return Err(format!("response a = {v} (of {a:?}): expected 0.001 to 1000"));
+                }
+                Ok(())
+            }
             _ => Ok(()),
         }
     }
 
-    /// f(x) for x in [0, 1].
+    /// Whether channels have curves of their own (else `apply` is every channel's).
+    pub fn per_channel(&self) -> bool {
+        matches!(self, Response::Sigmoid { .. })
+    }
+
+    /// f(x) for x in [0, 1], for the green channel where channels differ.
     pub fn apply(&self, x: f64) -> f64 {
+        self.apply_channel(1, x)
+    }
+
+    /// f⁻¹(y) for y in [0, 1], for the green channel where channels differ.
+    pub fn inverse(&self, y: f64) -> f64 {
+        self.inverse_channel(1, y)
+    }
+
+    /// Channel `c`'s f(x) for x in [0, 1].
+    pub fn apply_channel(&self, c: usize, x: f64) -> f64 {
         let x = x.clamp(0.0, 1.0);
         match *self {
+            Response::Sigmoid { gamma, a } => {
+                let (g, a) = (gamma[c.min(2)], a[c.min(2)]);
+                let p = x.powf(g);
+                p * (1.0 + a) / (p + a)
+            }
             Response::Linear => x,
             Response::Gamma { gamma } => x.powf(1.0 / gamma),
             Response::Srgb => {
@@ -118,13 +150,13 @@ impl Response {
         }
     }
 
-    /// f⁻¹(y) for y in [0, 1] (bisection: 60 halvings reach f64's resolution).
-    pub fn inverse(&self, y: f64) -> f64 {
+    /// Channel `c`'s f⁻¹(y) for y in [0, 1] (bisection: 60 halvings reach f64's resolution).
+    pub fn inverse_channel(&self, c: usize, y: f64) -> f64 {
         let y = y.clamp(0.0, 1.0);
         let (mut lo, mut hi) = (0.0f64, 1.0f64);
         for _ in 0..60 {
             let mid = 0.5 * (lo + hi);
-            if self.apply(mid) < y {
+            if self.apply_channel(c, mid) < y {
                 lo = mid
             } else {
                 hi = mid
@@ -195,7 +227,8 @@ impl Sensor {
                 let key = super::sampler::mix64(seed ^ 0x5e45_0a11 ^ super::sampler::mix64(pixel as u64));
                 let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(key);
                 px.iter()
-                    .map(|&l| {
+                    .enumerate()
+                    .map(|(ch, &l)| {
                         let mean_e = (l.max(0.0) as f64) * self.exposure * self.full_well;
                         let mut e = if self.photon_noise && mean_e > LARGE_MEAN {
                             // The Poisson sampler's rejection loop does not end for means near
@@ -211,7 +244,7 @@ impl Sensor {
                             e += n.sample(&mut rng);
                         }
                         let x = (e / self.full_well).clamp(0.0, 1.0);
-                        let y = if self.response == Response::Linear { x } else { self.response.apply(x) };
+                        let y = if self.response == Response::Linear { x } else { self.response.apply_channel(ch, x) };
                         (y * max).round().clamp(0.0, max) as u16
                     })
                     .collect::<Vec<_>>()
@@ -287,13 +320,17 @@ mod tests {
             Response::Srgb,
             Response::Film { stops: 2.0 },
             Response::Memorial,
+            Response::Sigmoid { gamma: [0.42, 0.46, 0.5], a: [0.25, 0.3, 0.35] },
         ] {
-            assert!(r.apply(0.0).abs() < 1e-12 && (r.apply(1.0) - 1.0).abs() < 1e-12, "{r:?}");
-            let ys: Vec<f64> = (0..=1000).map(|k| r.apply(k as f64 / 1000.0)).collect();
-            assert!(ys.windows(2).all(|w| w[1] > w[0]), "{r:?} is not increasing");
-            for k in 1..100 {
-                let x = k as f64 / 100.0;
-                assert!((r.inverse(r.apply(x)) - x).abs() < 1e-9, "{r:?} at {x}");
+            for c in 0..3 {
+                let f = |x: f64| r.apply_channel(c, x);
+                assert!(f(0.0).abs() < 1e-12 && (f(1.0) - 1.0).abs() < 1e-12, "{r:?}");
+                let ys: Vec<f64> = (0..=1000).map(|k| f(k as f64 / 1000.0)).collect();
+                assert!(ys.windows(2).all(|w| w[1] > w[0]), "{r:?} is not increasing");
+                for k in 1..100 {
+                    let x = k as f64 / 100.0;
+                    assert!((r.inverse_channel(c, f(x)) - x).abs() < 1e-9, "{r:?} at {x}");
+                }
             }
         }
         let table = memorial();

@@ -25,11 +25,16 @@
 //!   pixel channels well exposed (a mean signal of 10 % to 90 % of the full well) in at least
 //!   one frame, after one scale per channel (the median ratio); `radiance_median_err_stops`
 //!   the same in stops;
+//! - `radiance_worst_decade_bias`: the bias a median over the image can hide: per channel,
+//!   after that one scale, the median ratio estimate/truth in each decade of true radiance
+//!   (with at least `DECADE_MIN_SAMPLES` well-exposed pixel channels), the worst |median − 1|;
 //! - `floor_median_rel_err`, `floor_p95_rel_err`: the same for the stack merged through the
 //!   true curve with the same weights, the noise floor no response recovery can beat, and
 //!   `radiance_median_over_floor`, `radiance_p95_over_floor` the ratios to it;
 //! - `saturated_pixels`, `dark_pixels` (masked as bounds), `true_dynamic_range` (brightest
-//!   over darkest positive true luminance), `merge_megapixel_frames_per_s`.
+//!   over darkest positive true luminance), `merge_megapixel_frames_per_s`;
+//! - with `weights = "noise-from-stack"`, `full_well_rel_err`: the stack's estimate of the
+//!   full well (`hdr::noise`) against the sensor's.
 
 use super::{apply_overrides, Context, Findings, SettingsKey, StageError};
 use crate::hdr::{self, Frame, Method, Weights};
@@ -76,7 +81,9 @@ pub struct Config {
     /// Debevec's smoothness term in `logit` of the value (default) or `even` in the value.
     #[serde(default)]
     pub smoothness: hdr::response::Smoothness,
-    /// `hat` or `noise` (default noise: the sensor's own gain and read noise).
+    /// `hat`, `noise` (the default: the sensor's own full well and read noise, as its data
+    /// sheet gives them) or `noise-from-stack` (estimated from the frames, `hdr::noise`, as
+    /// `lumen hdr` does by default).
     #[serde(default = "default_weights")]
     pub weights: String,
     /// Samples per pixel (default: the scene's).
@@ -211,12 +218,18 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(hdr::Input, Truth, Findi
     };
     let luminance_range = crate::image::luminance_range(radiance.data.chunks_exact(3));
     // The noise floor: the stack merged through the true curve with the stage's weights.
-    let g_true: Vec<f64> =
-        (0..levels).map(|z| c.response.inverse(z as f64 / max_code).max(1e-300).ln()).collect();
-    let true_curve = hdr::Response { levels, g: vec![g_true; 3] };
+    let g_true = |ch: usize| -> Vec<f64> {
+        (0..levels).map(|z| c.response.inverse_channel(ch, z as f64 / max_code).max(1e-300).ln()).collect()
+    };
+    let true_curve = hdr::Response { levels, g: (0..3).map(g_true).collect() };
     let codes: Vec<&[u16]> = input.frames.iter().map(|f| f.codes.as_slice()).collect();
     let times: Vec<f64> = input.frames.iter().map(|f| f.time_s).collect();
-    let (floor_radiance, _) = hdr::merge::merge(&codes, &times, &true_curve, weights);
+    // Weights from the stack are judged against the sensor's true constants.
+    let floor_weights = match weights {
+        Weights::NoiseFromStack => Weights::Noise { full_well: c.full_well, read_noise: c.read_noise },
+        w => w,
+    };
+    let (floor_radiance, _) = hdr::merge::merge(&codes, &times, &true_curve, floor_weights);
     let (lo, hi) = luminance_range.unwrap_or((0.0, 0.0));
     let notes = vec![format!(
         "{}: {}×{} px, {} spp, luminance from {lo:.3e} to {hi:.3e}; {} exposures {} stops apart from 1 s, sensor {} bits, response {:?}, full well {} e⁻, read noise {} e⁻.",
@@ -270,7 +283,13 @@ fn method(c: &Config) -> Result<(Method, Weights), StageError> {
         "hat" => Weights::Hat,
         // The sensor's specification, as a camera's data sheet gives it.
         "noise" => Weights::Noise { full_well: c.full_well, read_noise: c.read_noise },
-        other => return Err(StageError::Config(format!("weights = \"{other}\": expected hat or noise"))),
+        // What `lumen hdr` does by default: the noise the stack itself shows.
+        "noise-from-stack" => Weights::NoiseFromStack,
+        other => {
+            return Err(StageError::Config(format!(
+                "weights = \"{other}\": expected hat, noise or noise-from-stack"
+            )))
+        }
     };
     Ok((m, w))
 }
@@ -303,6 +322,43 @@ fn radiance_errors(truth: &Truth, radiance: &[f32]) -> Vec<f64> {
     errs
 }
 
+/// Pixel channels a decade of radiance needs for its median ratio to count in
+/// `worst_decade_bias`: the median of 100 ratios is within about 1.25·σ/10 of the decade's
+/// own, a tenth of one observation's noise.
+const DECADE_MIN_SAMPLES: usize = 100;
+
+/// The bias a median over the whole image can hide: per channel, after the same one scale
+/// as `radiance_errors` (the median ratio), the median ratio estimate/truth of the
+/// well-exposed pixel channels in each decade of true radiance holding at least
+/// `DECADE_MIN_SAMPLES`; the worst |median − 1| over decades and channels.
+fn worst_decade_bias(truth: &Truth, radiance: &[f32]) -> Option<f64> {
+    let n = truth.well_exposed[0].len();
+    let mut worst: Option<f64> = None;
+    for c in 0..3 {
+        let pairs: Vec<(f64, f64)> = (0..n)
+            .filter(|&i| truth.well_exposed[c][i])
+            .map(|i| (truth.radiance.data[3 * i + c] as f64, radiance[3 * i + c] as f64))
+            .filter(|(t, _)| *t > 0.0)
+            .collect();
+        if pairs.is_empty() {
+            continue;
+        }
+        let mut ratios: Vec<f64> = pairs.iter().map(|(t, e)| e / t).collect();
+        ratios.sort_by(f64::total_cmp);
+        let k = ratios[ratios.len() / 2];
+        let mut by_decade: std::collections::BTreeMap<i64, Vec<f64>> = Default::default();
+        for (t, e) in &pairs {
+            by_decade.entry(t.log10().floor() as i64).or_default().push(e / (k * t));
+        }
+        for mut r in by_decade.into_values().filter(|r| r.len() >= DECADE_MIN_SAMPLES) {
+            r.sort_by(f64::total_cmp);
+            let bias = (r[r.len() / 2] - 1.0).abs();
+            worst = Some(worst.map_or(bias, |w: f64| w.max(bias)));
+        }
+    }
+    worst
+}
+
 /// The value at quantile `q` of sorted values.
 fn quantile(sorted: &[f64], q: f64) -> Option<f64> {
     (!sorted.is_empty()).then(|| sorted[((sorted.len() - 1) as f64 * q) as usize])
@@ -313,36 +369,42 @@ pub fn validate(_c: &Config, out: &hdr::Output, truth: &Truth) -> Findings {
     let levels = out.response.levels;
     // The response against the truth, over the values a single observation pins down
     // (module docs), and over every value that occurs.
-    let true_g = |z: f64| truth.response.inverse((z / truth.max_code).clamp(0.0, 1.0)).max(1e-300).ln();
+    let true_g = |c: usize, z: f64| {
+        truth.response.inverse_channel(c, (z / truth.max_code).clamp(0.0, 1.0)).max(1e-300).ln()
+    };
     // The fit's resolution: above 1024 levels it works on bins (`hdr::response`).
     let bin = (levels / hdr::response::MAX_FIT_LEVELS).max(1);
-    // The truth per value, and whether it is pinned down, once for every channel.
-    let g_true: Vec<f64> = (0..levels).map(|z| true_g(z as f64)).collect();
-    let pinned: Vec<bool> = (0..levels)
-        .map(|z| {
-            let half = 0.5 * bin as f64;
-            let sigma_q = (true_g(z as f64 + half) - true_g(z as f64 - half)) / 12f64.sqrt();
-            let e = g_true[z].exp() * truth.full_well;
-            let sigma_e = (e + truth.read_noise.powi(2)).sqrt() / e;
-            z >= bin && z + bin < levels && (sigma_q.powi(2) + sigma_e.powi(2)).sqrt() < 0.1
+    // The truth per channel and value, and whether a single observation pins it down.
+    let g_true: Vec<Vec<f64>> = (0..3).map(|c| (0..levels).map(|z| true_g(c, z as f64)).collect()).collect();
+    let pinned: Vec<Vec<bool>> = (0..3)
+        .map(|c| {
+            (0..levels)
+                .map(|z| {
+                    let half = 0.5 * bin as f64;
+                    let sigma_q = (true_g(c, z as f64 + half) - true_g(c, z as f64 - half)) / 12f64.sqrt();
+                    let e = g_true[c][z].exp() * truth.full_well;
+                    let sigma_e = (e + truth.read_noise.powi(2)).sqrt() / e;
+                    z >= bin && z + bin < levels && (sigma_q.powi(2) + sigma_e.powi(2)).sqrt() < 0.1
+                })
+                .collect()
         })
         .collect();
-    let worst_over = |keep: &dyn Fn(usize) -> bool| {
+    let worst_over = |keep: &dyn Fn(usize, usize) -> bool| {
         let mut worst: Option<f64> = None;
         for c in 0..3 {
-            let zs: Vec<usize> = (1..levels - 1).filter(|&z| truth.occurs[c][z] && keep(z)).collect();
+            let zs: Vec<usize> = (1..levels - 1).filter(|&z| truth.occurs[c][z] && keep(c, z)).collect();
             if zs.is_empty() {
                 continue;
             }
-            let g = &out.response.g[c];
-            let offset = zs.iter().map(|&z| g[z] - g_true[z]).sum::<f64>() / zs.len() as f64;
-            let w = zs.iter().map(|&z| (g[z] - g_true[z] - offset).abs()).fold(0.0, f64::max);
+            let (g, gt) = (&out.response.g[c], &g_true[c]);
+            let offset = zs.iter().map(|&z| g[z] - gt[z]).sum::<f64>() / zs.len() as f64;
+            let w = zs.iter().map(|&z| (g[z] - gt[z] - offset).abs()).fold(0.0, f64::max);
             worst = Some(worst.map_or(w, |v: f64| v.max(w)));
         }
         worst
     };
-    let worst = worst_over(&|z| pinned[z]);
-    let worst_all = worst_over(&|_| true);
+    let worst = worst_over(&|c, z| pinned[c][z]);
+    let worst_all = worst_over(&|_, _| true);
     let m = &mut f.metrics;
     m.push(Metric::maybe("response_err_ln", worst, "ln", Better::Lower, "no value inside the range occurs"));
     m.push(Metric::maybe("response_err_ln_all", worst_all, "ln", Better::Lower, "no value occurs"));
@@ -352,6 +414,13 @@ pub fn validate(_c: &Config, out: &hdr::Output, truth: &Truth) -> Findings {
     let none = "no pixel well exposed in any frame";
     m.push(Metric::maybe("radiance_median_rel_err", pick(0.5), "", Better::Lower, none));
     m.push(Metric::maybe("radiance_p95_rel_err", pick(0.95), "", Better::Lower, none));
+    m.push(Metric::maybe(
+        "radiance_worst_decade_bias",
+        worst_decade_bias(truth, &out.radiance),
+        "",
+        Better::Lower,
+        "no decade of radiance holds enough well-exposed pixel channels",
+    ));
     // The noise floor: the same frames merged through the true curve.
     let (floor_median, floor_p95) = truth.floor.unzip();
     m.push(Metric::maybe("floor_median_rel_err", floor_median, "", Better::Lower, none));
@@ -384,6 +453,10 @@ pub fn validate(_c: &Config, out: &hdr::Output, truth: &Truth) -> Findings {
         Better::Higher,
     ));
     m.push(Metric::new("response_s", s.response_s, "s", Better::Lower));
+    if let Some(e) = &s.noise {
+        m.push(Metric::new("full_well_rel_err", (e.full_well / truth.full_well - 1.0).abs(), "", Better::Lower));
+    }
+    f.notes.push(format!("Merge weights: {}.", s.weights));
     f
 }
 
@@ -402,7 +475,9 @@ pub struct DataConfig {
     /// (registration borders), as `lumen hdr --exclude-color`.
     pub exclude_color: Option<[u16; 3]>,
     /// `debevec` or `robertson` (default debevec), with Debevec's λ, samples and smoothness
-    /// as in `Config`. The merge uses hat weights: a photograph's noise model is unknown.
+    /// as in `Config`. The merge is `lumen hdr`'s default: noise weights with the full well
+    /// and read noise the stack itself gives (`hdr::noise`); the leave-one-out check merges
+    /// with hat weights, which need no estimate from the frame left out.
     #[serde(default = "default_method")]
     pub method: String,
     #[serde(default = "default_lambda")]
@@ -442,7 +517,8 @@ pub fn read(c: &DataConfig, ctx: &Context) -> Result<(hdr::Input, Stack, Finding
 
 pub fn solve_data(c: &DataConfig, input: &hdr::Input) -> Result<hdr::Output, StageError> {
     let method = fit(&c.method, c.lambda, c.samples_per_value, c.smoothness)?;
-    Ok(hdr::run(input, &hdr::Config { method, weights: Weights::Hat, fusion: None })?)
+    // The merge `lumen hdr` makes by default: noise weights with the stack's own estimate.
+    Ok(hdr::run(input, &hdr::Config { method, weights: Weights::NoiseFromStack, fusion: None })?)
 }
 
 /// Metrics:
