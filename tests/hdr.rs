@@ -411,7 +411,10 @@ fn cli_inputs_and_refusals() {
             vec!["--images", &a, &b, "--times", "1", "2", "--response", "/nonexistent/r.csv"],
             "not debevec, robertson",
         ),
-        (vec!["--images", &a, &b, "--times", "1", "2", "--read-noise", "3"], "--read-noise 3: give it with --full-well"),
+        (
+            vec!["--images", &a, &b, "--times", "1", "2", "--read-noise", "3"],
+            "--read-noise 3: give it with --full-well",
+        ),
         (vec!["--images", &a, &b, "--times", "1", "2", "--weights", "tent"], "hat or noise"),
         (vec!["--images", &a, &b, "--times", "1", "2", "--lambda", "nan"], "--lambda"),
         (vec!["--images", &a, &b, "--times", "1", "2", "--smoothness", "odd"], "--smoothness \"odd\""),

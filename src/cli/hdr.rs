@@ -112,7 +112,10 @@ pub fn run(a: &HdrArgs) -> Result<()> {
             a.read_noise
         ),
         ("noise", None) if a.read_noise != 0.0 => {
-            bail!("--read-noise {}: give it with --full-well (without, both come from the stack)", a.read_noise)
+            bail!(
+                "--read-noise {}: give it with --full-well (without, both come from the stack)",
+                a.read_noise
+            )
         }
         ("noise", None) => Weights::NoiseFromStack,
         (other, _) => bail!("--weights {other}: expected hat or noise"),

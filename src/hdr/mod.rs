@@ -5,7 +5,9 @@
 //! exposure times in, the response per channel (`response`: Debevec & Malik 1997, Robertson
 //! et al. 2003, or a given curve) and the merged radiance with its mask (`merge`) out. The
 //! radiance has the response's arbitrary scale per channel (g(z_mid) = 0): exposure × time
-//! is known only up to that factor.
+//! is known only up to that factor. The merge's noise weights take the sensor's full well and
+//! read noise as given, or as the stack itself shows them (`noise`, `Weights::NoiseFromStack`,
+//! `lumen hdr`'s default; `Config::default` keeps Debevec & Malik's hat weights).
 //!
 //! `tonemap` holds Reinhard et al.'s global operator for PNG previews; `fusion` Mertens et
 //! al.'s exposure fusion, an LDR picture blended from the frames without a response.

@@ -123,7 +123,10 @@ pub fn estimate(frames: &[&[u16]], times: &[f64], response: &Response, usable: &
     // One equation per bin: var − quantisation = α·u + β·v, with its pair count.
     let mut eqs: Vec<Equation> = Vec::new();
     let mut pairs = 0;
-    for b in bins.values_mut().filter(|b| b.d.len() >= MIN_BIN_PAIRS && b.clipped as f64 <= MAX_CLIPPED * b.d.len() as f64) {
+    for b in bins
+        .values_mut()
+        .filter(|b| b.d.len() >= MIN_BIN_PAIRS && b.clipped as f64 <= MAX_CLIPPED * b.d.len() as f64)
+    {
         let n = b.d.len() as f64;
         let (level, quant) = (b.level / n, b.quant / n);
         let Some(var) = robust_variance(&mut b.d, quant) else { continue };
@@ -173,8 +176,11 @@ fn solve(eqs: &[Equation], expected: impl Fn(&Equation) -> f64) -> Option<(f64, 
         b2 += w * e.v * y;
     }
     let det = a11 * a22 - a12 * a12;
-    let (mut alpha, mut beta) =
-        if det > 1e-12 * a11 * a22 { ((b1 * a22 - b2 * a12) / det, (a11 * b2 - a12 * b1) / det) } else { (b1 / a11, 0.0) };
+    let (mut alpha, mut beta) = if det > 1e-12 * a11 * a22 {
+        ((b1 * a22 - b2 * a12) / det, (a11 * b2 - a12 * b1) / det)
+    } else {
+        (b1 / a11, 0.0)
+    };
     if beta < 0.0 {
         beta = 0.0;
         alpha = b1 / a11;

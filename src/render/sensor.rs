@@ -244,7 +244,11 @@ impl Sensor {
                             e += n.sample(&mut rng);
                         }
                         let x = (e / self.full_well).clamp(0.0, 1.0);
-                        let y = if self.response == Response::Linear { x } else { self.response.apply_channel(ch, x) };
+                        let y = if self.response == Response::Linear {
+                            x
+                        } else {
+                            self.response.apply_channel(ch, x)
+                        };
                         (y * max).round().clamp(0.0, max) as u16
                     })
                     .collect::<Vec<_>>()

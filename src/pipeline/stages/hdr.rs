@@ -454,7 +454,12 @@ pub fn validate(_c: &Config, out: &hdr::Output, truth: &Truth) -> Findings {
     ));
     m.push(Metric::new("response_s", s.response_s, "s", Better::Lower));
     if let Some(e) = &s.noise {
-        m.push(Metric::new("full_well_rel_err", (e.full_well / truth.full_well - 1.0).abs(), "", Better::Lower));
+        m.push(Metric::new(
+            "full_well_rel_err",
+            (e.full_well / truth.full_well - 1.0).abs(),
+            "",
+            Better::Lower,
+        ));
     }
     f.notes.push(format!("Merge weights: {}.", s.weights));
     f
