@@ -252,7 +252,7 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
             None => (
                 Weights::Hat,
                 None,
-                "hat (the stack gave no noise estimate: too few pixels inside the range in two frames)".into(),
+                "hat (the stack gave no noise estimate: too few levels where consecutive frames overlap with a spread above the codes' quantisation, or no positive photon noise in them)".into(),
             ),
         },
         Weights::Hat => (Weights::Hat, None, "hat".into()),

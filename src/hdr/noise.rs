@@ -19,6 +19,8 @@
 //! from it, so the rest are a truncated sample whose spread is too small); each bin's variance
 //! about its own mean (a response biased at the toe shifts d, it does not widen it), with
 //! values beyond six robust deviations left out (motion, misregistration), is one equation
+//! (where it exceeds the quantisation's: below it the codes hardly move between frames and
+//! the bin cannot show the noise)
 //! linear in α and β, weighted by count/variance² (the variance of a variance estimate).
 //! Weighted least squares gives α and β; full well = 1/α, read noise = √β/α.
 //!
@@ -91,12 +93,17 @@ pub fn estimate(frames: &[&[u16]], times: &[f64], response: &Response, usable: &
                 let (zj, zk) = (frames[j][3 * i + c] as usize, frames[k][3 * i + c] as usize);
                 let inside = |z: usize| z > 0 && z < levels - 1;
                 let key = |level: f64| ((level.log2() / BIN_STOPS).floor() as i64, r_key);
+                // Binned by the level d is uncorrelated with: under photon noise var(r·xⱼ′) =
+                // r·var(xⱼ), so (r·xⱼ + r·xⱼ′)/(r + 1); the plain mean would select pairs by
+                // their difference and narrow each bin's spread.
+                let level_of = |xj: f64, xk: f64| (r * xj + xk) / (r + 1.0);
                 if !(inside(zj) && inside(zk)) {
                     // One frame inside, the other clipped (the shorter at black, the longer at
-                    // saturation): its bin's pairs are a truncated sample (module docs).
+                    // saturation): the bin this pair would have fallen in holds a truncated
+                    // sample (module docs). Its level, with the clipped frame at its clip.
                     let level = match (inside(zj), inside(zk)) {
-                        (true, false) if zk == 0 => frac[zj],
-                        (false, true) if zj == levels - 1 => r * frac[zk],
+                        (true, false) if zk == 0 => level_of(frac[zj], 0.0),
+                        (false, true) if zj == levels - 1 => level_of(1.0, r * frac[zk]),
                         _ => continue,
                     };
                     if level > 0.0 {
@@ -105,10 +112,7 @@ pub fn estimate(frames: &[&[u16]], times: &[f64], response: &Response, usable: &
                     continue;
                 }
                 let (xj, xk) = (frac[zj], r * frac[zk]);
-                // Binned by the level d is uncorrelated with: under photon noise var(r·xⱼ′) =
-                // r·var(xⱼ), so (r·xⱼ + r·xⱼ′)/(r + 1); the plain mean would select pairs by
-                // their difference and narrow each bin's spread.
-                let level = (r * xj + xk) / (r + 1.0);
+                let level = level_of(xj, xk);
                 if level <= 0.0 {
                     continue;
                 }
@@ -130,6 +134,11 @@ pub fn estimate(frames: &[&[u16]], times: &[f64], response: &Response, usable: &
         let n = b.d.len() as f64;
         let (level, quant) = (b.level / n, b.quant / n);
         let Some(var) = robust_variance(&mut b.d, quant) else { continue };
+        // A spread below the codes' own quantisation: the codes hardly move between the
+        // frames (a flat dark area, film's base), so the bin cannot show the noise.
+        if var <= quant {
+            continue;
+        }
         eqs.push(Equation { u: level * (1.0 + b.r), v: 1.0 + b.r * b.r, quant, var, n });
         pairs += b.d.len();
     }
@@ -227,7 +236,8 @@ mod tests {
     use rand_distr::{Distribution, Normal, Poisson};
 
     /// A linear 12-bit sensor with 5000 e⁻ and 4 e⁻ of read noise, seen through its true
-    /// curve: the estimate finds both within the precision 65 536 pixels give.
+    /// curve: the estimate finds both within a few times the precision its bins give (about
+    /// 30 levels of 15 000 pairs, each variance known to 1.2 %).
     #[test]
     fn recovers_full_well_and_read_noise() {
         let (levels, fw, rn) = (4096usize, 5000.0, 4.0);
@@ -258,7 +268,7 @@ mod tests {
         let refs: Vec<&[u16]> = frames.iter().map(|f| f.as_slice()).collect();
         let e = estimate(&refs, &times, &response, &vec![true; n]).unwrap();
         eprintln!("{e:?}");
-        assert!((e.full_well / fw - 1.0).abs() < 0.05, "{e:?}");
-        assert!((e.read_noise - rn).abs() < 1.0, "{e:?}");
+        assert!((e.full_well / fw - 1.0).abs() < 0.03, "{e:?}");
+        assert!((e.read_noise - rn).abs() < 0.5, "{e:?}");
     }
 }

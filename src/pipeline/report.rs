@@ -78,8 +78,9 @@ pub struct StageReport {
 }
 
 impl StageReport {
-    /// Whether the case failed: an outcome other than declared, a metric that missed its
-    /// bound without a declared miss, or a declared miss now met.
+    /// Whether the case failed: an outcome other than declared, or a metric that missed its
+    /// bound without a declared miss. (A declared miss now met is judged over its entry's
+    /// cases: `Report::misses_now_met`.)
     pub fn failed(&self) -> bool {
         self.skipped.is_none() && self.outcome.declared != self.outcome.actual
             || self.metrics.iter().any(Metric::failed)
