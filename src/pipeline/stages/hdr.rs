@@ -299,25 +299,34 @@ pub fn solve(c: &Config, input: &hdr::Input) -> Result<hdr::Output, StageError> 
     Ok(hdr::run(input, &hdr::Config { method, weights, fusion: None })?)
 }
 
+/// Per channel, the (truth, estimate) pairs of the well-exposed pixel channels with a positive
+/// truth, the estimate divided by one scale per channel (the median ratio): the radiance's
+/// arbitrary scale taken out.
+fn scaled_pairs(truth: &Truth, radiance: &[f32]) -> Vec<Vec<(f64, f64)>> {
+    let n = truth.well_exposed[0].len();
+    (0..3)
+        .map(|c| {
+            let pairs: Vec<(f64, f64)> = (0..n)
+                .filter(|&i| truth.well_exposed[c][i])
+                .map(|i| (truth.radiance.data[3 * i + c] as f64, radiance[3 * i + c] as f64))
+                .filter(|(t, _)| *t > 0.0)
+                .collect();
+            if pairs.is_empty() {
+                return pairs;
+            }
+            let mut ratios: Vec<f64> = pairs.iter().map(|(t, e)| e / t).collect();
+            ratios.sort_by(f64::total_cmp);
+            let k = ratios[ratios.len() / 2];
+            pairs.into_iter().map(|(t, e)| (t, e / k)).collect()
+        })
+        .collect()
+}
+
 /// Relative errors of a merged radiance against the truth over the well-exposed pixel
 /// channels, after one scale per channel (the median ratio), sorted.
 fn radiance_errors(truth: &Truth, radiance: &[f32]) -> Vec<f64> {
-    let n = truth.well_exposed[0].len();
-    let mut errs = Vec::new();
-    for c in 0..3 {
-        let pairs: Vec<(f64, f64)> = (0..n)
-            .filter(|&i| truth.well_exposed[c][i])
-            .map(|i| (truth.radiance.data[3 * i + c] as f64, radiance[3 * i + c] as f64))
-            .filter(|(t, _)| *t > 0.0)
-            .collect();
-        if pairs.is_empty() {
-            continue;
-        }
-        let mut ratios: Vec<f64> = pairs.iter().map(|(t, e)| e / t).collect();
-        ratios.sort_by(f64::total_cmp);
-        let k = ratios[ratios.len() / 2];
-        errs.extend(pairs.iter().map(|(t, e)| (e / k - t).abs() / t));
-    }
+    let mut errs: Vec<f64> =
+        scaled_pairs(truth, radiance).into_iter().flatten().map(|(t, e)| (e - t).abs() / t).collect();
     errs.sort_by(f64::total_cmp);
     errs
 }
@@ -332,23 +341,11 @@ const DECADE_MIN_SAMPLES: usize = 100;
 /// well-exposed pixel channels in each decade of true radiance holding at least
 /// `DECADE_MIN_SAMPLES`; the worst |median − 1| over decades and channels.
 fn worst_decade_bias(truth: &Truth, radiance: &[f32]) -> Option<f64> {
-    let n = truth.well_exposed[0].len();
     let mut worst: Option<f64> = None;
-    for c in 0..3 {
-        let pairs: Vec<(f64, f64)> = (0..n)
-            .filter(|&i| truth.well_exposed[c][i])
-            .map(|i| (truth.radiance.data[3 * i + c] as f64, radiance[3 * i + c] as f64))
-            .filter(|(t, _)| *t > 0.0)
-            .collect();
-        if pairs.is_empty() {
-            continue;
-        }
-        let mut ratios: Vec<f64> = pairs.iter().map(|(t, e)| e / t).collect();
-        ratios.sort_by(f64::total_cmp);
-        let k = ratios[ratios.len() / 2];
+    for pairs in scaled_pairs(truth, radiance) {
         let mut by_decade: std::collections::BTreeMap<i64, Vec<f64>> = Default::default();
         for (t, e) in &pairs {
-            by_decade.entry(t.log10().floor() as i64).or_default().push(e / (k * t));
+            by_decade.entry(t.log10().floor() as i64).or_default().push(e / t);
         }
         for mut r in by_decade.into_values().filter(|r| r.len() >= DECADE_MIN_SAMPLES) {
             r.sort_by(f64::total_cmp);
