@@ -44,6 +44,16 @@ pub const WELL_EXPOSED: u8 = 0;
 pub const SATURATED: u8 = 1;
 pub const DARK: u8 = 2;
 
+/// The variance of the linear exposure X = exp(g(z)) a code `z` stands for (module docs):
+/// k·X + σ_r² + X′²/12, with `x` the response's exp(g) per code.
+pub fn exposure_variance(x: &[f64], z: usize, full_well: f64, read_noise: f64) -> f64 {
+    let levels = x.len();
+    let gain = x[levels - 1] / full_well;
+    let read = gain * read_noise;
+    let slope = 0.5 * (x[(z + 1).min(levels - 1)] - x[z.saturating_sub(1)]);
+    gain * x[z] + read * read + slope * slope / 12.0
+}
+
 /// Merges `frames` (per frame, interleaved RGB codes) into linear radiance (interleaved RGB)
 /// and the mask.
 pub fn merge(frames: &[&[u16]], times: &[f64], response: &Response, weights: Weights) -> (Vec<f32>, Vec<u8>) {
@@ -64,10 +74,7 @@ pub fn merge(frames: &[&[u16]], times: &[f64], response: &Response, weights: Wei
                     _ if z == 0 || z == levels - 1 => 0.0,
                     Weights::Hat | Weights::NoiseFromStack => hat(z, levels),
                     Weights::Noise { full_well, read_noise } => {
-                        let gain = x[levels - 1] / full_well;
-                        let read = gain * read_noise;
-                        let slope = 0.5 * (x[(z + 1).min(levels - 1)] - x[z.saturating_sub(1)]);
-                        1.0 / (gain * x[z] + read * read + slope * slope / 12.0).max(1e-300)
+                        1.0 / exposure_variance(&x, z, full_well, read_noise).max(1e-300)
                     }
                 })
                 .collect();

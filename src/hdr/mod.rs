@@ -7,7 +7,9 @@
 //! radiance has the response's arbitrary scale per channel (g(z_mid) = 0): exposure × time
 //! is known only up to that factor. The merge's noise weights take the sensor's full well and
 //! read noise as given, or as the stack itself shows them (`noise`, `Weights::NoiseFromStack`,
-//! `lumen hdr`'s default; `Config::default` keeps Debevec & Malik's hat weights).
+//! `lumen hdr`'s default; `Config::default` keeps Debevec & Malik's hat weights). With the
+//! noise known, a fitted curve's toe, where one code says little of its exposure, is refitted
+//! as the sensor's mean response and the stack merged again through it (`toe`).
 //!
 //! `tonemap` holds Reinhard et al.'s global operator for PNG previews; `fusion` Mertens et
 //! al.'s exposure fusion, an LDR picture blended from the frames without a response.
@@ -17,6 +19,7 @@ pub mod input;
 pub mod merge;
 pub mod noise;
 pub mod response;
+pub mod toe;
 pub mod tonemap;
 
 pub use merge::Weights;
@@ -174,7 +177,7 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     };
     let t = std::time::Instant::now();
     let mut samples = 0;
-    let (response, method) = match &config.method {
+    let (response, mut method) = match &config.method {
         Method::Given(r) => {
             if r.levels != input.levels || r.g.len() != 3 || r.g.iter().any(|g| g.len() != r.levels) {
                 return Err(Error::BadInput(format!(
@@ -236,36 +239,55 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
             (Response { levels: input.levels, g }, "robertson".to_string())
         }
     };
-    let response_s = t.elapsed().as_secs_f64();
+    let mut response_s = t.elapsed().as_secs_f64();
     // Noise weights from the stack itself where asked: hat weights where it gives none.
     let t = std::time::Instant::now();
-    let (weights, noise, weights_used) = match config.weights {
-        Weights::NoiseFromStack => match noise::estimate(&frames, &times, &response, &usable) {
-            Some(e) => (
-                Weights::Noise { full_well: e.full_well, read_noise: e.read_noise },
-                Some(e),
-                format!(
-                    "noise (from the stack: full well {:.0} e⁻, read noise {:.2} e⁻, from {} pairs of frames in {} levels)",
-                    e.full_well, e.read_noise, e.pairs, e.bins
-                ),
-            ),
-            None => (
-                Weights::Hat,
-                None,
-                "hat (the stack gave no noise estimate: too few levels where consecutive frames overlap with a spread above the codes' quantisation, or no positive photon noise in them)".into(),
-            ),
-        },
-        Weights::Hat => (Weights::Hat, None, "hat".into()),
-        Weights::Noise { full_well, read_noise } => (
-            config.weights,
-            None,
-            format!("noise (given: full well {full_well} e⁻, read noise {read_noise} e⁻)"),
-        ),
-    };
-    let noise_s = t.elapsed().as_secs_f64();
+    let (mut weights, mut noise, mut weights_used) =
+        resolve_weights(config.weights, &frames, &times, &response, &usable);
+    let mut noise_s = t.elapsed().as_secs_f64();
     let t = std::time::Instant::now();
-    let (radiance, mask) = merge::merge(&frames, &times, &response, weights);
-    let merge_s = t.elapsed().as_secs_f64();
+    let (mut radiance, mut mask) = merge::merge(&frames, &times, &response, weights);
+    let mut merge_s = t.elapsed().as_secs_f64();
+    // With the noise known, a fitted curve's toe is refitted as the sensor's mean response
+    // (`toe`) and the stack merged again through it.
+    let mut response = response;
+    let mut toe_ends = Vec::new();
+    if let (Weights::Noise { full_well, read_noise }, false) =
+        (weights, matches!(config.method, Method::Given(_)))
+    {
+        let t = std::time::Instant::now();
+        let ln_times: Vec<f64> = times.iter().map(|t| t.ln()).collect();
+        for c in 0..3 {
+            let Some(end) = toe::end(&response.g[c], full_well, read_noise).filter(|&e| e > 1) else {
+                continue;
+            };
+            let codes: Vec<Vec<u16>> =
+                frames.iter().map(|f| f[c..].iter().step_by(3).copied().collect()).collect();
+            let ln_e: Vec<f64> = (0..n)
+                .map(|i| if usable[i] { (radiance[3 * i + c] as f64).ln() } else { f64::NAN })
+                .collect();
+            if let Some(g) = toe::refit(&response.g[c], &codes, &ln_times, &ln_e, end) {
+                response.g[c] = g;
+                toe_ends.push((c, end));
+            }
+        }
+        response_s += t.elapsed().as_secs_f64();
+        if !toe_ends.is_empty() {
+            // The noise seen through the final curve, as a merge given that curve sees it.
+            let t = std::time::Instant::now();
+            (weights, noise, weights_used) =
+                resolve_weights(config.weights, &frames, &times, &response, &usable);
+            noise_s += t.elapsed().as_secs_f64();
+            let t = std::time::Instant::now();
+            (radiance, mask) = merge::merge(&frames, &times, &response, weights);
+            merge_s = t.elapsed().as_secs_f64();
+        }
+    }
+    if !toe_ends.is_empty() {
+        let ends: Vec<String> =
+            toe_ends.iter().map(|(c, e)| format!("{} {e}", ["R", "G", "B"][*c])).collect();
+        method += &format!("; toe refitted as the mean response below value {}", ends.join(", "));
+    }
     if radiance.iter().any(|v| !v.is_finite()) {
         let (lo, hi) = response
             .g
@@ -308,6 +330,40 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
         fusion_s,
     };
     Ok(Output { response, radiance, mask, fusion, summary })
+}
+
+/// The merge's weights for `asked`: `NoiseFromStack` resolved to the stack's noise through
+/// `response` (hat weights where it gives none), with the estimate and a description.
+fn resolve_weights(
+    asked: Weights,
+    frames: &[&[u16]],
+    times: &[f64],
+    response: &Response,
+    usable: &[bool],
+) -> (Weights, Option<noise::Estimate>, String) {
+    match asked {
+    Weights::NoiseFromStack => match noise::estimate(frames, times, response, usable) {
+        Some(e) => (
+            Weights::Noise { full_well: e.full_well, read_noise: e.read_noise },
+            Some(e),
+            format!(
+                "noise (from the stack: full well {:.0} e⁻, read noise {:.2} e⁻, from {} pairs of frames in {} levels)",
+                e.full_well, e.read_noise, e.pairs, e.bins
+            ),
+        ),
+        None => (
+            Weights::Hat,
+            None,
+            "hat (the stack gave no noise estimate: too few levels where consecutive frames overlap with a spread above the codes' quantisation, or no positive photon noise in them)".into(),
+        ),
+    },
+    Weights::Hat => (Weights::Hat, None, "hat".into()),
+    Weights::Noise { full_well, read_noise } => (
+        asked,
+        None,
+        format!("noise (given: full well {full_well} e⁻, read noise {read_noise} e⁻)"),
+    ),
+    }
 }
 
 fn check(input: &Input) -> Result<(), Error> {

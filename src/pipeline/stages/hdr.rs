@@ -21,6 +21,13 @@
 //!   errors in variables) rather than towards f⁻¹; the values in the fit's end bins (weight
 //!   0: black and saturated) are left out too. `response_err_ln_all` is the same over every
 //!   value that occurs, for the record;
+//! - `response_toe_err_sigmas`: the toe, the values that occur below the pinned ones and
+//!   above the sensor's mean code at black, against what the sensor does there: its mean
+//!   response E[z | x] under photon, read and quantisation noise and the clip at black
+//!   (`mean_response`). At each toe value z, the fitted curve's exposure (with the offset of
+//!   the pinned values) gives a mean code; the worst |mean − z| over the code's own standard
+//!   deviation there. An error ε in ln exposure shows as ε/σ of these units where a code's
+//!   noise in ln exposure is σ: at the toe's end (σ = 0.1) the pinned values' 0.02 is 0.2;
 //! - `radiance_median_rel_err`, `radiance_p95_rel_err`: against the true radiance over the
 //!   pixel channels well exposed (a mean signal of 10 % to 90 % of the full well) in at least
 //!   one frame, after one scale per channel (the median ratio); `radiance_median_err_stops`
@@ -356,6 +363,63 @@ fn worst_decade_bias(truth: &Truth, radiance: &[f32]) -> Option<f64> {
     worst
 }
 
+/// The sensor's mean response: on a grid of ln x (exposure as a fraction of full scale, as
+/// the true g), rising from 10⁻³ electrons to `ln_hi` (at most full scale), the mean and standard deviation of
+/// the code under photon, read and quantisation noise and the clip at black. With
+/// e = Poisson(x·full_well) + Normal(0, σ_r²) electrons and e_z = full_well·f⁻¹((z − ½)/max)
+/// the electrons at which the code reaches z, code = Σ_z 1[e ≥ e_z] and code² =
+/// Σ_z (2z − 1)·1[e ≥ e_z], so both moments are sums of P(e ≥ e_z).
+fn mean_response(truth: &Truth, c: usize, ln_hi: f64) -> Vec<(f64, f64, f64)> {
+    use crate::math::stats::normal_cdf;
+    let (fw, sr, max) = (truth.full_well, truth.read_noise, truth.max_code);
+    let thresholds: Vec<f64> =
+        (1..=max as usize).map(|z| fw * truth.response.inverse_channel(c, (z as f64 - 0.5) / max)).collect();
+    // (E[code], E[code²]) given e ~ Normal(mean, s²).
+    let moments = |mean: f64, s: f64| -> (f64, f64) {
+        let (lo, hi) = if s <= 0.0 {
+            let k = thresholds.partition_point(|&t| t <= mean);
+            (k, k)
+        } else {
+            (
+                thresholds.partition_point(|&t| t < mean - 9.0 * s),
+                thresholds.partition_point(|&t| t <= mean + 9.0 * s),
+            )
+        };
+        let (mut m1, mut m2) = (lo as f64, (lo * lo) as f64);
+        for (k, &t) in thresholds[lo..hi].iter().enumerate() {
+            let p = normal_cdf((mean - t) / s);
+            m1 += p;
+            m2 += (2 * (lo + k + 1) - 1) as f64 * p;
+        }
+        (m1, m2)
+    };
+    // Under Poisson photons (means up to `POISSON`): the moments per photon count, once.
+    const POISSON: f64 = 200.0;
+    let per_count: Vec<(f64, f64)> =
+        (0..(POISSON + 12.0 * POISSON.sqrt() + 20.0) as usize).map(|k| moments(k as f64, sr)).collect();
+    let expected = |e: f64| -> (f64, f64) {
+        if e > POISSON {
+            return moments(e, (e + sr * sr).sqrt());
+        }
+        let (mut p, mut sum) = ((-e).exp(), (0.0, 0.0));
+        for (k, &(a, b)) in per_count.iter().enumerate().take((e + 12.0 * e.sqrt() + 20.0) as usize) {
+            sum = (sum.0 + p * a, sum.1 + p * b);
+            p *= e / (k + 1) as f64;
+        }
+        sum
+    };
+    let ln_lo = (1e-3 / fw).ln();
+    let ln_hi = ln_hi.min(0.0).max(ln_lo + 1.0);
+    let steps = 2000;
+    (0..=steps)
+        .map(|k| {
+            let l = ln_lo + (ln_hi - ln_lo) * k as f64 / steps as f64;
+            let (m1, m2) = expected(l.exp() * fw);
+            (l, m1, (m2 - m1 * m1).max(0.0).sqrt())
+        })
+        .collect()
+}
+
 /// The value at quantile `q` of sorted values.
 fn quantile(sorted: &[f64], q: f64) -> Option<f64> {
     (!sorted.is_empty()).then(|| sorted[((sorted.len() - 1) as f64 * q) as usize])
@@ -402,9 +466,42 @@ pub fn validate(_c: &Config, out: &hdr::Output, truth: &Truth) -> Findings {
     };
     let worst = worst_over(&|c, z| pinned[c][z]);
     let worst_all = worst_over(&|_, _| true);
+    // The toe: the values that occur below the pinned ones (outside the end bins) and above
+    // the sensor's mean code at black; the fitted curve's exposure for each (with the offset
+    // of the pinned values) against the mean code the sensor gives there, in units of the
+    // code's own spread.
+    let mut toe: Option<f64> = None;
+    for c in 0..3 {
+        let Some(first) = (0..levels).find(|&z| pinned[c][z]) else { continue };
+        let zs: Vec<usize> = (first..levels).filter(|&z| pinned[c][z] && truth.occurs[c][z]).collect();
+        if zs.is_empty() {
+            continue;
+        }
+        let g = &out.response.g[c];
+        let offset = zs.iter().map(|&z| g[z] - g_true[c][z]).sum::<f64>() / zs.len() as f64;
+        // Up to an exposure past the toe's end: the fit's toe values lie below it.
+        let curve = mean_response(truth, c, g_true[c][first] + 1.0);
+        let black = curve[0].1;
+        for z in (bin..first).filter(|&z| truth.occurs[c][z] && z as f64 > black) {
+            let l = g[z] - offset;
+            let k = curve.partition_point(|p| p.0 < l).clamp(1, curve.len() - 1);
+            let (a, b) = (curve[k - 1], curve[k]);
+            let f = ((l - a.0) / (b.0 - a.0)).clamp(0.0, 1.0);
+            let (mean, sd) = (a.1 + f * (b.1 - a.1), a.2 + f * (b.2 - a.2));
+            let e = (mean - z as f64).abs() / sd.max(1e-9);
+            toe = Some(toe.map_or(e, |t: f64| t.max(e)));
+        }
+    }
     let m = &mut f.metrics;
     m.push(Metric::maybe("response_err_ln", worst, "ln", Better::Lower, "no value inside the range occurs"));
     m.push(Metric::maybe("response_err_ln_all", worst_all, "ln", Better::Lower, "no value occurs"));
+    m.push(Metric::maybe(
+        "response_toe_err_sigmas",
+        toe,
+        "σ",
+        Better::Lower,
+        "no value below the pinned ones occurs above the sensor's mean code at black",
+    ));
     // The radiance against the truth.
     let errs = radiance_errors(truth, &out.radiance);
     let pick = |q: f64| quantile(&errs, q);
