@@ -1,7 +1,8 @@
 //! Pipelines: which stages run, on which scenes, with which seeds and bounds (`file`); the
-//! runner (`run`, the one `match` over the stages); the render cache (`cache`); metrics and
-//! their verdicts (`metric`); the report (`report`). Every stage is three plain functions
-//! (`stages` docs); only listed cases run, and each renders only what it consumes.
+//! runner (`run`); the stages, one file each and one table of them (`stages::REGISTRY`); the
+//! render cache (`cache`); metrics and their verdicts (`metric`); the report (`report`). Every
+//! stage is three plain functions (`stages` docs); only listed cases run, and each renders
+//! only what it consumes.
 
 pub mod cache;
 pub mod file;
@@ -13,10 +14,10 @@ pub mod stages;
 
 pub use file::{load, PipelineFile};
 
-use file::{Case, Stage};
+use file::Case;
 use metric::Metric;
 use report::{Outcome, Renders, Report, StageFailure, StageReport};
-use stages::{run_case, CaseResult, Context, StageError};
+use stages::{CaseResult, Context, StageError};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 
@@ -121,21 +122,7 @@ pub fn render_share(
             let seed = case.common.seed.unwrap_or(file.seed);
             let ctx = Context { dir: &dir, case: &case.common.case, seed, cache: &cache, progress: false };
             let before = cache.share_count();
-            let result = match (&case.stage, pass) {
-                (Stage::Calibrate(c), cache::Pass::Renders) => {
-                    stages::calibrate::synthesize(c, &ctx).map(|_| ())
-                }
-                (Stage::Photometric(c), cache::Pass::Renders) => {
-                    stages::photometric::synthesize(c, &ctx).map(|_| ())
-                }
-                (Stage::Color(c), cache::Pass::Renders) => stages::color::synthesize(c, &ctx).map(|_| ()),
-                (Stage::Hdr(c), cache::Pass::Renders) => stages::hdr::synthesize(c, &ctx).map(|_| ()),
-                (Stage::SfmRender(c), _) => stages::sfm::synthesize(c, &ctx).map(|_| ()),
-                (Stage::Sfm(c), _) => stages::sfm::read(c, &ctx).map(|_| ()),
-                // Renders timed afresh (never cached), other real data, and in the matches
-                // pass every stage without pairs to match: nothing to share.
-                _ => continue,
-            };
+            let Some(result) = case.stage.share(&ctx, pass) else { continue };
             if progress {
                 let now = cache.share_count();
                 let what = match result {
@@ -182,56 +169,7 @@ fn run_cases(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Repo
             eprintln!("[{}/{n}] {} {} ...", k + 1, case.stage.name(), case.common.case);
         }
         let t = std::time::Instant::now();
-        let result = match &case.stage {
-            Stage::Render(c) => run_case(
-                || stages::render::synthesize(c, &ctx),
-                |i| stages::render::solve(c, i),
-                |o, t| stages::render::validate(c, o, t),
-            ),
-            Stage::Calibrate(c) => run_case(
-                || stages::calibrate::synthesize(c, &ctx),
-                |i| stages::calibrate::solve(c, i),
-                |o, t| stages::calibrate::validate(c, o, t),
-            ),
-            Stage::CalibrateData(c) => run_case(
-                || stages::calibrate::read(c, &ctx),
-                |i| stages::calibrate::solve_data(c, i),
-                stages::calibrate::validate_data,
-            ),
-            Stage::Photometric(c) => run_case(
-                || stages::photometric::synthesize(c, &ctx),
-                |i| stages::photometric::solve(c, i),
-                stages::photometric::validate,
-            ),
-            Stage::PhotometricData(c) => run_case(
-                || stages::photometric::read(c, &ctx),
-                |i| stages::photometric::solve_data(c, i),
-                stages::photometric::validate,
-            ),
-            Stage::Color(c) => run_case(
-                || stages::color::synthesize(c, &ctx),
-                |i| stages::color::solve(c, i),
-                |o, t| stages::color::validate(c, o, t),
-            ),
-            Stage::Hdr(c) => run_case(
-                || stages::hdr::synthesize(c, &ctx),
-                |i| stages::hdr::solve(c, i),
-                |o, t| stages::hdr::validate(c, o, t),
-            ),
-            Stage::HdrData(c) => run_case(
-                || stages::hdr::read(c, &ctx),
-                |i| stages::hdr::solve_data(c, i),
-                stages::hdr::validate_data,
-            ),
-            Stage::SfmRender(c) => run_case(
-                || stages::sfm::synthesize(c, &ctx),
-                |i| stages::sfm::solve_render(c, i),
-                stages::sfm::validate,
-            ),
-            Stage::Sfm(c) => {
-                run_case(|| stages::sfm::read(c, &ctx), |i| stages::sfm::solve(c, i), stages::sfm::validate)
-            }
-        };
+        let result = case.stage.run(&ctx);
         let total = t.elapsed().as_secs_f64();
         let (mut st, kept) = report_case(path, case, seed, result)?;
         st.timings_s.insert("total".into(), total);

@@ -33,6 +33,8 @@
 //! the folder is absent (no `../shared` beside a fresh clone) the case is skipped.
 
 use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError, MAX_RENDERS};
+use super::{run_case, CaseResult, Settings};
+use crate::pipeline::cache::Pass;
 use crate::calib::{self, detect::BoardSize};
 use crate::image::{filter::Grey, Image};
 use crate::math::{CameraModel, Pose};
@@ -545,4 +547,26 @@ pub fn validate(_c: &Config, out: &calib::Output, truth: &Truth) -> Findings {
         truth.camera.distortion.to_array()
     ));
     f
+}
+
+
+impl Settings for Config {
+    fn headline(&self) -> &'static str {
+        "fx_rel_err"
+    }
+    fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
+        run_case(|| synthesize(self, ctx), |i| solve(self, i), |o, t| validate(self, o, t))
+    }
+    fn share(&self, ctx: &Context, pass: Pass) -> Option<Result<(), StageError>> {
+        (pass == Pass::Renders).then(|| synthesize(self, ctx).map(|_| ()))
+    }
+}
+
+impl Settings for DataConfig {
+    fn headline(&self) -> &'static str {
+        "rms_px"
+    }
+    fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
+        run_case(|| read(self, ctx), |i| solve_data(self, i), validate_data)
+    }
 }

@@ -32,6 +32,8 @@
 //! 3σ sure), `fit_s` and `loo_s`.
 
 use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError};
+use super::{run_case, CaseResult, Settings};
+use crate::pipeline::cache::Pass;
 use crate::color::{self, chart, spectra, Model, PatchInput};
 use crate::image::Image;
 use crate::pipeline::cache::scene_digest;
@@ -438,4 +440,17 @@ pub fn validate(_c: &Config, out: &color::Output, truth: &Truth) -> Findings {
         f.notes.push(format!("Largest ΔE00: patch {} ({}), {:.3}.", i + 1, p.name, p.de2000));
     }
     f
+}
+
+
+impl Settings for Config {
+    fn headline(&self) -> &'static str {
+        "loo_mean_de2000"
+    }
+    fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
+        run_case(|| synthesize(self, ctx), |i| solve(self, i), |o, t| validate(self, o, t))
+    }
+    fn share(&self, ctx: &Context, pass: Pass) -> Option<Result<(), StageError>> {
+        (pass == Pass::Renders).then(|| synthesize(self, ctx).map(|_| ()))
+    }
 }

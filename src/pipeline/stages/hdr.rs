@@ -44,6 +44,8 @@
 //!   full well (`hdr::noise`) against the sensor's.
 
 use super::{apply_overrides, Context, Findings, SettingsKey, StageError};
+use super::{run_case, CaseResult, Settings};
+use crate::pipeline::cache::Pass;
 use crate::hdr::{self, Frame, Method, Weights};
 use crate::image::Image;
 use crate::pipeline::cache::scene_digest;
@@ -704,4 +706,26 @@ pub fn validate_data(out: &hdr::Output, stack: &Stack) -> Findings {
         listed.join(", ")
     ));
     f
+}
+
+
+impl Settings for Config {
+    fn headline(&self) -> &'static str {
+        "radiance_median_rel_err"
+    }
+    fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
+        run_case(|| synthesize(self, ctx), |i| solve(self, i), |o, t| validate(self, o, t))
+    }
+    fn share(&self, ctx: &Context, pass: Pass) -> Option<Result<(), StageError>> {
+        (pass == Pass::Renders).then(|| synthesize(self, ctx).map(|_| ()))
+    }
+}
+
+impl Settings for DataConfig {
+    fn headline(&self) -> &'static str {
+        "loo_median_abs_ln"
+    }
+    fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
+        run_case(|| read(self, ctx), |i| solve_data(self, i), validate_data)
+    }
 }

@@ -1,15 +1,18 @@
-//! The stages, one file each. Every stage is three plain functions around its solver:
+//! The stages, one file each, and the one table of them (`REGISTRY`). Every stage is three
+//! plain functions around its solver:
 //!
 //! - `synthesize(&Config, &Context) -> (Input, Truth, Findings)`: renders the stage's input
 //!   through the render cache and keeps the truth beside it (its findings: notes, and the
-//!   input files an entry asks to keep);
+//!   input files an entry asks to keep); a case on real data `read`s its input instead;
 //! - `solve(&Config, &Input) -> Output`: the solver module's `run`, the function the CLI
 //!   calls too, with a `Config` built from the pipeline entry;
 //! - `validate(&Config, &Output, &Truth) -> Findings`: the only place that holds an
 //!   estimate and its truth together.
 //!
 //! `run_case` times the three apart, so a solver is never credited or blamed for the
-//! renderer.
+//! renderer. A stage's entry settings implement `Settings`: its headline metric, the case
+//! run through those three functions, and its share of the shard passes (`share`). A new
+//! stage is one file here and one line in `REGISTRY`.
 
 pub mod calibrate;
 pub mod color;
@@ -17,6 +20,115 @@ pub mod hdr;
 pub mod photometric;
 pub mod render;
 pub mod sfm;
+
+/// What a pipeline entry's own settings do: one implementation per kind of entry.
+pub trait Settings: std::fmt::Debug + Send + Sync {
+    /// The error metric a sweep's plot shows unless the entry names another.
+    fn headline(&self) -> &'static str;
+    /// Runs the case: synthesis (or reading its data), solve, validation (`run_case`).
+    fn run(&self, ctx: &Context) -> Result<CaseResult, StageError>;
+    /// The case's share of a shard pass (`pipeline::render_share`): asks for its renders (and
+    /// in the matches pass its pairs) through `ctx.cache`; `None` when it has nothing to share
+    /// in `pass` (real data other than structure from motion's, renders timed afresh).
+    fn share(&self, _ctx: &Context, _pass: Pass) -> Option<Result<(), StageError>> {
+        None
+    }
+}
+
+/// A stage of a pipeline entry with its settings.
+#[derive(Debug)]
+pub struct Stage {
+    name: &'static str,
+    settings: Box<dyn Settings>,
+}
+
+impl Stage {
+    pub fn name(&self) -> &'static str {
+        self.name
+    }
+    pub fn headline(&self) -> &'static str {
+        self.settings.headline()
+    }
+    pub fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
+        self.settings.run(ctx)
+    }
+    pub fn share(&self, ctx: &Context, pass: Pass) -> Option<Result<(), StageError>> {
+        self.settings.share(ctx, pass)
+    }
+}
+
+/// One kind of entry: a stage on renders or on real data.
+pub struct Kind {
+    /// The entry's `stage`.
+    pub stage: &'static str,
+    /// The key that selects this kind among the stage's kinds (the first kind whose key the
+    /// entry has, else the stage's kind without one).
+    pub marked_by: Option<&'static str>,
+    /// The key naming this kind's real data: an entry may not give it beside `scene`.
+    pub real_data: Option<&'static str>,
+    pub parse: fn(toml::Table) -> Result<Box<dyn Settings>, String>,
+}
+
+fn parse<T: Settings + serde::de::DeserializeOwned + 'static>(t: toml::Table) -> Result<Box<dyn Settings>, String> {
+    from_table::<T>(t).map(|c| Box::new(c) as Box<dyn Settings>)
+}
+
+/// Every kind of pipeline entry.
+pub const REGISTRY: &[Kind] = &[
+    Kind { stage: "render", marked_by: None, real_data: None, parse: parse::<render::Config> },
+    Kind { stage: "calibrate", marked_by: Some("images"), real_data: Some("images"), parse: parse::<calibrate::DataConfig> },
+    Kind { stage: "calibrate", marked_by: None, real_data: None, parse: parse::<calibrate::Config> },
+    Kind { stage: "photometric", marked_by: Some("dataset"), real_data: Some("dataset"), parse: parse::<photometric::DataConfig> },
+    Kind { stage: "photometric", marked_by: None, real_data: None, parse: parse::<photometric::Config> },
+    Kind { stage: "color", marked_by: None, real_data: None, parse: parse::<color::Config> },
+    Kind { stage: "hdr", marked_by: Some("list"), real_data: Some("list"), parse: parse::<hdr::DataConfig> },
+    Kind { stage: "hdr", marked_by: None, real_data: None, parse: parse::<hdr::Config> },
+    Kind { stage: "sfm", marked_by: Some("scene"), real_data: None, parse: parse::<sfm::RenderConfig> },
+    Kind { stage: "sfm", marked_by: None, real_data: Some("images"), parse: parse::<sfm::Config> },
+];
+
+/// The entry's stage from its name and its own keys, through `REGISTRY`.
+pub fn parse_stage(name: &str, own: toml::Table) -> Result<Stage, String> {
+    let kinds: Vec<&Kind> = REGISTRY.iter().filter(|k| k.stage == name).collect();
+    let Some(first) = kinds.first() else {
+        let mut names: Vec<&str> = Vec::new();
+        for k in REGISTRY {
+            if !names.contains(&k.stage) {
+                names.push(k.stage);
+            }
+        }
+        let (last, rest) = names.split_last().map_or(("", &[][..]), |(l, r)| (*l, r));
+        return Err(format!("unknown stage `{name}`: expected {} or {last}", rest.join(", ")));
+    };
+    // A stage on real data is told apart from its rendered variant by one key; both keys
+    // given would blame the other variant's keys, so the pair is refused by name.
+    if let Some(key) = kinds.iter().find_map(|k| k.real_data) {
+        if own.contains_key(key) && own.contains_key("scene") {
+            return Err(format!(
+                "`{key}` and `scene` are both given: a {name} entry runs on real data (`{key}`) or on renders of a scene (`scene`), not both"
+            ));
+        }
+    }
+    let kind = kinds
+        .iter()
+        .find(|k| k.marked_by.is_some_and(|key| own.contains_key(key)))
+        .or_else(|| kinds.iter().find(|k| k.marked_by.is_none()))
+        .unwrap_or(first);
+    Ok(Stage { name: kind.stage, settings: (kind.parse)(own)? })
+}
+
+/// Deserialises a table, naming the key at fault in the error.
+pub fn from_table<T: serde::de::DeserializeOwned>(t: toml::Table) -> Result<T, String> {
+    serde_path_to_error::deserialize(toml::Value::Table(t)).map_err(|e| {
+        let path = e.path().to_string();
+        let inner = e.into_inner().message().trim().to_string();
+        if path == "." {
+            inner
+        } else {
+            format!("`{path}`: {inner}")
+        }
+    })
+}
 
 /// The folder or file a dataset case reads, relative to the pipeline file, shown without `..`
 /// detours. When it is not there the case is skipped (`Absent`) only if the whole data tree
@@ -40,7 +152,7 @@ pub fn dataset_path(ctx: &Context, path: &str) -> Result<PathBuf, StageError> {
     }
 }
 
-use super::cache::Cache;
+use super::cache::{Cache, Pass};
 use super::metric::Metric;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

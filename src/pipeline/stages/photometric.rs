@@ -31,6 +31,8 @@
 //! normals, compared with truth here).
 
 use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError, MAX_RENDERS};
+use super::{run_case, CaseResult, Settings};
+use crate::pipeline::cache::Pass;
 use crate::image::Image;
 use crate::photometric::{self, Model, Observations};
 use crate::pipeline::cache::scene_digest;
@@ -463,4 +465,26 @@ pub fn validate(out: &Output, truth: &Truth) -> Findings {
         }
     }
     f
+}
+
+
+impl Settings for Config {
+    fn headline(&self) -> &'static str {
+        "mean_angular_error_deg"
+    }
+    fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
+        run_case(|| synthesize(self, ctx), |i| solve(self, i), validate)
+    }
+    fn share(&self, ctx: &Context, pass: Pass) -> Option<Result<(), StageError>> {
+        (pass == Pass::Renders).then(|| synthesize(self, ctx).map(|_| ()))
+    }
+}
+
+impl Settings for DataConfig {
+    fn headline(&self) -> &'static str {
+        "mean_angular_error_deg"
+    }
+    fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
+        run_case(|| read(self, ctx), |i| solve_data(self, i), validate)
+    }
 }

@@ -23,6 +23,7 @@
 //! metrics are reported as skipped, with the missing file named.
 
 use super::{apply_overrides, Context, Findings, Kept, StageError};
+use super::{run_case, CaseResult, Settings};
 use crate::image::{io, metrics, Image};
 use crate::pipeline::metric::{Better, Metric};
 use crate::render;
@@ -290,4 +291,18 @@ fn bias_sigmas(film: &render::Film, expected: [f64; 3]) -> Option<f64> {
         worst = worst.max(if diff == 0.0 { 0.0 } else { diff / se });
     }
     Some(worst)
+}
+
+
+impl Settings for Config {
+    fn headline(&self) -> &'static str {
+        if self.reference.is_some() {
+            "rmse"
+        } else {
+            "mean_rel_err"
+        }
+    }
+    fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
+        run_case(|| synthesize(self, ctx), |i| solve(self, i), |o, t| validate(self, o, t))
+    }
 }

@@ -31,6 +31,7 @@
 //! the true fx, and on renders `k1_err`, |k1 − k1_true|; and the phases' times as a note.
 
 use super::{apply_overrides, Context, Findings, SettingsKey, StageError, MAX_RENDERS};
+use super::{run_case, CaseResult, Settings};
 use crate::math::Pose as CameraPose;
 use crate::pipeline::cache::{scene_digest, Pass};
 use crate::pipeline::metric::{Better, Metric};
@@ -559,4 +560,31 @@ pub fn validate(out: &sfm::Output, truth: &Truth) -> Findings {
         out.extraction_s, rec.matching_s, rec.verification_s, rec.mapping_s, rec.bundle_s
     ));
     f
+}
+
+
+impl Settings for RenderConfig {
+    fn headline(&self) -> &'static str {
+        "rotation_err_median_deg"
+    }
+    fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
+        run_case(|| synthesize(self, ctx), |i| solve_render(self, i), validate)
+    }
+    /// Both passes: the views' renders and features, then the pairs (`synthesize`).
+    fn share(&self, ctx: &Context, _pass: Pass) -> Option<Result<(), StageError>> {
+        Some(synthesize(self, ctx).map(|_| ()))
+    }
+}
+
+impl Settings for Config {
+    fn headline(&self) -> &'static str {
+        "rotation_err_median_deg"
+    }
+    fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
+        run_case(|| read(self, ctx), |i| solve(self, i), validate)
+    }
+    /// Both passes: the photographs' features, then the pairs (`read`).
+    fn share(&self, ctx: &Context, _pass: Pass) -> Option<Result<(), StageError>> {
+        Some(read(self, ctx).map(|_| ()))
+    }
 }
