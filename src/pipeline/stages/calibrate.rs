@@ -34,11 +34,11 @@
 
 use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError, MAX_RENDERS};
 use super::{run_case, CaseResult, Settings};
-use crate::pipeline::cache::Pass;
 use crate::calib::{self, detect::BoardSize};
 use crate::image::{filter::Grey, Image};
 use crate::math::{CameraModel, Pose};
 use crate::pipeline::cache::scene_digest;
+use crate::pipeline::cache::Pass;
 use crate::pipeline::metric::{Better, Metric};
 use crate::render::{self, sampler::Sampler};
 use glam::{DMat3, DVec2, DVec3};
@@ -548,7 +548,6 @@ pub fn validate(_c: &Config, out: &calib::Output, truth: &Truth) -> Findings {
     ));
     f
 }
-
 
 impl Settings for Config {
     fn headline(&self) -> &'static str {

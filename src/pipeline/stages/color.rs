@@ -33,10 +33,10 @@
 
 use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError};
 use super::{run_case, CaseResult, Settings};
-use crate::pipeline::cache::Pass;
 use crate::color::{self, chart, spectra, Model, PatchInput};
 use crate::image::Image;
 use crate::pipeline::cache::scene_digest;
+use crate::pipeline::cache::Pass;
 use crate::pipeline::metric::{Better, Metric};
 use crate::render::{self, scene::Light, texture::Texture};
 use glam::{DVec2, DVec3, Vec3A};
@@ -441,7 +441,6 @@ pub fn validate(_c: &Config, out: &color::Output, truth: &Truth) -> Findings {
     }
     f
 }
-
 
 impl Settings for Config {
     fn headline(&self) -> &'static str {

@@ -45,10 +45,10 @@
 
 use super::{apply_overrides, Context, Findings, SettingsKey, StageError};
 use super::{run_case, CaseResult, Settings};
-use crate::pipeline::cache::Pass;
 use crate::hdr::{self, Frame, Method, Weights};
 use crate::image::Image;
 use crate::pipeline::cache::scene_digest;
+use crate::pipeline::cache::Pass;
 use crate::pipeline::metric::{Better, Metric};
 use crate::render::{self, sensor::Response};
 use serde::{Deserialize, Serialize};
@@ -707,7 +707,6 @@ pub fn validate_data(out: &hdr::Output, stack: &Stack) -> Findings {
     ));
     f
 }
-
 
 impl Settings for Config {
     fn headline(&self) -> &'static str {

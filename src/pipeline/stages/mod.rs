@@ -69,16 +69,28 @@ pub struct Kind {
     pub parse: fn(toml::Table) -> Result<Box<dyn Settings>, String>,
 }
 
-fn parse<T: Settings + serde::de::DeserializeOwned + 'static>(t: toml::Table) -> Result<Box<dyn Settings>, String> {
+fn parse<T: Settings + serde::de::DeserializeOwned + 'static>(
+    t: toml::Table,
+) -> Result<Box<dyn Settings>, String> {
     from_table::<T>(t).map(|c| Box::new(c) as Box<dyn Settings>)
 }
 
 /// Every kind of pipeline entry.
 pub const REGISTRY: &[Kind] = &[
     Kind { stage: "render", marked_by: None, real_data: None, parse: parse::<render::Config> },
-    Kind { stage: "calibrate", marked_by: Some("images"), real_data: Some("images"), parse: parse::<calibrate::DataConfig> },
+    Kind {
+        stage: "calibrate",
+        marked_by: Some("images"),
+        real_data: Some("images"),
+        parse: parse::<calibrate::DataConfig>,
+    },
     Kind { stage: "calibrate", marked_by: None, real_data: None, parse: parse::<calibrate::Config> },
-    Kind { stage: "photometric", marked_by: Some("dataset"), real_data: Some("dataset"), parse: parse::<photometric::DataConfig> },
+    Kind {
+        stage: "photometric",
+        marked_by: Some("dataset"),
+        real_data: Some("dataset"),
+        parse: parse::<photometric::DataConfig>,
+    },
     Kind { stage: "photometric", marked_by: None, real_data: None, parse: parse::<photometric::Config> },
     Kind { stage: "color", marked_by: None, real_data: None, parse: parse::<color::Config> },
     Kind { stage: "hdr", marked_by: Some("list"), real_data: Some("list"), parse: parse::<hdr::DataConfig> },

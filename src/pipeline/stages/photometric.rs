@@ -32,10 +32,10 @@
 
 use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError, MAX_RENDERS};
 use super::{run_case, CaseResult, Settings};
-use crate::pipeline::cache::Pass;
 use crate::image::Image;
 use crate::photometric::{self, Model, Observations};
 use crate::pipeline::cache::scene_digest;
+use crate::pipeline::cache::Pass;
 use crate::pipeline::metric::{Better, Metric};
 use crate::render::{self, scene::Light};
 use glam::{DVec3, Vec3A};
@@ -466,7 +466,6 @@ pub fn validate(out: &Output, truth: &Truth) -> Findings {
     }
     f
 }
-
 
 impl Settings for Config {
     fn headline(&self) -> &'static str {

@@ -293,7 +293,6 @@ fn bias_sigmas(film: &render::Film, expected: [f64; 3]) -> Option<f64> {
     Some(worst)
 }
 
-
 impl Settings for Config {
     fn headline(&self) -> &'static str {
         if self.reference.is_some() {

@@ -562,7 +562,6 @@ pub fn validate(out: &sfm::Output, truth: &Truth) -> Findings {
     f
 }
 
-
 impl Settings for RenderConfig {
     fn headline(&self) -> &'static str {
         "rotation_err_median_deg"
