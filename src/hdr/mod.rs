@@ -256,17 +256,14 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
         (weights, matches!(config.method, Method::Given(_)))
     {
         let t = std::time::Instant::now();
-        let ln_times: Vec<f64> = times.iter().map(|t| t.ln()).collect();
         for c in 0..3 {
             let Some(end) = toe::end(&response.g[c], full_well, read_noise).filter(|&e| e > 1) else {
                 continue;
             };
-            let codes: Vec<Vec<u16>> =
-                frames.iter().map(|f| f[c..].iter().step_by(3).copied().collect()).collect();
             let ln_e: Vec<f64> = (0..n)
                 .map(|i| if usable[i] { (radiance[3 * i + c] as f64).ln() } else { f64::NAN })
                 .collect();
-            if let Some(g) = toe::refit(&response.g[c], &codes, &ln_times, &ln_e, end) {
+            if let Some(g) = toe::refit(&channel(c), &response.g[c], &ln_e, end) {
                 response.g[c] = g;
                 toe_ends.push((c, end));
             }
@@ -342,27 +339,27 @@ fn resolve_weights(
     usable: &[bool],
 ) -> (Weights, Option<noise::Estimate>, String) {
     match asked {
-    Weights::NoiseFromStack => match noise::estimate(frames, times, response, usable) {
-        Some(e) => (
-            Weights::Noise { full_well: e.full_well, read_noise: e.read_noise },
-            Some(e),
-            format!(
-                "noise (from the stack: full well {:.0} e⁻, read noise {:.2} e⁻, from {} pairs of frames in {} levels)",
-                e.full_well, e.read_noise, e.pairs, e.bins
+        Weights::NoiseFromStack => match noise::estimate(frames, times, response, usable) {
+            Some(e) => (
+                Weights::Noise { full_well: e.full_well, read_noise: e.read_noise },
+                Some(e),
+                format!(
+                    "noise (from the stack: full well {:.0} e⁻, read noise {:.2} e⁻, from {} pairs of frames in {} levels)",
+                    e.full_well, e.read_noise, e.pairs, e.bins
+                ),
             ),
-        ),
-        None => (
-            Weights::Hat,
+            None => (
+                Weights::Hat,
+                None,
+                "hat (the stack gave no noise estimate: too few levels where consecutive frames overlap with a spread above the codes' quantisation, or no positive photon noise in them)".into(),
+            ),
+        },
+        Weights::Hat => (Weights::Hat, None, "hat".into()),
+        Weights::Noise { full_well, read_noise } => (
+            asked,
             None,
-            "hat (the stack gave no noise estimate: too few levels where consecutive frames overlap with a spread above the codes' quantisation, or no positive photon noise in them)".into(),
+            format!("noise (given: full well {full_well} e⁻, read noise {read_noise} e⁻)"),
         ),
-    },
-    Weights::Hat => (Weights::Hat, None, "hat".into()),
-    Weights::Noise { full_well, read_noise } => (
-        asked,
-        None,
-        format!("noise (given: full well {full_well} e⁻, read noise {read_noise} e⁻)"),
-    ),
     }
 }
 

@@ -91,7 +91,7 @@ impl Channel<'_> {
         self.frames[j][self.offset..].iter().step_by(self.stride).copied()
     }
 
-    fn code(&self, j: usize, i: usize) -> u16 {
+    pub(super) fn code(&self, j: usize, i: usize) -> u16 {
         self.frames[j][i * self.stride + self.offset]
     }
 }
@@ -521,16 +521,30 @@ fn finish(mut g: Vec<f64>, seen: &[bool]) -> Vec<f64> {
 
 /// Least-squares non-decreasing fit (pool adjacent violators).
 fn isotonic(y: &[f64]) -> Vec<f64> {
-    let mut blocks: Vec<(f64, usize)> = Vec::new();
-    for &v in y {
-        blocks.push((v, 1));
-        while blocks.len() > 1 && blocks[blocks.len() - 2].0 > blocks[blocks.len() - 1].0 {
-            let (b, nb) = blocks.pop().unwrap_or((0.0, 0));
-            let (a, na) = blocks.pop().unwrap_or((0.0, 0));
-            blocks.push(((a * na as f64 + b * nb as f64) / (na + nb) as f64, na + nb));
+    pool_adjacent_violators(y.iter().map(|&v| (0.0, v, 1)))
+        .iter()
+        .flat_map(|&(_, sy, k)| std::iter::repeat_n(sy / k as f64, k))
+        .collect()
+}
+
+/// Pool adjacent violators over blocks (Σx, Σy, count) in order: neighbours whose mean y
+/// falls are merged until the means rise (weakly), each block weighing by its count.
+pub(super) fn pool_adjacent_violators(
+    blocks: impl IntoIterator<Item = (f64, f64, usize)>,
+) -> Vec<(f64, f64, usize)> {
+    let mut out: Vec<(f64, f64, usize)> = Vec::new();
+    for b in blocks {
+        out.push(b);
+        while out.len() > 1 {
+            let (b, a) = (out[out.len() - 1], out[out.len() - 2]);
+            if a.1 / a.2 as f64 <= b.1 / b.2 as f64 {
+                break;
+            }
+            out.truncate(out.len() - 2);
+            out.push((a.0 + b.0, a.1 + b.1, a.2 + b.2));
         }
     }
-    blocks.iter().flat_map(|&(v, k)| std::iter::repeat_n(v, k)).collect()
+    out
 }
 
 #[cfg(test)]

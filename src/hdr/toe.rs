@@ -24,6 +24,7 @@
 //! observation pins its value and the fit of g on z stands.
 
 use super::merge::exposure_variance;
+use super::response::{pool_adjacent_violators, Channel};
 
 /// Noise in ln exposure of one observation below which a value is pinned by its data.
 pub const PINNED_SIGMA: f64 = 0.1;
@@ -41,36 +42,38 @@ const GROUPS: usize = 100;
 /// `None` when no value is pinned.
 pub fn end(g: &[f64], full_well: f64, read_noise: f64) -> Option<usize> {
     let x: Vec<f64> = g.iter().map(|v| v.exp()).collect();
-    let mid = g.len() - 2;
+    let below_top = g.len() - 2;
     let sigma = |z: usize| exposure_variance(&x, z, full_well, read_noise).sqrt() / x[z];
-    let last_unpinned = (1..=mid).rev().find(|&z| !(sigma(z) < PINNED_SIGMA));
+    let last_unpinned = (1..=below_top).rev().find(|&z| !(sigma(z) < PINNED_SIGMA));
     match last_unpinned {
-        Some(z) if z == mid => None,
+        Some(z) if z == below_top => None,
         Some(z) => Some(z + 1),
         None => Some(1),
     }
 }
 
-/// One channel's g with the values below `end` refitted (module docs). `codes[j]` holds frame
-/// j's codes of this channel per pixel, `ln_times[j]` its ln exposure time, `ln_e` each
-/// pixel's merged ln exposure in g's scale (not finite where unknown), `levels` the codes.
-/// `None` when too few pairs reach below the toe's end.
-pub fn refit(g: &[f64], codes: &[Vec<u16>], ln_times: &[f64], ln_e: &[f64], end: usize) -> Option<Vec<f64>> {
+/// One channel's g with the values below `end` refitted (module docs), from the stack's
+/// channel `ch` and each pixel's merged ln exposure `ln_e` in g's scale (not finite where
+/// unknown). `None` when too few pairs reach below the toe's end.
+pub fn refit(ch: &Channel, g: &[f64], ln_e: &[f64], end: usize) -> Option<Vec<f64>> {
     let levels = g.len();
     if end <= 1 {
         return None;
     }
+    let frames = 0..ch.frames.len();
+    let ln_times: Vec<f64> = ch.times.iter().map(|t| t.ln()).collect();
     // Pixels the merge pins down: some frame shows them above the toe, below saturation.
     let top = (levels - 1) as u16;
-    let pinned = |i: usize| ln_e[i].is_finite() && codes.iter().any(|f| (end as u16..top).contains(&f[i]));
+    let pinned =
+        |i: usize| ln_e[i].is_finite() && frames.clone().any(|j| (end as u16..top).contains(&ch.code(j, i)));
     // Pairs up to an exposure a little above the toe's end, so the fit meets the rest.
     let reach = g[(2 * end).min(levels - 2).max(end)];
     let mut pairs: Vec<(f64, f64)> = Vec::new();
     for i in (0..ln_e.len()).filter(|&i| pinned(i)) {
-        for (f, lt) in codes.iter().zip(ln_times) {
-            let l = ln_e[i] + lt;
+        for j in frames.clone() {
+            let l = ln_e[i] + ln_times[j];
             if l <= reach {
-                pairs.push((l, f[i] as f64));
+                pairs.push((l, ch.code(j, i) as f64));
             }
         }
     }
@@ -80,20 +83,10 @@ pub fn refit(g: &[f64], codes: &[Vec<u16>], ln_times: &[f64], ln_e: &[f64], end:
     pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
     // Groups of equal count, then pool adjacent violators of a non-decreasing code.
     let size = MIN_GROUP.max(pairs.len() / GROUPS);
-    let mut blocks: Vec<(f64, f64, usize)> = Vec::new(); // (Σ ln X, Σ z, count)
-    for chunk in pairs.chunks(size) {
+    let blocks = pool_adjacent_violators(pairs.chunks(size).map(|chunk| {
         let (sl, sz) = chunk.iter().fold((0.0, 0.0), |(a, b), p| (a + p.0, b + p.1));
-        blocks.push((sl, sz, chunk.len()));
-        while blocks.len() > 1 {
-            let (b, a) = (blocks[blocks.len() - 1], blocks[blocks.len() - 2]);
-            if a.1 / a.2 as f64 <= b.1 / b.2 as f64 {
-                break;
-            }
-            blocks.pop();
-            blocks.pop();
-            blocks.push((a.0 + b.0, a.1 + b.1, a.2 + b.2));
-        }
-    }
+        (sl, sz, chunk.len())
+    }));
     let h: Vec<(f64, f64)> = blocks.iter().map(|&(sl, sz, n)| (sl / n as f64, sz / n as f64)).collect();
     let mut out = g.to_vec();
     let mut inverted = vec![false; levels];
@@ -165,9 +158,12 @@ mod tests {
                     .collect()
             })
             .collect();
+        let frames: Vec<&[u16]> = codes.iter().map(|f| f.as_slice()).collect();
+        let times: Vec<f64> = ln_times.iter().map(|l| l.exp()).collect();
+        let ch = Channel { frames: &frames, stride: 1, offset: 0, times: &times, levels: 256 };
         let truth = |z: usize| (z.max(1) as f64 / 255.0).ln();
         let g: Vec<f64> = (0..256).map(|z| truth(z) + if z < end { 0.3 } else { 0.0 }).collect();
-        let refit = refit(&g, &codes, &ln_times, &ln_e, end).expect("enough pairs");
+        let refit = refit(&ch, &g, &ln_e, end).expect("enough pairs");
         for z in 10..end {
             assert!((refit[z] - truth(z)).abs() < 0.02, "z = {z}: {} against {}", refit[z], truth(z));
         }

@@ -366,8 +366,9 @@ fn worst_decade_bias(truth: &Truth, radiance: &[f32]) -> Option<f64> {
 }
 
 /// The sensor's mean response: on a grid of ln x (exposure as a fraction of full scale, as
-/// the true g), rising from 10⁻³ electrons to `ln_hi` (at most full scale), the mean and standard deviation of
-/// the code under photon, read and quantisation noise and the clip at black. With
+/// the true g), rising from 10⁻³ electrons to `ln_hi` (at most full scale), the mean and
+/// standard deviation of the code under photon, read and quantisation noise and the clip at
+/// black. With
 /// e = Poisson(x·full_well) + Normal(0, σ_r²) electrons and e_z = full_well·f⁻¹((z − ½)/max)
 /// the electrons at which the code reaches z, code = Σ_z 1[e ≥ e_z] and code² =
 /// Σ_z (2z − 1)·1[e ≥ e_z], so both moments are sums of P(e ≥ e_z).
@@ -452,15 +453,22 @@ pub fn validate(_c: &Config, out: &hdr::Output, truth: &Truth) -> Findings {
                 .collect()
         })
         .collect();
+    // Per channel, the values that occur and `keep` holds, and the fit's mean offset from the
+    // truth over them (the offset every recovery is free to choose); `None` when there are none.
+    let offset_over = |c: usize, keep: &dyn Fn(usize, usize) -> bool| {
+        let zs: Vec<usize> = (1..levels - 1).filter(|&z| truth.occurs[c][z] && keep(c, z)).collect();
+        if zs.is_empty() {
+            return None;
+        }
+        let (g, gt) = (&out.response.g[c], &g_true[c]);
+        let offset = zs.iter().map(|&z| g[z] - gt[z]).sum::<f64>() / zs.len() as f64;
+        Some((zs, offset))
+    };
     let worst_over = |keep: &dyn Fn(usize, usize) -> bool| {
         let mut worst: Option<f64> = None;
         for c in 0..3 {
-            let zs: Vec<usize> = (1..levels - 1).filter(|&z| truth.occurs[c][z] && keep(c, z)).collect();
-            if zs.is_empty() {
-                continue;
-            }
+            let Some((zs, offset)) = offset_over(c, keep) else { continue };
             let (g, gt) = (&out.response.g[c], &g_true[c]);
-            let offset = zs.iter().map(|&z| g[z] - gt[z]).sum::<f64>() / zs.len() as f64;
             let w = zs.iter().map(|&z| (g[z] - gt[z] - offset).abs()).fold(0.0, f64::max);
             worst = Some(worst.map_or(w, |v: f64| v.max(w)));
         }
@@ -475,12 +483,8 @@ pub fn validate(_c: &Config, out: &hdr::Output, truth: &Truth) -> Findings {
     let mut toe: Option<f64> = None;
     for c in 0..3 {
         let Some(first) = (0..levels).find(|&z| pinned[c][z]) else { continue };
-        let zs: Vec<usize> = (first..levels).filter(|&z| pinned[c][z] && truth.occurs[c][z]).collect();
-        if zs.is_empty() {
-            continue;
-        }
+        let Some((_, offset)) = offset_over(c, &|c, z| pinned[c][z]) else { continue };
         let g = &out.response.g[c];
-        let offset = zs.iter().map(|&z| g[z] - g_true[c][z]).sum::<f64>() / zs.len() as f64;
         // Up to an exposure past the toe's end: the fit's toe values lie below it.
         let curve = mean_response(truth, c, g_true[c][first] + 1.0);
         let black = curve[0].1;
