@@ -8,7 +8,7 @@
 //! - **Pixels.** Every pixel coordinate a user sees follows OpenCV: pixel centres at integer
 //!   coordinates, so a centred principal point is ((W−1)/2, (H−1)/2). The renderer integrates
 //!   pixel (i, j) over [i − ½, i + ½) × [j − ½, j + ½); the conversion lives in one place,
-//!   `render::integrator`.
+//!   `render::camera_ray`.
 //! - **Numbers.** f64 for everything estimated or compared with truth (camera model, poses);
 //!   f32 (`glam::Vec3A`) for radiance, film and BVH traversal.
 //! - **Radiometry.** Linear RGB radiance in W·sr⁻¹·m⁻²; EXR files are linear; PNG previews are

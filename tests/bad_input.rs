@@ -57,6 +57,27 @@ fn unknown_key_names_key_and_line() {
     assert!(e.contains("samples") && e.contains("line 12"), "{e}");
 }
 
+/// An integrator no one has, named in a scene file, on the command line and in a pipeline
+/// case: refused with the name given and the names there are.
+#[test]
+fn unknown_integrator_is_refused_with_the_names_there_are() {
+    let e = scene_error("[render]\nintegrator = \"photon-soup\"\n", &[]);
+    assert!(e.contains("photon-soup") && e.contains("\"path\"") && e.contains("line 12"), "{e}");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.exr");
+    let scene = common::root().join("pipelines/scenes/furnace.toml");
+    let (code, err) =
+        lumen(&["render", scene.to_str().unwrap(), "--out", out.to_str().unwrap(), "--integrator", "bdpt2"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("bdpt2") && err.contains("path"), "{err}");
+    assert!(!out.exists());
+    let text = format!(
+        "seed = 1\n[[stages]]\nstage = \"render\"\ncase = \"f\"\nscene = \"{}\"\nintegrator = \"nope\"\n",
+        scene.display()
+    );
+    refused_naming(dir.path(), &text, &["nope", "\"path\""]);
+}
+
 #[test]
 fn nan_in_transform() {
     let e = scene_error(

@@ -7,6 +7,7 @@ use std::path::Path;
 
 /// `lumen bench render`'s options.
 pub struct BenchRender {
+    pub integrator: Option<&'static render::integrators::Kind>,
     pub spp: u32,
     pub max_depth: u32,
     pub threads: Option<usize>,
@@ -18,6 +19,7 @@ pub struct BenchRender {
 pub fn bench_render(scene_path: &Path, o: &BenchRender) -> Result<()> {
     let scene = render::load(scene_path)?;
     let mut settings = render::Settings::from_scene(&scene);
+    settings.integrator = o.integrator.unwrap_or(settings.integrator);
     settings.spp = o.spp.max(1);
     settings.max_depth = o.max_depth.max(1);
     settings.threads = o.threads;
@@ -36,10 +38,15 @@ pub fn bench_render(scene_path: &Path, o: &BenchRender) -> Result<()> {
         best = best.min(t.elapsed().as_secs_f64());
         std::hint::black_box(film);
     }
-    let lanes =
-        if settings.lanes && render::lanes::supported(&scene, &settings) { "8 lanes" } else { "one path" };
+    let path = settings.integrator.name == "path";
+    let lanes = if path && settings.lanes && render::integrators::path::lanes_supported(&scene, &settings) {
+        "8 lanes"
+    } else {
+        "one path"
+    };
     println!(
-        "lumen {}: {}x{} spp {} depth {} {:?} sampler, {lanes}, threads {}: {best:.3} s, {:.3} M paths/s",
+        "lumen {} {}: {}x{} spp {} depth {} {:?} sampler, {lanes}, threads {}: {best:.3} s, {:.3} M paths/s",
+        settings.integrator.name,
         scene_path.display(),
         scene.camera.width,
         scene.camera.height,

@@ -212,6 +212,9 @@ pub struct RenderArgs {
     /// NAME.<aov>.exr.
     #[arg(long)]
     pub out: PathBuf,
+    /// Light-transport algorithm (default: the scene's [render] integrator).
+    #[arg(long, value_parser = integrator_parser())]
+    pub integrator: Option<&'static render::integrators::Kind>,
     /// Samples per pixel (default: the scene's [render] spp).
     #[arg(long)]
     pub spp: Option<u32>,
@@ -240,6 +243,9 @@ enum Bench {
         /// Scene file (TOML).
         #[arg(long, default_value = "pipelines/scenes/cornell-box.toml")]
         scene: PathBuf,
+        /// Light-transport algorithm (default: the scene's [render] integrator).
+        #[arg(long, value_parser = integrator_parser())]
+        integrator: Option<&'static render::integrators::Kind>,
         /// Samples per pixel.
         #[arg(long, default_value_t = 64)]
         spp: u32,
@@ -371,9 +377,9 @@ pub fn main() -> i32 {
         Command::Hdr(args) => hdr::run(&args).map(|_| 0),
         Command::Sfm(args) => sfm::run(&args).map(|_| 0),
         Command::Bench {
-            what: Bench::Render { scene, spp, max_depth, threads, repeat, sampler, one_path },
+            what: Bench::Render { scene, integrator, spp, max_depth, threads, repeat, sampler, one_path },
         } => {
-            let opts = BenchRender { spp, max_depth, threads, repeat, sampler, one_path };
+            let opts = BenchRender { integrator, spp, max_depth, threads, repeat, sampler, one_path };
             bench_render(&scene, &opts).map(|_| 0)
         }
         Command::Bench { what: Bench::Convergence { scene, reference, spp, threads } } => {
@@ -402,8 +408,15 @@ fn sibling(out: &Path, suffix: &str) -> PathBuf {
     out.with_file_name(format!("{stem}.{suffix}.exr"))
 }
 
+/// `--integrator`: one of `render::integrators::REGISTRY`'s names, listed in the help.
+fn integrator_parser() -> impl clap::builder::TypedValueParser<Value = &'static render::integrators::Kind> {
+    use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
+    let names = render::integrators::REGISTRY.iter().map(|k| PossibleValue::new(k.name).help(k.about));
+    PossibleValuesParser::new(names).try_map(|name| render::integrators::find(&name))
+}
+
 fn render_cmd(a: &RenderArgs) -> Result<()> {
-    let RenderArgs { scene: scene_path, out, spp, max_depth, seed, threads, aov, preview } = a;
+    let RenderArgs { scene: scene_path, out, integrator, spp, max_depth, seed, threads, aov, preview } = a;
     let (spp, max_depth, seed, threads) = (*spp, *max_depth, *seed, *threads);
     let ext = out.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     if ext != "exr" && ext != "png" {
@@ -422,6 +435,7 @@ fn render_cmd(a: &RenderArgs) -> Result<()> {
         );
     }
     let mut settings = render::Settings::from_scene(&scene);
+    settings.integrator = integrator.unwrap_or(settings.integrator);
     if let Some(s) = spp {
         if s == 0 {
             bail!("--spp must be at least 1");

@@ -1,6 +1,5 @@
 //! What a render is asked for and what it hands back: the settings, the film (mean and
-//! variance of the mean per pixel), and the per-pixel statistics both the one-path loop
-//! (`integrator`) and the eight lanes (`lanes`) fill it with.
+//! variance of the mean per pixel), and the per-pixel statistics the integrators fill it with.
 
 use super::sampler::SamplerKind;
 use super::scene::Scene;
@@ -10,6 +9,8 @@ use glam::Vec3A;
 /// What to render: samples, depth, seed, and which part of the image.
 #[derive(Clone, Debug)]
 pub struct Settings {
+    /// The light-transport algorithm (`render::integrators`).
+    pub integrator: &'static super::integrators::Kind,
     pub spp: u32,
     pub max_depth: u32,
     pub seed: u64,
@@ -19,14 +20,15 @@ pub struct Settings {
     /// Worker threads; all available cores when `None`.
     pub threads: Option<usize>,
     pub progress: bool,
-    /// Trace eight paths at once where the scene allows it (`render::lanes`; the image is the
-    /// same either way). False forces the one-path loop, for comparisons.
+    /// Trace eight paths at once where the integrator and the scene allow it
+    /// (`integrators::path::lanes`; the image is the same either way). False forces the one-path loop, for comparisons.
     pub lanes: bool,
 }
 
 impl Settings {
     pub fn from_scene(scene: &Scene) -> Settings {
         Settings {
+            integrator: scene.render.integrator,
             spp: scene.render.spp,
             max_depth: scene.render.max_depth,
             seed: scene.render.seed,
@@ -49,7 +51,7 @@ pub struct Film {
     pub dropped_samples: u64,
 }
 
-/// Segments after which Russian roulette starts (`integrator` docs).
+/// Segments after which Russian roulette starts (`integrators::path` docs).
 pub const RR_START: u32 = 5;
 
 /// Mean and variance of the mean of a pixel's samples, in sample order, and the number of

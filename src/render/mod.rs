@@ -1,8 +1,9 @@
 //! The physically based path tracer that renders each stage's synthetic input with its truth.
 //!
-//! `scene` reads scene files; `bvh` and `geometry` find hits; `integrator` traces paths into a
-//! `Film` (mean + variance); `truth` writes ground-truth images; `sensor` turns radiance into
-//! noisy, quantised code values.
+//! `scene` reads scene files and answers the queries of light transport; `bvh` and `geometry`
+//! find hits; `integrators` are the light-transport algorithms, by name, that fill a `Film`
+//! (mean + variance); `truth` writes ground-truth images; `sensor` turns radiance into noisy,
+//! quantised code values.
 
 pub mod bsdf;
 pub mod bvh;
@@ -10,7 +11,7 @@ pub mod camera_ray;
 pub mod envmap;
 pub mod film;
 pub mod geometry;
-pub mod integrator;
+pub mod integrators;
 pub mod lanes;
 pub mod microfacet;
 pub mod obj;
@@ -22,7 +23,8 @@ pub mod surfaces;
 pub mod texture;
 pub mod truth;
 
-pub use integrator::{render, try_render, Film, Settings};
+pub use film::{Film, Settings};
+pub use integrators::{render, try_render};
 pub use scene::{load, Scene};
 pub use truth::{truth, Truth};
 

@@ -84,7 +84,7 @@ to_light = [-0.3, 1.0, 0.4]
 irradiance = [0.5, 0.6, 0.7]
 "#;
 
-/// The eight-lane path loop (`render::lanes`) gives the one-path loop's image bit for bit,
+/// The eight-lane path loop (`render::integrators::path::lanes`) gives the one-path loop's image bit for bit,
 /// with either sampler, with a pinhole or a thin lens, on every kind of scene it takes.
 #[test]
 fn eight_lanes_match_the_scalar_loop_bit_for_bit() {
@@ -115,7 +115,7 @@ fn eight_lanes_match_the_scalar_loop_bit_for_bit() {
         let mut s = common::settings(scene, 8, 8);
         s.sampler = sampler;
         s.crop = crop;
-        assert!(render::lanes::supported(scene, &s), "{name}: not taken");
+        assert!(render::integrators::path::lanes_supported(scene, &s), "{name}: not taken");
         let a = render::render(scene, &s);
         s.lanes = false;
         let b = render::render(scene, &s);

@@ -35,6 +35,9 @@ use std::path::PathBuf;
 pub struct Config {
     /// Scene file, relative to the pipeline file.
     pub scene: String,
+    /// The light-transport algorithm by name, `render::integrators::REGISTRY` (default: the
+    /// scene's `[render] integrator`).
+    pub integrator: Option<&'static render::integrators::Kind>,
     /// Samples per pixel (default: the scene's).
     pub spp: Option<u32>,
     /// Longest path in segments (default: the scene's).
@@ -84,6 +87,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(Input, Truth, Findings),
     let mut settings = render::Settings::from_scene(&scene);
     settings.seed = ctx.seed;
     settings.progress = ctx.progress;
+    settings.integrator = c.integrator.unwrap_or(settings.integrator);
     apply_overrides(&mut settings, c.spp, c.max_depth)?;
     if let Some(e) = c.expect_uniform {
         if !e.iter().all(|v| v.is_finite() && *v > 0.0) {
@@ -184,8 +188,8 @@ pub fn validate(c: &Config, out: &Output, truth: &Truth) -> Findings {
     f.metrics.push(Metric::new("nonfinite_samples", film.dropped_samples as f64, "samples", Better::Lower));
     f.metrics.push(Metric::new("mpaths_per_s", paths / out.seconds.max(1e-9) / 1e6, "M/s", Better::Higher));
     f.notes.push(format!(
-        "{}x{} pixels, {} spp, max depth {}.",
-        film.mean.width, film.mean.height, settings.spp, settings.max_depth
+        "{}x{} pixels, {} spp, max depth {}, integrator `{}`.",
+        film.mean.width, film.mean.height, settings.spp, settings.max_depth, settings.integrator.name
     ));
     let reference_metrics = ["mean_rel_err_r", "mean_rel_err_g", "mean_rel_err_b", "rmse"];
     match &truth.reference {

@@ -8,7 +8,7 @@ use std::arch::x86_64::*;
 
 /// `sampler::lk_hash`, lane by lane.
 #[inline(always)]
-pub(super) fn lk_hash(x: __m256i, seed: __m256i) -> __m256i {
+pub(crate) fn lk_hash(x: __m256i, seed: __m256i) -> __m256i {
     // SAFETY: as in `binop`.
     unsafe {
         let mul = |a, c: u32| _mm256_mullo_epi32(a, _mm256_set1_epi32(c as i32));
@@ -23,7 +23,7 @@ pub(super) fn lk_hash(x: __m256i, seed: __m256i) -> __m256i {
 /// `u32::reverse_bits`, lane by lane: the bytes swapped, then each byte's nibbles looked up
 /// reversed and swapped.
 #[inline(always)]
-pub(super) fn reverse_bits(x: __m256i) -> __m256i {
+pub(crate) fn reverse_bits(x: __m256i) -> __m256i {
     // SAFETY: as in `binop`.
     unsafe {
         let bytes = _mm256_setr_epi8(
@@ -44,7 +44,7 @@ pub(super) fn reverse_bits(x: __m256i) -> __m256i {
 
 /// `sampler::sobol_dim1_reversed`, lane by lane.
 #[inline(always)]
-pub(super) fn sobol_dim1_reversed(i: __m256i) -> __m256i {
+pub(crate) fn sobol_dim1_reversed(i: __m256i) -> __m256i {
     let mut v = i;
     for (shift, mask) in sampler::SUPERSET_STEPS {
         // SAFETY: as in `binop`.
@@ -58,7 +58,7 @@ pub(super) fn sobol_dim1_reversed(i: __m256i) -> __m256i {
 
 /// `sampler::to_unit` (the top 24 bits as a float in [0, 1)), lane by lane.
 #[inline(always)]
-pub(super) fn to_unit(bits: __m256i) -> F {
+pub(crate) fn to_unit(bits: __m256i) -> F {
     // SAFETY: as in `binop`.
     let value = unsafe { F(_mm256_cvtepi32_ps(_mm256_srli_epi32::<8>(bits))) };
     value * F::splat(1.0 / (1u32 << 24) as f32)
@@ -67,22 +67,22 @@ pub(super) fn to_unit(bits: __m256i) -> F {
 /// The eight lanes' `Sampler`s, structure of arrays, drawn from together, and the Sobol
 /// scramble seeds of the group's pixels.
 #[derive(Default)]
-pub(super) struct Samplers {
-    pub(super) pcg: [u64; 8],
-    pub(super) sobol_left: [u32; 8],
-    pub(super) index_reversed: [u32; 8],
-    pub(super) dim: [u32; 8],
+pub(crate) struct Samplers {
+    pub(crate) pcg: [u64; 8],
+    pub(crate) sobol_left: [u32; 8],
+    pub(crate) index_reversed: [u32; 8],
+    pub(crate) dim: [u32; 8],
     /// Per lane, where its pixel's rows of `seeds` start.
-    pub(super) seed_row: [u32; 8],
+    pub(crate) seed_row: [u32; 8],
     /// (index shuffle, x, y) seeds per pixel of the group and Sobol dimension
     /// (`sampler::sobol_seeds`), pixel-major; empty without Sobol points.
-    pub(super) seeds: [Vec<u32>; 3],
+    pub(crate) seeds: [Vec<u32>; 3],
 }
 
 const DIMS: u32 = sampler::SOBOL_DIMENSIONS as u32;
 
 impl Samplers {
-    pub(super) fn new(settings: &Settings, y: u32, gx0: u32, gx1: u32, width: u32) -> Samplers {
+    pub(crate) fn new(settings: &Settings, y: u32, gx0: u32, gx1: u32, width: u32) -> Samplers {
         let mut s = Samplers::default();
         if settings.sampler == SamplerKind::Sobol {
             for x in gx0..gx1 {
@@ -98,7 +98,7 @@ impl Samplers {
     }
 
     /// Lane `lane` continues `s`, a sampler of the group's pixel `x_local`.
-    pub(super) fn set(&mut self, lane: usize, s: &Sampler, x_local: u32) {
+    pub(crate) fn set(&mut self, lane: usize, s: &Sampler, x_local: u32) {
         let dim;
         (self.pcg[lane], self.sobol_left[lane], self.index_reversed[lane], dim) = s.parts();
         self.dim[lane] = dim.min(DIMS as u64) as u32;
@@ -108,7 +108,7 @@ impl Samplers {
     /// `Sampler::next2` (or `next` when `two` is false, the second number then 0) for the
     /// lanes of `want`; the other lanes' streams do not move.
     #[inline(always)]
-    pub(super) fn next(&mut self, want: u32, two: bool) -> (F, F) {
+    pub(crate) fn next(&mut self, want: u32, two: bool) -> (F, F) {
         let zero = F::splat(0.0);
         if want == 0 {
             return (zero, zero);
@@ -161,7 +161,7 @@ impl Samplers {
 
 /// One PCG32 step (`Sampler::pcg`) on eight streams: the number and the next state.
 #[inline(always)]
-pub(super) fn pcg_step(old: U64) -> (F, U64) {
+pub(crate) fn pcg_step(old: U64) -> (F, U64) {
     let state = old.mul(sampler::PCG_MUL).add(sampler::PCG_INC);
     let xorshifted = old.shr::<18>().xor(old).shr::<27>().low_halves();
     let rot = old.shr::<59>().low_halves();

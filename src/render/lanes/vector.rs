@@ -8,11 +8,11 @@ use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
 /// Eight f32 lanes. The operators are IEEE single operations lane by lane, as the scalar
 /// code's; they are inlined into the AVX2 function that uses them.
 #[derive(Clone, Copy)]
-pub(super) struct F(pub(super) __m256);
+pub(crate) struct F(pub(crate) __m256);
 
 /// A lane mask: all bits set where true.
 #[derive(Clone, Copy)]
-pub(super) struct M(pub(super) __m256);
+pub(crate) struct M(pub(crate) __m256);
 
 macro_rules! binop {
     ($trait:ident, $f:ident, $intr:ident) => {
@@ -70,7 +70,7 @@ impl Not for M {
 macro_rules! cmp {
     ($f:ident, $pred:ident) => {
         #[inline(always)]
-        pub(super) fn $f(self, o: F) -> M {
+        pub(crate) fn $f(self, o: F) -> M {
             // SAFETY: as in `binop`.
             M(unsafe { _mm256_cmp_ps::<$pred>(self.0, o.0) })
         }
@@ -79,55 +79,55 @@ macro_rules! cmp {
 
 impl F {
     #[inline(always)]
-    pub(super) fn splat(v: f32) -> F {
+    pub(crate) fn splat(v: f32) -> F {
         // SAFETY: as in `binop`.
         F(unsafe { _mm256_set1_ps(v) })
     }
     #[inline(always)]
-    pub(super) fn load(v: &[f32; 8]) -> F {
+    pub(crate) fn load(v: &[f32; 8]) -> F {
         // SAFETY: reads the eight floats of `v`; as in `binop` otherwise.
         F(unsafe { _mm256_loadu_ps(v.as_ptr()) })
     }
     #[inline(always)]
-    pub(super) fn store(self, v: &mut [f32; 8]) {
+    pub(crate) fn store(self, v: &mut [f32; 8]) {
         // SAFETY: writes the eight floats of `v`; as in `binop` otherwise.
         unsafe { _mm256_storeu_ps(v.as_mut_ptr(), self.0) }
     }
     #[inline(always)]
-    pub(super) fn sqrt(self) -> F {
+    pub(crate) fn sqrt(self) -> F {
         // SAFETY: as in `binop`.
         F(unsafe { _mm256_sqrt_ps(self.0) })
     }
     /// `f32::min` / `max` for numbers (SSE's operand order, which glam's `max_element`
     /// also uses).
     #[inline(always)]
-    pub(super) fn min(self, o: F) -> F {
+    pub(crate) fn min(self, o: F) -> F {
         // SAFETY: as in `binop`.
         F(unsafe { _mm256_min_ps(self.0, o.0) })
     }
     #[inline(always)]
-    pub(super) fn max(self, o: F) -> F {
+    pub(crate) fn max(self, o: F) -> F {
         // SAFETY: as in `binop`.
         F(unsafe { _mm256_max_ps(self.0, o.0) })
     }
     #[inline(always)]
-    pub(super) fn abs(self) -> F {
+    pub(crate) fn abs(self) -> F {
         // SAFETY: as in `binop`.
         F(unsafe { _mm256_andnot_ps(_mm256_set1_ps(-0.0), self.0) })
     }
     #[inline(always)]
-    pub(super) fn bits(self) -> __m256i {
+    pub(crate) fn bits(self) -> __m256i {
         // SAFETY: as in `binop`.
         unsafe { _mm256_castps_si256(self.0) }
     }
     #[inline(always)]
-    pub(super) fn from_bits(v: __m256i) -> F {
+    pub(crate) fn from_bits(v: __m256i) -> F {
         // SAFETY: as in `binop`.
         F(unsafe { _mm256_castsi256_ps(v) })
     }
     /// Lane i gets `table[index[i]]`; every index must be in bounds.
     #[inline(always)]
-    pub(super) fn gather(table: &[f32], index: __m256i) -> F {
+    pub(crate) fn gather(table: &[f32], index: __m256i) -> F {
         // SAFETY: the callers' indices are in 0..table.len(); as in `binop` otherwise.
         F(unsafe { _mm256_i32gather_ps::<4>(table.as_ptr(), index) })
     }
@@ -140,17 +140,17 @@ impl F {
 impl M {
     /// `a` where true, `b` elsewhere.
     #[inline(always)]
-    pub(super) fn select(self, a: F, b: F) -> F {
+    pub(crate) fn select(self, a: F, b: F) -> F {
         // SAFETY: as in `binop`.
         F(unsafe { _mm256_blendv_ps(b.0, a.0, self.0) })
     }
     #[inline(always)]
-    pub(super) fn bits(self) -> u32 {
+    pub(crate) fn bits(self) -> u32 {
         // SAFETY: as in `binop`.
         unsafe { _mm256_movemask_ps(self.0) as u32 }
     }
     #[inline(always)]
-    pub(super) fn from_bits(bits: u32) -> M {
+    pub(crate) fn from_bits(bits: u32) -> M {
         // SAFETY: as in `binop`.
         unsafe {
             let lane_bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
@@ -162,70 +162,70 @@ impl M {
 
 /// Eight 3-vectors, one per lane.
 #[derive(Clone, Copy)]
-pub(super) struct V {
-    pub(super) x: F,
-    pub(super) y: F,
-    pub(super) z: F,
+pub(crate) struct V {
+    pub(crate) x: F,
+    pub(crate) y: F,
+    pub(crate) z: F,
 }
 
 impl V {
     #[inline(always)]
-    pub(super) fn load(v: &[[f32; 8]; 3]) -> V {
+    pub(crate) fn load(v: &[[f32; 8]; 3]) -> V {
         V { x: F::load(&v[0]), y: F::load(&v[1]), z: F::load(&v[2]) }
     }
     #[inline(always)]
-    pub(super) fn store(self, v: &mut [[f32; 8]; 3]) {
+    pub(crate) fn store(self, v: &mut [[f32; 8]; 3]) {
         self.x.store(&mut v[0]);
         self.y.store(&mut v[1]);
         self.z.store(&mut v[2]);
     }
     #[inline(always)]
-    pub(super) fn gather(table: &[Vec<f32>; 3], index: __m256i) -> V {
+    pub(crate) fn gather(table: &[Vec<f32>; 3], index: __m256i) -> V {
         V { x: F::gather(&table[0], index), y: F::gather(&table[1], index), z: F::gather(&table[2], index) }
     }
     /// glam's `Vec3A::dot` order: (x·x' + y·y') + z·z'.
     #[inline(always)]
-    pub(super) fn dot(self, o: V) -> F {
+    pub(crate) fn dot(self, o: V) -> F {
         self.x * o.x + self.y * o.y + self.z * o.z
     }
     #[inline(always)]
-    pub(super) fn add(self, o: V) -> V {
+    pub(crate) fn add(self, o: V) -> V {
         V { x: self.x + o.x, y: self.y + o.y, z: self.z + o.z }
     }
     #[inline(always)]
-    pub(super) fn sub(self, o: V) -> V {
+    pub(crate) fn sub(self, o: V) -> V {
         V { x: self.x - o.x, y: self.y - o.y, z: self.z - o.z }
     }
     #[inline(always)]
-    pub(super) fn mul(self, o: V) -> V {
+    pub(crate) fn mul(self, o: V) -> V {
         V { x: self.x * o.x, y: self.y * o.y, z: self.z * o.z }
     }
     #[inline(always)]
-    pub(super) fn scale(self, s: F) -> V {
+    pub(crate) fn scale(self, s: F) -> V {
         V { x: self.x * s, y: self.y * s, z: self.z * s }
     }
     #[inline(always)]
-    pub(super) fn div(self, s: F) -> V {
+    pub(crate) fn div(self, s: F) -> V {
         V { x: self.x / s, y: self.y / s, z: self.z / s }
     }
     #[inline(always)]
-    pub(super) fn neg(self) -> V {
+    pub(crate) fn neg(self) -> V {
         V { x: -self.x, y: -self.y, z: -self.z }
     }
     #[inline(always)]
-    pub(super) fn select(m: M, a: V, b: V) -> V {
+    pub(crate) fn select(m: M, a: V, b: V) -> V {
         V { x: m.select(a.x, b.x), y: m.select(a.y, b.y), z: m.select(a.z, b.z) }
     }
     /// glam's `Vec3A::max_element` order: max(max(x, z), y).
     #[inline(always)]
-    pub(super) fn max_element(self) -> F {
+    pub(crate) fn max_element(self) -> F {
         self.x.max(self.z).max(self.y)
     }
 }
 
 /// Lane i gets `table[index[i]]`; every index must be in bounds.
 #[inline(always)]
-pub(super) fn gather_i(table: &[i32], index: __m256i) -> __m256i {
+pub(crate) fn gather_i(table: &[i32], index: __m256i) -> __m256i {
     // SAFETY: the callers' indices are in 0..table.len(); as in `binop` otherwise.
     unsafe { _mm256_i32gather_epi32::<4>(table.as_ptr(), index) }
 }
@@ -235,7 +235,7 @@ pub(super) fn gather_i(table: &[i32], index: __m256i) -> __m256i {
 /// partition point that `partition_point` finds; the probability is 0 where the scalar
 /// pick gives `None` (no light, or one of zero power).
 #[inline(always)]
-pub(super) fn pick_light(cdf: &[f32], u: F) -> (__m256i, F, F) {
+pub(crate) fn pick_light(cdf: &[f32], u: F) -> (__m256i, F, F) {
     let n = cdf.len().saturating_sub(1);
     // SAFETY: indices stay within cdf (see below); as in `binop` otherwise.
     unsafe {
@@ -272,7 +272,7 @@ pub(super) fn pick_light(cdf: &[f32], u: F) -> (__m256i, F, F) {
 
 /// `bsdf::unit_circle`, lane by lane.
 #[inline(always)]
-pub(super) fn unit_circle(u: F) -> (F, F) {
+pub(crate) fn unit_circle(u: F) -> (F, F) {
     let v = F::splat(4.0) * u;
     let shifted = v + F::splat(8_388_608.0);
     let q = shifted.bits();
@@ -299,7 +299,7 @@ pub(super) fn unit_circle(u: F) -> (F, F) {
 
 /// `bsdf::basis`, lane by lane.
 #[inline(always)]
-pub(super) fn basis(n: V) -> (V, V) {
+pub(crate) fn basis(n: V) -> (V, V) {
     // SAFETY: as in `binop`.
     let s = F(unsafe { _mm256_or_ps(_mm256_and_ps(n.z.0, _mm256_set1_ps(-0.0)), _mm256_set1_ps(1.0)) });
     let a = F::splat(-1.0) / (s + n.z);
@@ -312,16 +312,16 @@ pub(super) fn basis(n: V) -> (V, V) {
 
 /// Eight unsigned 64-bit lanes, as two registers (lanes 0–3, 4–7).
 #[derive(Clone, Copy)]
-pub(super) struct U64(pub(super) [__m256i; 2]);
+pub(crate) struct U64(pub(crate) [__m256i; 2]);
 
 impl U64 {
     #[inline(always)]
-    pub(super) fn load(v: &[u64; 8]) -> U64 {
+    pub(crate) fn load(v: &[u64; 8]) -> U64 {
         // SAFETY: reads the eight integers of `v`; as in `binop` otherwise.
         unsafe { U64([_mm256_loadu_si256(v.as_ptr().cast()), _mm256_loadu_si256(v[4..].as_ptr().cast())]) }
     }
     #[inline(always)]
-    pub(super) fn store(self, v: &mut [u64; 8]) {
+    pub(crate) fn store(self, v: &mut [u64; 8]) {
         // SAFETY: writes the eight integers of `v`; as in `binop` otherwise.
         unsafe {
             _mm256_storeu_si256(v.as_mut_ptr().cast(), self.0[0]);
@@ -329,31 +329,31 @@ impl U64 {
         }
     }
     #[inline(always)]
-    pub(super) fn map(self, f: impl Fn(__m256i) -> __m256i) -> U64 {
+    pub(crate) fn map(self, f: impl Fn(__m256i) -> __m256i) -> U64 {
         U64([f(self.0[0]), f(self.0[1])])
     }
     #[inline(always)]
-    pub(super) fn zip(self, o: U64, f: impl Fn(__m256i, __m256i) -> __m256i) -> U64 {
+    pub(crate) fn zip(self, o: U64, f: impl Fn(__m256i, __m256i) -> __m256i) -> U64 {
         U64([f(self.0[0], o.0[0]), f(self.0[1], o.0[1])])
     }
     #[inline(always)]
-    pub(super) fn xor(self, o: U64) -> U64 {
+    pub(crate) fn xor(self, o: U64) -> U64 {
         // SAFETY: as in `binop`.
         self.zip(o, |a, b| unsafe { _mm256_xor_si256(a, b) })
     }
     #[inline(always)]
-    pub(super) fn add(self, c: u64) -> U64 {
+    pub(crate) fn add(self, c: u64) -> U64 {
         // SAFETY: as in `binop`.
         self.map(|a| unsafe { _mm256_add_epi64(a, _mm256_set1_epi64x(c as i64)) })
     }
     #[inline(always)]
-    pub(super) fn shr<const S: i32>(self) -> U64 {
+    pub(crate) fn shr<const S: i32>(self) -> U64 {
         // SAFETY: as in `binop`.
         self.map(|a| unsafe { _mm256_srli_epi64::<S>(a) })
     }
     /// The low 64 bits of the product with c (`u64::wrapping_mul`), from 32-bit products.
     #[inline(always)]
-    pub(super) fn mul(self, c: u64) -> U64 {
+    pub(crate) fn mul(self, c: u64) -> U64 {
         // SAFETY: as in `binop`.
         self.map(|a| unsafe {
             let (lo, hi) =
@@ -365,7 +365,7 @@ impl U64 {
     }
     /// The low 32 bits of the eight lanes (`as u32`), as eight 32-bit lanes.
     #[inline(always)]
-    pub(super) fn low_halves(self) -> __m256i {
+    pub(crate) fn low_halves(self) -> __m256i {
         // SAFETY: as in `binop`.
         unsafe {
             let (a, b) = (_mm256_castsi256_ps(self.0[0]), _mm256_castsi256_ps(self.0[1]));
@@ -376,7 +376,7 @@ impl U64 {
     }
     /// `m` (eight 32-bit lanes, all bits or none) as the mask of the matching 64-bit lanes.
     #[inline(always)]
-    pub(super) fn widen(m: __m256i) -> U64 {
+    pub(crate) fn widen(m: __m256i) -> U64 {
         // SAFETY: as in `binop`.
         unsafe {
             U64([
@@ -387,7 +387,7 @@ impl U64 {
     }
     /// `a` where the 32-bit lane mask `m` is set, `b` elsewhere.
     #[inline(always)]
-    pub(super) fn select(m: __m256i, a: U64, b: U64) -> U64 {
+    pub(crate) fn select(m: __m256i, a: U64, b: U64) -> U64 {
         let w = U64::widen(m);
         // SAFETY: as in `binop`.
         U64([0, 1].map(|h| unsafe { _mm256_blendv_epi8(b.0[h], a.0[h], w.0[h]) }))

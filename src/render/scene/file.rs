@@ -78,6 +78,10 @@ pub enum Scale {
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RenderSpec {
+    /// The light-transport algorithm by name (`render::integrators::REGISTRY`; default
+    /// `"path"`).
+    #[serde(default = "default_integrator")]
+    pub integrator: &'static crate::render::integrators::Kind,
     /// Samples per pixel (default 16).
     #[serde(default = "default_spp")]
     pub spp: u32,
@@ -94,6 +98,9 @@ pub struct RenderSpec {
     pub sampler: super::super::sampler::SamplerKind,
 }
 
+fn default_integrator() -> &'static crate::render::integrators::Kind {
+    crate::render::integrators::DEFAULT
+}
 fn default_spp() -> u32 {
     16
 }
@@ -107,6 +114,7 @@ fn default_seed() -> u64 {
 impl Default for RenderSpec {
     fn default() -> Self {
         RenderSpec {
+            integrator: default_integrator(),
             spp: default_spp(),
             max_depth: default_depth(),
             seed: default_seed(),

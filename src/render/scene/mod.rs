@@ -11,6 +11,9 @@
 
 mod build;
 pub mod file;
+mod query;
+
+pub use query::{epsilon, Surface};
 
 pub use build::build;
 pub use file::*;

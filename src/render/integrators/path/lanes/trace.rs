@@ -1,13 +1,8 @@
-//! The path loop over eight lanes (`lanes` docs), and whether the processor has the lanes.
+//! The path loop over eight lanes (`lanes` docs).
 
-use super::samplers::*;
-use super::vector::*;
 use super::*;
+use crate::render::lanes::{samplers::*, vector::*};
 use std::arch::x86_64::*;
-
-pub fn available() -> bool {
-    is_x86_feature_detected!("avx2")
-}
 
 /// The state of the eight lanes' paths, structure of arrays.
 pub(super) struct Lanes {
@@ -47,7 +42,7 @@ pub(super) fn get(a: &[[f32; 8]; 3], lane: usize) -> Vec3A {
 /// sample order within a pixel).
 ///
 /// # Safety
-/// The processor must have AVX2 (`available()`).
+/// The processor must have AVX2 (`render::lanes::available()`).
 #[target_feature(enable = "avx2")]
 pub unsafe fn trace_group(
     scene: &Scene,
@@ -75,7 +70,7 @@ pub unsafe fn trace_group(
     };
     let mut v = Vertex::default();
     loop {
-        // Empty lanes take the next samples (`integrator::camera_path`, with the pixel
+        // Empty lanes take the next samples (`integrators::camera_path`, with the pixel
         // position and a thin lens's sample drawn for the new lanes together).
         let mut fresh = 0u32;
         let mut empty = !lanes.active & 0xff;

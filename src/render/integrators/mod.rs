@@ -1,0 +1,183 @@
+//! The light-transport algorithms, one file each, and the one table that names them.
+//!
+//! An integrator is a function that fills a film with its estimate of every pixel of the
+//! settings' crop, querying the scene (intersections, surfaces, lights, materials) for what it
+//! needs; the scene holds data and owns no loop. `REGISTRY` lists them by the name a scene
+//! file's `[render] integrator`, `lumen render --integrator` and a pipeline case's
+//! `integrator` use (pbrt-v4's `Integrator::Create` and Mitsuba 3's plugin names are the
+//! model). Adding one is a file here and a line in `REGISTRY` (`docs/adding.md`).
+//!
+//! What integrators share lives here too: the row-parallel film loop for those that estimate
+//! pixel by pixel (`render_rows`), the start of a camera path (`camera_path`) and Veach's power
+//! heuristic.
+
+pub mod path;
+
+use super::camera_ray::{camera_direction, camera_ray, needs_lens_sample};
+use super::film::{Film, Settings};
+use super::geometry::Ray;
+use super::sampler::Sampler;
+use super::scene::Scene;
+use crate::image::Image;
+use rayon::prelude::*;
+use std::fmt;
+
+/// One light-transport algorithm: its name and what it does (for `--help` and error
+/// messages), and the function that renders with it.
+pub struct Kind {
+    pub name: &'static str,
+    pub about: &'static str,
+    /// Fills `film` (allocated for the settings' crop, zeroed) with the mean radiance and the
+    /// variance of that mean of every pixel, and counts the samples it dropped.
+    pub render: fn(&Scene, &Settings, &mut Film),
+}
+
+/// Every integrator lumen has, by name.
+pub const REGISTRY: &[Kind] = &[Kind {
+    name: "path",
+    about: "unidirectional path tracing with next-event estimation and MIS",
+    render: path::render,
+}];
+
+/// The integrator scenes use unless they name one.
+pub const DEFAULT: &Kind = &REGISTRY[0];
+
+impl fmt::Debug for Kind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name)
+    }
+}
+
+impl PartialEq for Kind {
+    fn eq(&self, o: &Kind) -> bool {
+        self.name == o.name
+    }
+}
+
+/// The integrator called `name`; the error lists the names there are.
+pub fn find(name: &str) -> Result<&'static Kind, UnknownIntegrator> {
+    REGISTRY.iter().find(|k| k.name == name).ok_or_else(|| UnknownIntegrator(name.to_string()))
+}
+
+/// A name no integrator has.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("unknown integrator `{0}`: expected one of {names}", names = names())]
+pub struct UnknownIntegrator(pub String);
+
+/// The registry's names, as `"a", "b"` for messages.
+pub fn names() -> String {
+    REGISTRY.iter().map(|k| format!("\"{}\"", k.name)).collect::<Vec<_>>().join(", ")
+}
+
+impl std::str::FromStr for &'static Kind {
+    type Err = UnknownIntegrator;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        find(s)
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for &'static Kind {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let name = String::deserialize(d)?;
+        find(&name).map_err(serde::de::Error::custom)
+    }
+}
+
+impl serde::Serialize for Kind {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.name)
+    }
+}
+
+/// Renders the scene into a film with the settings' integrator.
+pub fn render(scene: &Scene, settings: &Settings) -> Film {
+    let (fw, fh) = film_size(scene, settings);
+    render_into(scene, settings, Image::new(fw, fh, 3), Image::new(fw, fh, 3))
+}
+
+/// `render`, refusing with `Error::OutOfMemory` (nothing allocated) a film whose memory
+/// cannot be had, where `render` would abort: for films of a size a user chose.
+pub fn try_render(scene: &Scene, settings: &Settings) -> Result<Film, super::Error> {
+    let (fw, fh) = film_size(scene, settings);
+    let oom = || super::Error::OutOfMemory {
+        what: format!("a {fw}×{fh} film (mean and variance, 3 float32 channels each)"),
+        bytes: 2 * 3 * 4 * fw as u64 * fh as u64,
+    };
+    let mean = Image::try_new(fw, fh, 3).ok_or_else(oom)?;
+    let variance = Image::try_new(fw, fh, 3).ok_or_else(oom)?;
+    Ok(render_into(scene, settings, mean, variance))
+}
+
+fn film_size(scene: &Scene, settings: &Settings) -> (u32, u32) {
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let [x0, y0, x1, y1] = settings.crop.unwrap_or([0, 0, w, h]);
+    (x1.saturating_sub(x0), y1.saturating_sub(y0))
+}
+
+fn render_into(scene: &Scene, settings: &Settings, mean: Image, variance: Image) -> Film {
+    let origin = settings.crop.map_or([0, 0], |c| [c[0], c[1]]);
+    let mut film = Film { mean, variance, origin, dropped_samples: 0 };
+    let mut work = || (settings.integrator.render)(scene, settings, &mut film);
+    match settings.threads.and_then(|n| rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build().ok()) {
+        Some(pool) => pool.install(work),
+        None => work(),
+    }
+    film
+}
+
+/// Fills the film row by row, rows in parallel: `row(y, x0, x1)` gives the pixels x0..x1 of
+/// image row y as (mean, variance of the mean, samples dropped), in order.
+pub fn render_rows<R>(settings: &Settings, film: &mut Film, row: R)
+where
+    R: Fn(u32, u32, u32) -> Vec<([f32; 3], [f32; 3], u64)> + Sync,
+{
+    let [x0, y0] = film.origin;
+    let fw = film.mean.width;
+    let bar = super::progress_bar(film.mean.height as u64, "render", settings.progress);
+    let dropped = std::sync::atomic::AtomicU64::new(0);
+    film.mean
+        .data
+        .par_chunks_mut(3 * fw as usize)
+        .zip(film.variance.data.par_chunks_mut(3 * fw as usize))
+        .enumerate()
+        .for_each(|(r, (mrow, vrow))| {
+            let mut lost = 0;
+            for (i, (m, v, d)) in row(y0 + r as u32, x0, x0 + fw).into_iter().enumerate() {
+                mrow[3 * i..3 * i + 3].copy_from_slice(&m);
+                vrow[3 * i..3 * i + 3].copy_from_slice(&v);
+                lost += d;
+            }
+            if lost > 0 {
+                dropped.fetch_add(lost, std::sync::atomic::Ordering::Relaxed);
+            }
+            bar.inc(1);
+        });
+    bar.finish_and_clear();
+    film.dropped_samples += dropped.into_inner();
+}
+
+/// The start of sample `k` of pixel (x, y): its sampler, after the pixel position (and a thin
+/// lens's sample) were drawn, and the camera ray, `None` beyond the fold of the distortion
+/// (no scene ray maps there; the sample is black).
+pub fn camera_path(scene: &Scene, settings: &Settings, x: u32, y: u32, k: u32) -> (Sampler, Option<Ray>) {
+    let pixel_index = y as u64 * scene.camera.width as u64 + x as u64;
+    let mut s = Sampler::with_kind(settings.sampler, settings.seed, pixel_index, k as u64);
+    let ray = camera_direction(scene, x, y, s.next2()).map(|d| {
+        let lens_u = needs_lens_sample(scene, d).then(|| s.next2());
+        camera_ray(scene, d, lens_u)
+    });
+    (s, ray)
+}
+
+/// Veach's power heuristic (β = 2) weight of strategy a against b.
+#[inline]
+pub fn power_heuristic(a: f32, b: f32) -> f32 {
+    let (a2, b2) = (a * a, b * b);
+    if a2 + b2 > 0.0 && a2.is_finite() {
+        a2 / (a2 + b2)
+    } else if a.is_infinite() {
+        1.0
+    } else {
+        0.0
+    }
+}
