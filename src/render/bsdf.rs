@@ -20,6 +20,7 @@
 pub use super::geometry::basis;
 use super::microfacet::{self, Distribution};
 use super::specular;
+pub use super::transport::{cosine_hemisphere, unit_circle};
 use glam::Vec3A;
 use std::f32::consts::{FRAC_1_PI, PI};
 
@@ -56,44 +57,6 @@ pub enum Bsdf {
 /// Rec. 709 luminance of linear RGB.
 pub fn luminance(c: Vec3A) -> f32 {
     0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
-}
-
-/// Cosine-weighted direction around `n` (Malley's method).
-#[inline]
-pub fn cosine_hemisphere(n: Vec3A, u1: f32, u2: f32) -> Vec3A {
-    let r = u1.sqrt();
-    let (cos, sin) = unit_circle(u2);
-    let (t, b) = basis(n);
-    let z = (1.0 - u1).max(0.0).sqrt();
-    // Unit up to rounding already (t, b, n orthonormal, r² + z² = 1): no normalisation.
-    t * (r * cos) + b * (r * sin) + n * z
-}
-
-/// (cos 2πu, sin 2πu) for u in [0, 1], within 1.5e-7 of the true values. The nearest quarter
-/// turn q is split off with integer arithmetic and the rest, |θ| ≤ π/4, goes through Taylor
-/// polynomials (to θ⁹ and θ⁸); the quarter turn swaps and negates the pair with bit operations,
-/// not branches, since q is random. This is a few times cheaper than libm's `sincosf`, which
-/// reduces arguments of any size.
-#[inline]
-pub fn unit_circle(u: f32) -> (f32, f32) {
-    let v = 4.0 * u;
-    // Adding 2²³ rounds v to the nearest integer, which then sits in the low mantissa bits:
-    // two additions instead of a saturating float-to-integer conversion. Only q's low two bits
-    // are used.
-    let shifted = v + 8_388_608.0;
-    let q = shifted.to_bits();
-    let t = (v - (shifted - 8_388_608.0)) * std::f32::consts::FRAC_PI_2;
-    let t2 = t * t;
-    let sin =
-        t * (1.0 + t2 * (-1.0 / 6.0 + t2 * (1.0 / 120.0 + t2 * (-1.0 / 5040.0 + t2 * (1.0 / 362_880.0)))));
-    let cos = 1.0 + t2 * (-0.5 + t2 * (1.0 / 24.0 + t2 * (-1.0 / 720.0 + t2 * (1.0 / 40_320.0))));
-    // Quarter turn q: (cos, sin) → (−sin, cos); so q odd swaps the pair, the cosine is
-    // negated for q ≡ 1, 2 and the sine for q ≡ 2, 3 (mod 4).
-    let swap = 0u32.wrapping_sub(q & 1);
-    let (cb, sb) = (cos.to_bits(), sin.to_bits());
-    let c = (cb & !swap) | (sb & swap);
-    let s = (sb & !swap) | (cb & swap);
-    (f32::from_bits(c ^ (((q + 1) & 2) << 30)), f32::from_bits(s ^ ((q & 2) << 30)))
 }
 
 impl Bsdf {
@@ -147,8 +110,7 @@ impl Bsdf {
     #[inline(always)]
     pub fn eval(&self, kd: Vec3A, n: Vec3A, wo: Vec3A, wi: Vec3A) -> Vec3A {
         match self {
-            Bsdf::Lambertian if n.dot(wo) > 0.0 && n.dot(wi) > 0.0 => kd * FRAC_1_PI,
-            Bsdf::Lambertian => Vec3A::ZERO,
+            Bsdf::Lambertian => super::transport::lambert(kd, n, wo, wi),
             _ => self.eval_other(kd, n, wo, wi),
         }
     }

@@ -2,15 +2,7 @@
 
 use glam::{Vec2, Vec3A};
 
-/// An orthonormal basis (t, b) completing n (Duff et al. 2017).
-#[inline]
-pub fn basis(n: Vec3A) -> (Vec3A, Vec3A) {
-    // As in the paper: a sign copy, not a compare and a branch (n.z = −0 takes −1, also fine).
-    let s = 1.0f32.copysign(n.z);
-    let a = -1.0 / (s + n.z);
-    let b = n.x * n.y * a;
-    (Vec3A::new(1.0 + s * n.x * n.x * a, s * b, -s * n.x), Vec3A::new(b, s + n.y * n.y * a, -n.y))
-}
+pub use super::transport::basis;
 
 #[derive(Clone, Copy, Debug)]
 pub struct Ray {
@@ -154,9 +146,7 @@ impl Prim {
     pub fn sample_area(&self, u: f32, v: f32) -> (Vec3A, Vec3A) {
         match *self {
             Prim::Triangle { v0, e1, e2 } => {
-                let su = u.sqrt();
-                let (b1, b2) = (su * (1.0 - v), su * v);
-                (v0 + b1 * e1 + b2 * e2, e1.cross(e2).normalize())
+                (super::transport::triangle_point(v0, e1, e2, u, v), e1.cross(e2).normalize())
             }
             Prim::Sphere { center, radius } => {
                 let z = 1.0 - 2.0 * u;

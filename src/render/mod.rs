@@ -21,6 +21,7 @@ pub mod sensor;
 pub mod specular;
 pub mod surfaces;
 pub mod texture;
+pub mod transport;
 pub mod truth;
 
 pub use film::{Film, Settings};

@@ -41,7 +41,8 @@ use super::super::bsdf::Bsdf;
 use super::super::film::{pixel_stats, Film, Settings, RR_START};
 use super::super::geometry::Ray;
 use super::super::sampler::Sampler;
-use super::super::scene::{epsilon, Scene};
+use super::super::scene::Scene;
+use super::super::transport::{self, epsilon};
 use super::{camera_path, power_heuristic, render_rows};
 use glam::Vec3A;
 
@@ -143,18 +144,16 @@ pub fn trace(scene: &Scene, mut ray: Ray, max_depth: u32, s: &mut Sampler) -> Ve
         mis_pdf = if delta { Some(f32::INFINITY) } else { glossy.then(|| bsdf.pdf(albedo, n, wo, wi)) };
         beta *= weight;
         if depth >= RR_START {
-            let q = beta.max_element().min(0.95);
-            if s.next() >= q {
+            let (killed, survivor) = transport::roulette(beta, s.next());
+            if killed {
                 break;
             }
-            beta /= q;
+            beta = survivor;
         }
         if beta == Vec3A::ZERO {
             break;
         }
-        // Refracted rays leave from the far side.
-        let origin = surf.p + if n.dot(wi) >= 0.0 { n * eps } else { -n * eps };
-        ray = Ray { origin, dir: wi };
+        ray = Ray { origin: transport::offset(surf.p, n, wi, eps), dir: wi };
     }
     l
 }

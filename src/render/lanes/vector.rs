@@ -1,6 +1,6 @@
 //! Eight f32, mask, 3-vector and u64 lanes over AVX2, with the operators the path loop uses
-//! (each an IEEE single operation lane by lane, as the scalar code's), and the light pick,
-//! unit circle and basis on lanes.
+//! (each an IEEE single operation lane by lane, as the scalar code's), the light pick on
+//! lanes, and the `Real` and `Vector` implementations that let `render::transport` run on them.
 
 use std::arch::x86_64::*;
 use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
@@ -270,46 +270,6 @@ pub(crate) fn pick_light(cdf: &[f32], u: F) -> (__m256i, F, F) {
     }
 }
 
-/// `bsdf::unit_circle`, lane by lane.
-#[inline(always)]
-pub(crate) fn unit_circle(u: F) -> (F, F) {
-    let v = F::splat(4.0) * u;
-    let shifted = v + F::splat(8_388_608.0);
-    let q = shifted.bits();
-    let t = (v - (shifted - F::splat(8_388_608.0))) * F::splat(std::f32::consts::FRAC_PI_2);
-    let t2 = t * t;
-    let c = |x: f32| F::splat(x);
-    let sin = t
-        * (c(1.0)
-            + t2 * (c(-1.0 / 6.0)
-                + t2 * (c(1.0 / 120.0) + t2 * (c(-1.0 / 5040.0) + t2 * c(1.0 / 362_880.0)))));
-    let cos =
-        c(1.0) + t2 * (c(-0.5) + t2 * (c(1.0 / 24.0) + t2 * (c(-1.0 / 720.0) + t2 * c(1.0 / 40_320.0))));
-    // SAFETY: as in `binop`.
-    unsafe {
-        let one = _mm256_set1_epi32(1);
-        let two = _mm256_set1_epi32(2);
-        let swap = M(_mm256_castsi256_ps(_mm256_cmpeq_epi32(_mm256_and_si256(q, one), one)));
-        let (cb, sb) = (swap.select(sin, cos).bits(), swap.select(cos, sin).bits());
-        let c_sign = _mm256_slli_epi32::<30>(_mm256_and_si256(_mm256_add_epi32(q, one), two));
-        let s_sign = _mm256_slli_epi32::<30>(_mm256_and_si256(q, two));
-        (F::from_bits(_mm256_xor_si256(cb, c_sign)), F::from_bits(_mm256_xor_si256(sb, s_sign)))
-    }
-}
-
-/// `bsdf::basis`, lane by lane.
-#[inline(always)]
-pub(crate) fn basis(n: V) -> (V, V) {
-    // SAFETY: as in `binop`.
-    let s = F(unsafe { _mm256_or_ps(_mm256_and_ps(n.z.0, _mm256_set1_ps(-0.0)), _mm256_set1_ps(1.0)) });
-    let a = F::splat(-1.0) / (s + n.z);
-    let b = n.x * n.y * a;
-    (
-        V { x: F::splat(1.0) + s * n.x * n.x * a, y: s * b, z: -s * n.x },
-        V { x: b, y: s + n.y * n.y * a, z: -n.y },
-    )
-}
-
 /// Eight unsigned 64-bit lanes, as two registers (lanes 0–3, 4–7).
 #[derive(Clone, Copy)]
 pub(crate) struct U64(pub(crate) [__m256i; 2]);
@@ -391,5 +351,124 @@ impl U64 {
         let w = U64::widen(m);
         // SAFETY: as in `binop`.
         U64([0, 1].map(|h| unsafe { _mm256_blendv_epi8(b.0[h], a.0[h], w.0[h]) }))
+    }
+}
+
+impl super::Real for F {
+    type Mask = M;
+    #[inline(always)]
+    fn splat(v: f32) -> F {
+        F::splat(v)
+    }
+    #[inline(always)]
+    fn sqrt(self) -> F {
+        F::sqrt(self)
+    }
+    #[inline(always)]
+    fn min(self, o: F) -> F {
+        F::min(self, o)
+    }
+    #[inline(always)]
+    fn max(self, o: F) -> F {
+        F::max(self, o)
+    }
+    #[inline(always)]
+    fn le(self, o: F) -> M {
+        F::le(self, o)
+    }
+    #[inline(always)]
+    fn gt(self, o: F) -> M {
+        F::gt(self, o)
+    }
+    #[inline(always)]
+    fn ge(self, o: F) -> M {
+        F::ge(self, o)
+    }
+    #[inline(always)]
+    fn eq(self, o: F) -> M {
+        F::eq(self, o)
+    }
+    #[inline(always)]
+    fn select(m: M, a: F, b: F) -> F {
+        m.select(a, b)
+    }
+    #[inline(always)]
+    fn sign_one(self) -> F {
+        // SAFETY: as in `binop`.
+        F(unsafe { _mm256_or_ps(_mm256_and_ps(self.0, _mm256_set1_ps(-0.0)), _mm256_set1_ps(1.0)) })
+    }
+    #[inline(always)]
+    fn quarter_turn(shifted: F, cos: F, sin: F) -> (F, F) {
+        // SAFETY: as in `binop`.
+        unsafe {
+            let q = shifted.bits();
+            let one = _mm256_set1_epi32(1);
+            let two = _mm256_set1_epi32(2);
+            let swap = M(_mm256_castsi256_ps(_mm256_cmpeq_epi32(_mm256_and_si256(q, one), one)));
+            let (cb, sb) = (swap.select(sin, cos).bits(), swap.select(cos, sin).bits());
+            let c_sign = _mm256_slli_epi32::<30>(_mm256_and_si256(_mm256_add_epi32(q, one), two));
+            let s_sign = _mm256_slli_epi32::<30>(_mm256_and_si256(q, two));
+            (F::from_bits(_mm256_xor_si256(cb, c_sign)), F::from_bits(_mm256_xor_si256(sb, s_sign)))
+        }
+    }
+}
+
+impl super::Vector for V {
+    type R = F;
+    #[inline(always)]
+    fn new(x: F, y: F, z: F) -> V {
+        V { x, y, z }
+    }
+    #[inline(always)]
+    fn x(self) -> F {
+        self.x
+    }
+    #[inline(always)]
+    fn y(self) -> F {
+        self.y
+    }
+    #[inline(always)]
+    fn z(self) -> F {
+        self.z
+    }
+    #[inline(always)]
+    fn add(self, o: V) -> V {
+        V::add(self, o)
+    }
+    #[inline(always)]
+    fn sub(self, o: V) -> V {
+        V::sub(self, o)
+    }
+    #[inline(always)]
+    fn mul(self, o: V) -> V {
+        V::mul(self, o)
+    }
+    #[inline(always)]
+    fn scale(self, s: F) -> V {
+        V::scale(self, s)
+    }
+    #[inline(always)]
+    fn div(self, s: F) -> V {
+        V::div(self, s)
+    }
+    #[inline(always)]
+    fn neg(self) -> V {
+        V::neg(self)
+    }
+    #[inline(always)]
+    fn dot(self, o: V) -> F {
+        V::dot(self, o)
+    }
+    #[inline(always)]
+    fn max_element(self) -> F {
+        V::max_element(self)
+    }
+    #[inline(always)]
+    fn abs(self) -> V {
+        V { x: self.x.abs(), y: self.y.abs(), z: self.z.abs() }
+    }
+    #[inline(always)]
+    fn select(m: M, a: V, b: V) -> V {
+        V::select(m, a, b)
     }
 }

@@ -4,15 +4,12 @@
 
 use super::super::geometry::{Hit, Prim, Ray};
 use super::super::texture::Texture;
+use super::super::transport;
 use super::{Light, Scene};
 use glam::{Vec2, Vec3A};
 use std::f32::consts::PI;
 
-/// Offset for spawning rays off a surface, scaled with the coordinates' magnitude.
-#[inline]
-pub fn epsilon(p: Vec3A) -> f32 {
-    1e-4 * (1.0 + p.abs().max_element())
-}
+pub use super::super::transport::epsilon;
 
 /// Surface data at a hit.
 pub struct Surface {
@@ -74,9 +71,8 @@ impl Scene {
         if !dist.is_finite() {
             return !self.bvh.occluded(&Ray { origin, dir: wi }, 0.0, f32::INFINITY);
         }
-        let to = p + wi * dist - origin;
-        let len = to.length();
-        len > 0.0 && !self.bvh.occluded(&Ray { origin, dir: to / len }, 0.0, len * (1.0 - 1e-4) - epsilon(p))
+        let (dir, t_max, has_length) = transport::shadow_segment(origin, p, wi, dist);
+        has_length && !self.bvh.occluded(&Ray { origin, dir }, 0.0, t_max)
     }
 
     /// An emitting sphere seen from outside is sampled by the cone of directions it subtends
@@ -149,10 +145,8 @@ impl Scene {
         let u = (u0, u.1);
         match self.lights[i] {
             Light::Point { position, intensity } => {
-                let d = position - p;
-                let r2 = d.length_squared();
-                let r = r2.sqrt();
-                Some((intensity / (r2 * p_pick), d / r, r, None))
+                let (wi, r, r2) = transport::towards(p, position);
+                Some((transport::point_light(intensity, r2, p_pick), wi, r, None))
             }
             Light::Directional { to_light, irradiance } => {
                 Some((irradiance / p_pick, to_light, f32::INFINITY, None))
@@ -194,17 +188,9 @@ impl Scene {
                         (y, if info.reverse { -ny } else { ny })
                     }
                 };
-                let d = y - p;
-                let r2 = d.length_squared();
-                let r = r2.sqrt();
-                let wi = d / r;
-                let cos_light = -ny.dot(wi);
-                if cos_light <= 0.0 || r2 == 0.0 {
-                    return None;
-                }
-                // Area-measure pdf 1/A converted to solid angle: r² / (A cos θ_light).
-                let pdf = p_pick * r2 / (area * cos_light);
-                Some((radiance / pdf, wi, r, Some(pdf)))
+                let (wi, r, r2) = transport::towards(p, y);
+                let (li, pdf, lit) = transport::area_light(wi, r2, ny, radiance, area, p_pick);
+                lit.then_some((li, wi, r, Some(pdf)))
             }
         }
     }

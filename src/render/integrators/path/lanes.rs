@@ -6,23 +6,23 @@
 //! Rays are still traced one at a time (the BVH's 8-wide tests already use the lanes for one
 //! ray), and so are a hit's surface look-ups and a new path's camera ray. What the lanes take
 //! over is the rest of a vertex: the light pick (a branch-free binary search over the power
-//! CDF) and the light sample, the shadow ray's set-up, the Lambertian contribution, the
-//! cosine-weighted bounce (Malley's method with `bsdf::unit_circle`'s polynomials), the
-//! throughput, Russian roulette, and the random numbers themselves: PCG32 with 64-bit products
-//! built from 32-bit ones, and Owen-scrambled Sobol points with the scramble seeds looked up
-//! per pixel (they do not depend on the sample). A lane whose path ends takes the next
-//! (pixel, sample) of its group of pixels at once, so the lanes stay full while paths of
-//! different lengths run side by side.
+//! CDF), the light sample, the shadow ray's set-up, the Lambertian contribution, the
+//! cosine-weighted bounce, the throughput, Russian roulette, and the random numbers themselves
+//! (`render::lanes::samplers`). A lane whose path ends takes the next (pixel, sample) of its
+//! group of pixels at once, so the lanes stay full while paths of different lengths run side
+//! by side.
 //!
-//! Every lane performs the scalar loop's floating-point and integer operations in the same
-//! order, draws the same numbers from its own (pixel, sample) stream, and the film sums each
-//! pixel's samples in sample order, so the image is bit-identical to the scalar loop's
-//! (tested on both samplers, a thin lens, spheres, textures and every light kind taken).
-//! Scenes with anything else (glossy or delta materials, textured roughness, spot, sphere or
-//! environment lights) and processors without AVX2 take the scalar loop.
+//! The vertex's arithmetic is `render::transport`'s, the same functions the one-path loop and
+//! the scene's light sampling call on `f32`: a change to light transport is made there once.
+//! Each lane draws the same numbers from its own (pixel, sample) stream, and the film sums each
+//! pixel's samples in sample order, so the image is bit-identical to the one-path loop's
+//! (tested on both samplers, a thin lens, spheres, textures and every light kind taken). What
+//! is this file's own is the control: which lanes shade, which light kind each keeps, when a
+//! path ends. Scenes with anything else (glossy or delta materials, textured roughness, spot,
+//! sphere or environment lights) and processors without AVX2 take the one-path loop.
 //!
-//! The lane types and the lanes' random numbers are `render::lanes`'; `trace` is the path
-//! loop; this module decides which scenes take the lanes and lays out their lights.
+//! `trace` is the path loop; this module decides which scenes take the lanes and lays out
+//! their lights.
 
 use crate::render::bsdf::Bsdf;
 use crate::render::camera_ray::{camera_direction, camera_ray, needs_lens_sample};

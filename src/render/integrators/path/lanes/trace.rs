@@ -2,6 +2,7 @@
 
 use super::*;
 use crate::render::lanes::{samplers::*, vector::*};
+use crate::render::transport;
 use std::arch::x86_64::*;
 
 /// The state of the eight lanes' paths, structure of arrays.
@@ -178,44 +179,35 @@ pub unsafe fn trace_group(
         let surf_n = V::load(&v.n);
         let front = surf_n.dot(wo).ge(F::splat(0.0));
         let n = V::select(front, surf_n, surf_n.neg());
-        let eps = F::splat(1e-4) * (F::splat(1.0) + p.x.abs().max(p.z.abs()).max(p.y.abs()));
+        let eps = transport::epsilon(p);
         let zero = F::splat(0.0);
         let (light, p_pick, u_pick) = pick_light(&scene.light_cdf, u_light.0);
         let kind = gather_i(&lights.kind, light);
         let is = |k: i32| M(_mm256_castsi256_ps(_mm256_cmpeq_epi32(kind, _mm256_set1_epi32(k))));
         let (point, directional) = (is(POINT), is(DIRECTIONAL));
-        // Triangle: y = v0 + b1·e1 + b2·e2 with b1 = √u(1 − v), b2 = √u·v.
-        let su = u_pick.sqrt();
-        let uv = u_light.1;
-        let (b1, b2) = (su * (F::splat(1.0) - uv), su * uv);
+        // A triangle's point, or the point light itself; a directional light's direction.
         let v0 = V::gather(&lights.v0, light);
-        let tri_y =
-            v0.add(V::gather(&lights.e1, light).scale(b1)).add(V::gather(&lights.e2, light).scale(b2));
-        let d = V::select(point, v0, tri_y).sub(p);
-        let r2 = d.dot(d);
-        let r = r2.sqrt();
-        let wi = V::select(directional, v0, d.div(r));
-        let cos_light = -V::gather(&lights.n, light).dot(wi);
         let power = V::gather(&lights.power, light);
-        // Point: intensity / (r²·p_pick). Triangle: radiance / pdf, pdf = p_pick·r² / (A·cos θ_light).
-        let li_point = power.div(r2 * p_pick);
-        let pdf = p_pick * r2 / (F::gather(&lights.area, light) * cos_light);
-        let li_tri = power.div(pdf);
+        let (e1, e2) = (V::gather(&lights.e1, light), V::gather(&lights.e2, light));
+        let tri_y = transport::triangle_point(v0, e1, e2, u_pick, u_light.1);
+        let (to_y, r, r2) = transport::towards(p, V::select(point, v0, tri_y));
+        let wi = V::select(directional, v0, to_y);
+        let area = F::gather(&lights.area, light);
+        let (li_tri, _, tri_ok) =
+            transport::area_light(wi, r2, V::gather(&lights.n, light), power, area, p_pick);
+        let li_point = transport::point_light(power, r2, p_pick);
         // Directional: irradiance / p_pick, along the direction itself.
-        let li_directional = power.div(p_pick);
-        let li = V::select(point, li_point, V::select(directional, li_directional, li_tri));
-        let tri_ok = !(cos_light.le(zero) | r2.eq(zero));
+        let li = V::select(point, li_point, V::select(directional, power.div(p_pick), li_tri));
         let cos = n.dot(wi);
         let origin = p.add(n.scale(eps));
-        let to = p.add(wi.scale(r)).sub(origin);
-        let len = to.dot(to).sqrt();
-        let sdir = V::select(directional, wi, to.div(len));
-        let t_max = directional.select(F::splat(f32::INFINITY), len * F::splat(1.0 - 1e-4) - eps);
+        let (to_light, t_light, has_length) = transport::shadow_segment(origin, p, wi, r);
+        let sdir = V::select(directional, wi, to_light);
+        let t_max = directional.select(F::splat(f32::INFINITY), t_light);
         let lit = shading
             & p_pick.gt(zero)
             & (point | directional | tri_ok)
             & cos.gt(zero)
-            & (directional | len.gt(zero));
+            & (directional | has_length);
         let mut ray_o = [[0.0f32; 8]; 3];
         let mut ray_d = [[0.0f32; 8]; 3];
         let mut ray_t = [0.0f32; 8];
@@ -233,34 +225,23 @@ pub unsafe fn trace_group(
             }
         }
 
-        // Lambertian: f = kd/π where n·wo > 0 and n·wi > 0.
         let albedo = V::load(&v.albedo);
         let beta = V::load(&lanes.beta);
-        let f_on = n.dot(wo).gt(zero) & cos.gt(zero);
-        let none = V { x: zero, y: zero, z: zero };
-        let f = V::select(f_on, albedo.scale(F::splat(std::f32::consts::FRAC_1_PI)), none);
+        let f = transport::lambert(albedo, n, wo, wi);
         let l = V::load(&lanes.l);
         let l = V::select(M::from_bits(visible), l.add(beta.mul(f).scale(cos).mul(li)), l);
         l.store(&mut lanes.l);
 
-        // The bounce (`bsdf::cosine_hemisphere`): weight kd.
-        let u1 = u_bsdf.0;
-        let radius = u1.sqrt();
-        let (c, s) = unit_circle(u_bsdf.1);
-        let (t, b) = basis(n);
-        let z = (F::splat(1.0) - u1).max(zero).sqrt();
-        let wi = t.scale(radius * c).add(b.scale(radius * s)).add(n.scale(z));
+        // The bounce: cosine-weighted, weight kd; roulette after RR_START segments.
+        let wi = transport::cosine_hemisphere(n, u_bsdf.0, u_bsdf.1);
         let mut beta = beta.mul(albedo);
-        // Russian roulette after RR_START segments: survive with q = min(max β, 0.95).
         let roulette = M::from_bits(roulette);
-        let q = beta.max_element().min(F::splat(0.95));
-        let killed = roulette & u_rr.ge(q);
-        beta = V::select(roulette, beta.div(q), beta);
+        let (killed, survivor) = transport::roulette(beta, u_rr);
+        let killed = roulette & killed;
+        beta = V::select(roulette, survivor, beta);
         let black = beta.x.eq(zero) & beta.y.eq(zero) & beta.z.eq(zero);
         let alive = shading & !killed & !black;
-        let away = n.dot(wi).ge(zero);
-        let off = n.scale(eps);
-        let origin = p.add(V::select(away, off, off.neg()));
+        let origin = transport::offset(p, n, wi, eps);
         beta.store(&mut lanes.beta);
         origin.store(&mut lanes.origin);
         wi.store(&mut lanes.dir);
