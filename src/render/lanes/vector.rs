@@ -183,44 +183,6 @@ impl V {
     pub(crate) fn gather(table: &[Vec<f32>; 3], index: __m256i) -> V {
         V { x: F::gather(&table[0], index), y: F::gather(&table[1], index), z: F::gather(&table[2], index) }
     }
-    /// glam's `Vec3A::dot` order: (x·x' + y·y') + z·z'.
-    #[inline(always)]
-    pub(crate) fn dot(self, o: V) -> F {
-        self.x * o.x + self.y * o.y + self.z * o.z
-    }
-    #[inline(always)]
-    pub(crate) fn add(self, o: V) -> V {
-        V { x: self.x + o.x, y: self.y + o.y, z: self.z + o.z }
-    }
-    #[inline(always)]
-    pub(crate) fn sub(self, o: V) -> V {
-        V { x: self.x - o.x, y: self.y - o.y, z: self.z - o.z }
-    }
-    #[inline(always)]
-    pub(crate) fn mul(self, o: V) -> V {
-        V { x: self.x * o.x, y: self.y * o.y, z: self.z * o.z }
-    }
-    #[inline(always)]
-    pub(crate) fn scale(self, s: F) -> V {
-        V { x: self.x * s, y: self.y * s, z: self.z * s }
-    }
-    #[inline(always)]
-    pub(crate) fn div(self, s: F) -> V {
-        V { x: self.x / s, y: self.y / s, z: self.z / s }
-    }
-    #[inline(always)]
-    pub(crate) fn neg(self) -> V {
-        V { x: -self.x, y: -self.y, z: -self.z }
-    }
-    #[inline(always)]
-    pub(crate) fn select(m: M, a: V, b: V) -> V {
-        V { x: m.select(a.x, b.x), y: m.select(a.y, b.y), z: m.select(a.z, b.z) }
-    }
-    /// glam's `Vec3A::max_element` order: max(max(x, z), y).
-    #[inline(always)]
-    pub(crate) fn max_element(self) -> F {
-        self.x.max(self.z).max(self.y)
-    }
 }
 
 /// Lane i gets `table[index[i]]`; every index must be in bounds.
@@ -433,35 +395,35 @@ impl super::Vector for V {
     }
     #[inline(always)]
     fn add(self, o: V) -> V {
-        V::add(self, o)
+        V { x: self.x + o.x, y: self.y + o.y, z: self.z + o.z }
     }
     #[inline(always)]
     fn sub(self, o: V) -> V {
-        V::sub(self, o)
+        V { x: self.x - o.x, y: self.y - o.y, z: self.z - o.z }
     }
     #[inline(always)]
     fn mul(self, o: V) -> V {
-        V::mul(self, o)
+        V { x: self.x * o.x, y: self.y * o.y, z: self.z * o.z }
     }
     #[inline(always)]
     fn scale(self, s: F) -> V {
-        V::scale(self, s)
+        V { x: self.x * s, y: self.y * s, z: self.z * s }
     }
     #[inline(always)]
     fn div(self, s: F) -> V {
-        V::div(self, s)
+        V { x: self.x / s, y: self.y / s, z: self.z / s }
     }
     #[inline(always)]
     fn neg(self) -> V {
-        V::neg(self)
+        V { x: -self.x, y: -self.y, z: -self.z }
     }
     #[inline(always)]
     fn dot(self, o: V) -> F {
-        V::dot(self, o)
+        self.x * o.x + self.y * o.y + self.z * o.z
     }
     #[inline(always)]
     fn max_element(self) -> F {
-        V::max_element(self)
+        self.x.max(self.z).max(self.y)
     }
     #[inline(always)]
     fn abs(self) -> V {
@@ -469,6 +431,6 @@ impl super::Vector for V {
     }
     #[inline(always)]
     fn select(m: M, a: V, b: V) -> V {
-        V::select(m, a, b)
+        V { x: m.select(a.x, b.x), y: m.select(a.y, b.y), z: m.select(a.z, b.z) }
     }
 }

@@ -1,7 +1,7 @@
 //! The path loop over eight lanes (`lanes` docs).
 
 use super::*;
-use crate::render::lanes::{samplers::*, vector::*};
+use crate::render::lanes::{samplers::*, vector::*, Vector};
 use crate::render::transport;
 use std::arch::x86_64::*;
 
