@@ -17,23 +17,28 @@ use glam::{DVec2, DVec3};
 use opencv::core::{Mat, Point2f, Point3f, Size, TermCriteria, TermCriteria_Type, Vector};
 use opencv::prelude::*;
 
-/// An OpenCV error as text (the module's callers are tests and benchmarks).
-fn err(e: opencv::Error) -> String {
-    format!("OpenCV: {e}")
+/// What OpenCV reported, or why its answer could not be used (the module's callers are
+/// tests and benchmarks).
+#[derive(Debug, thiserror::Error)]
+#[error("OpenCV: {0}")]
+pub struct Error(pub String);
+
+fn err(e: opencv::Error) -> Error {
+    Error(e.to_string())
 }
 
 /// Reads an image file as OpenCV's users do (`imread`, greyscale).
-pub fn read_grey(path: &std::path::Path) -> Result<Mat, String> {
+pub fn read_grey(path: &std::path::Path) -> Result<Mat, Error> {
     let m = opencv::imgcodecs::imread(&path.to_string_lossy(), opencv::imgcodecs::IMREAD_GRAYSCALE)
         .map_err(err)?;
     if m.empty() {
-        return Err(format!("{}: OpenCV cannot read it", path.display()));
+        return Err(Error(format!("{}: cannot read it", path.display())));
     }
     Ok(m)
 }
 
 /// `findChessboardCorners` + `cornerSubPix` (module docs); `None` when OpenCV finds no board.
-pub fn find_corners(img: &Mat, cols: usize, rows: usize) -> Result<Option<Vec<DVec2>>, String> {
+pub fn find_corners(img: &Mat, cols: usize, rows: usize) -> Result<Option<Vec<DVec2>>, Error> {
     let mut corners = Vector::<Point2f>::new();
     let pattern = Size::new(cols as i32, rows as i32);
     let flags = opencv::calib3d::CALIB_CB_ADAPTIVE_THRESH | opencv::calib3d::CALIB_CB_NORMALIZE_IMAGE;
@@ -62,7 +67,7 @@ pub fn calibrate(
     size: (u32, u32),
     max_iter: i32,
     eps: f64,
-) -> Result<CvCalibration, String> {
+) -> Result<CvCalibration, Error> {
     let object: Vector<Point3f> =
         board.iter().map(|p| Point3f::new(p.x as f32, p.y as f32, p.z as f32)).collect();
     let mut objects = Vector::<Vector<Point3f>>::new();
@@ -125,7 +130,7 @@ pub struct CvHdr {
 }
 
 /// Interleaved 3-channel f32 values of a CV_32FC3 image, BGR swapped to RGB.
-fn rgb_f32(m: &Mat) -> Result<Vec<f32>, String> {
+fn rgb_f32(m: &Mat) -> Result<Vec<f32>, Error> {
     let data = m.data_typed::<opencv::core::Vec3f>().map_err(err)?;
     Ok(data.iter().flat_map(|p| [p[2], p[1], p[0]]).collect())
 }
@@ -140,13 +145,13 @@ pub struct CvStack {
 }
 
 impl CvStack {
-    pub fn read(frames: &[std::path::PathBuf], times: &[f64]) -> Result<CvStack, String> {
+    pub fn read(frames: &[std::path::PathBuf], times: &[f64]) -> Result<CvStack, Error> {
         let mut images = Vector::<Mat>::new();
         for p in frames {
             let m = opencv::imgcodecs::imread(&p.to_string_lossy(), opencv::imgcodecs::IMREAD_COLOR)
                 .map_err(err)?;
             if m.empty() {
-                return Err(format!("{}: OpenCV cannot read it", p.display()));
+                return Err(Error(format!("{}: cannot read it", p.display())));
             }
             images.push(m);
         }
@@ -160,7 +165,7 @@ impl CvStack {
     }
 
     /// `CalibrateDebevec` with its defaults (70 random samples, λ = 10): exposure per value.
-    pub fn calibrate_debevec(&self) -> Result<Mat, String> {
+    pub fn calibrate_debevec(&self) -> Result<Mat, Error> {
         use opencv::photo::CalibrateCRFTrait;
         let mut response = Mat::default();
         opencv::photo::create_calibrate_debevec(70, 10.0, false)
@@ -171,7 +176,7 @@ impl CvStack {
     }
 
     /// `MergeDebevec` through the given response (exposure per value, as OpenCV's fits give).
-    pub fn merge_debevec(&self, response: &Mat) -> Result<Mat, String> {
+    pub fn merge_debevec(&self, response: &Mat) -> Result<Mat, Error> {
         use opencv::photo::MergeDebevecTrait;
         let mut radiance = Mat::default();
         opencv::photo::create_merge_debevec()
@@ -183,7 +188,7 @@ impl CvStack {
 
     /// `MergeMertens` with Mertens et al.'s exponents (1, 1, 1; OpenCV's default exposure
     /// exponent is 0).
-    pub fn merge_mertens(&self) -> Result<Mat, String> {
+    pub fn merge_mertens(&self) -> Result<Mat, Error> {
         use opencv::photo::MergeMertensTrait;
         let mut fusion = Mat::default();
         let mut mertens = opencv::photo::create_merge_mertens(1.0, 1.0, 1.0).map_err(err)?;
@@ -197,7 +202,7 @@ pub fn hdr_stack(
     frames: &[std::path::PathBuf],
     times: &[f64],
     merge_response: Option<&[Vec<f64>]>,
-) -> Result<CvHdr, String> {
+) -> Result<CvHdr, Error> {
     let stack = CvStack::read(frames, times)?;
     let (width, height) = (stack.width, stack.height);
     let response = stack.calibrate_debevec()?;
@@ -209,7 +214,7 @@ pub fn hdr_stack(
     let given;
     let merge_with = match merge_response {
         Some(g) if g.len() != 3 || g.iter().any(|c| c.len() != 256) => {
-            return Err("the merge's response needs 3 channels of 256 values (8-bit frames)".into());
+            return Err(Error("the merge's response needs 3 channels of 256 values (8-bit frames)".into()));
         }
         Some(g) => {
             let values: Vec<opencv::core::Vec3f> = (0..256)

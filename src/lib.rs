@@ -14,8 +14,9 @@
 //! - **Radiometry.** Linear RGB radiance in W·sr⁻¹·m⁻²; EXR files are linear; PNG previews are
 //!   sRGB-encoded; sensor PNGs hold raw linear code values.
 //! - **Depth.** Path depth counts segments (Mitsuba's `max_depth`).
-//! - **Errors.** One error enum per module, lifted into [`Error`]; a solver that fails returns
-//!   an error, never NaN.
+//! - **Errors.** One error enum per module, lifted into [`Error`]; each says whose fault it is
+//!   ([`Fault`]: bad input, numerical, I/O, unsupported), decided where the error arises. A
+//!   solver that fails returns an error, never NaN.
 //! - **Determinism.** Every random number is a hash of (seed, pixel, sample, dimension), so
 //!   results do not depend on the thread count.
 
@@ -23,6 +24,7 @@ pub mod calib;
 pub mod color;
 #[cfg(feature = "opencv")]
 pub mod cv;
+pub mod error;
 pub mod hdr;
 pub mod image;
 pub mod math;
@@ -30,6 +32,8 @@ pub mod photometric;
 pub mod pipeline;
 pub mod render;
 pub mod sfm;
+
+pub use error::Fault;
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
@@ -43,10 +47,24 @@ pub enum Error {
     Pipeline(#[from] pipeline::Error),
     #[error(transparent)]
     Photometric(#[from] photometric::Error),
+    /// The colour or the hdr fit's.
     #[error(transparent)]
-    Color(#[from] color::Error),
-    #[error(transparent)]
-    Hdr(#[from] hdr::Error),
+    Fit(#[from] error::FitError),
     #[error(transparent)]
     Sfm(#[from] sfm::Error),
+}
+
+impl Error {
+    /// Whose fault it is, as the module that raised it decided.
+    pub fn fault(&self) -> Fault {
+        match self {
+            Error::Calib(e) => e.fault(),
+            Error::Render(e) => e.fault(),
+            Error::Image(e) => e.fault(),
+            Error::Pipeline(e) => e.fault(),
+            Error::Photometric(e) => e.fault(),
+            Error::Fit(e) => e.fault(),
+            Error::Sfm(e) => e.fault(),
+        }
+    }
 }

@@ -1,5 +1,6 @@
-//! The `lumen` command line. Exit codes: 0 success; 1 an error (bad input, I/O — the message
-//! names the file, field or value); 2 a usage error; 3 a pipeline ran but a metric missed its
+//! The `lumen` command line. Exit codes: 0 success; 1 an error (the message names the file,
+//! field or value, and starts with whose fault it is: `error (bad-input):`, `(numerical)`,
+//! `(io)` or `(unsupported)`); 2 a usage error; 3 a pipeline ran but a metric missed its
 //! bound without a declared expected miss, or met a bound declared a miss (the message names
 //! the metric).
 

@@ -26,26 +26,36 @@ fn run_pipeline(dir: &std::path::Path, text: &str) -> (i32, String) {
     lumen(&["run", p.to_str().unwrap(), "--out", dir.join("out").to_str().unwrap(), "--no-cache"])
 }
 
+/// The message of the error a scene with `extra` ends in, which must be the scene's fault.
 fn scene_error(extra: &str, files: &[(&str, &str)]) -> String {
+    let (fault, message) = scene_fault(extra, files);
+    assert_eq!(fault, lumen::Fault::BadInput, "{message}");
+    message
+}
+
+fn scene_fault(extra: &str, files: &[(&str, &str)]) -> (lumen::Fault, String) {
     let dir = tempfile::tempdir().unwrap();
     for (name, text) in files {
         std::fs::write(dir.path().join(name), text).unwrap();
     }
     match common::scene(&format!("{CAMERA}{extra}"), dir.path()) {
         Ok(_) => panic!("scene was accepted:\n{extra}"),
-        Err(e) => e.to_string(),
+        Err(e) => (e.fault(), e.to_string()),
     }
 }
 
 #[test]
 fn missing_scene_file() {
-    let e = render::load(std::path::Path::new("/nonexistent/scene.toml")).err().unwrap().to_string();
-    assert!(e.contains("/nonexistent/scene.toml"), "{e}");
+    let e = render::load(std::path::Path::new("/nonexistent/scene.toml")).err().unwrap();
+    assert_eq!(e.fault(), lumen::Fault::Io, "{e}");
+    assert!(e.to_string().contains("/nonexistent/scene.toml"), "{e}");
 }
 
 #[test]
 fn missing_mesh_file() {
-    let e = scene_error("[[shapes]]\ntype = \"mesh\"\nfile = \"nope.obj\"\nmaterial = \"white\"\n", &[]);
+    let (fault, e) =
+        scene_fault("[[shapes]]\ntype = \"mesh\"\nfile = \"nope.obj\"\nmaterial = \"white\"\n", &[]);
+    assert_eq!(fault, lumen::Fault::Io, "{e}");
     assert!(e.contains("nope.obj") && e.contains("cannot read"), "{e}");
 }
 
@@ -145,7 +155,8 @@ fn bad_values() {
     let env = "[[lights]]\ntype = \"environment\"\nradiance = [1.0, 1.0, 1.0]\n";
     let e = scene_error(&format!("{env}{env}"), &[]);
     assert!(e.contains("lights[1]") && e.contains("one environment"), "{e}");
-    let e = scene_error("[[lights]]\ntype = \"environment\"\nmap = \"sky.exr\"\n", &[]);
+    let (fault, e) = scene_fault("[[lights]]\ntype = \"environment\"\nmap = \"sky.exr\"\n", &[]);
+    assert_eq!(fault, lumen::Fault::Io, "{e}");
     assert!(e.contains("sky.exr"), "{e}");
     let e = scene_error("[[lights]]\ntype = \"environment\"\nmap = \"sky.png\"\n", &[("sky.png", "")]);
     assert!(e.contains("lights[0].map") && e.contains("EXR"), "{e}");
@@ -177,10 +188,11 @@ fn bad_values() {
         &[],
     );
     assert!(e.contains("shapes[0].segments"), "{e}");
-    let e = scene_error(
+    let (fault, e) = scene_fault(
         "[[materials]]\nname = \"m\"\ntype = \"lambertian\"\nalbedo = { texture = \"missing.png\" }\n",
         &[],
     );
+    assert_eq!(fault, lumen::Fault::Io, "{e}");
     assert!(e.contains("missing.png"), "{e}");
     let e = scene_error("[sensor]\nbits = 9\n", &[]);
     assert!(e.contains("sensor") && e.contains("bits"), "{e}");
@@ -207,7 +219,9 @@ fn bad_values() {
         &[],
     );
     assert!(e.contains("materials[1] (g).alpha.checker.even") && e.contains("[0.001, 1]"), "{e}");
-    let e = scene_error(&glossy("type = \"conductor\"\nalpha = { texture = \"missing.png\" }\n"), &[]);
+    let (fault, e) =
+        scene_fault(&glossy("type = \"conductor\"\nalpha = { texture = \"missing.png\" }\n"), &[]);
+    assert_eq!(fault, lumen::Fault::Io, "{e}");
     assert!(e.contains("missing.png"), "{e}");
     let e = scene_error(&glossy("type = \"mirror\"\neta = [0.2, 0.2, 0.5]\n"), &[]);
     assert!(e.contains("materials[1] (g)") && e.contains("both `eta` and `k`"), "{e}");
@@ -248,6 +262,7 @@ fn cli_render_errors_leave_no_output() {
     let out = dir.path().join("x.exr");
     let (code, err) = lumen(&["render", "/nonexistent/s.toml", "--out", out.to_str().unwrap()]);
     assert_eq!(code, 1, "{err}");
+    assert_eq!(common::fault_in(&err), "io", "{err}");
     assert!(err.contains("/nonexistent/s.toml"), "{err}");
     assert!(!out.exists());
     let scene = common::root().join("pipelines/scenes/furnace.toml");
@@ -278,6 +293,7 @@ fn cli_pipeline_errors() {
     );
     let (code, err) = run(&format!("{head}spf = 3\n"));
     assert_eq!(code, 1);
+    assert_eq!(common::fault_in(&err), "bad-input", "{err}");
     assert!(err.contains("spf") && err.contains("line"), "{err}");
     let (code, err) =
         run(&format!("{head}bounds = {{ max_rel_eror = 0.1 }}\nexpect_uniform = [1.0, 1.0, 1.0]\n"));
@@ -285,6 +301,7 @@ fn cli_pipeline_errors() {
     assert!(err.contains("max_rel_eror"), "{err}");
     let (code, err) = run("seed = 1\n[[stages]]\nstage = \"teleport\"\ncase = \"x\"\n");
     assert_eq!(code, 1);
+    assert_eq!(common::fault_in(&err), "bad-input", "{err}");
     assert!(err.contains("teleport"), "{err}");
     assert!(!out.exists(), "a failed pipeline wrote output");
 }
@@ -311,6 +328,7 @@ fn pipeline_counts_beyond_their_limit_are_refused() {
 fn refused_naming(dir: &std::path::Path, text: &str, words: &[&str]) {
     let (code, err) = run_pipeline(dir, text);
     assert_eq!(code, 1, "{err}");
+    assert_eq!(common::fault_in(&err), "bad-input", "{err}");
     assert!(words.iter().all(|w| err.contains(w)), "{err}");
     assert!(!dir.join("out").exists(), "a refused pipeline wrote output");
 }
@@ -456,6 +474,7 @@ fn a_late_output_that_is_a_folder_leaves_nothing_behind() {
         &s(&hdr_out.join("radiance.exr")),
     ]);
     assert_eq!(code, 1, "{err}");
+    assert_eq!(common::fault_in(&err), "io", "{err}");
     assert!(err.contains("summary.json") && err.contains("is a folder"), "{err}");
     only(&hdr_out, "summary.json");
     // color spectral: white.csv is the last.
@@ -463,6 +482,7 @@ fn a_late_output_that_is_a_folder_leaves_nothing_behind() {
     blocked(&color_out, "white.csv");
     let (code, err) = lumen(&["color", "spectral", "--out", &s(&color_out)]);
     assert_eq!(code, 1, "{err}");
+    assert_eq!(common::fault_in(&err), "io", "{err}");
     assert!(err.contains("white.csv") && err.contains("is a folder"), "{err}");
     only(&color_out, "white.csv");
     // sfm on two unrelated images (nothing registered, the files still written): summary.json.
@@ -480,6 +500,7 @@ fn a_late_output_that_is_a_folder_leaves_nothing_behind() {
     blocked(&sfm_out, "summary.json");
     let (code, err) = lumen(&["sfm", "--images", &s(&photos), "--out", &s(&sfm_out)]);
     assert_eq!(code, 1, "{err}");
+    assert_eq!(common::fault_in(&err), "io", "{err}");
     assert!(err.contains("summary.json") && err.contains("is a folder"), "{err}");
     only(&sfm_out, "summary.json");
 }
@@ -506,6 +527,7 @@ fn a_film_beyond_memory_is_refused() {
         .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(1), "{err}");
+    assert_eq!(common::fault_in(&err), "bad-input", "{err}");
     assert!(
         err.contains("a 16384×16384 film") && err.contains("6.00 GiB), which could not be allocated"),
         "{err}"

@@ -31,6 +31,7 @@
 //!    corner error from 0.042 to 0.030 px RMS. Gradients are central differences of the image
 //!    blurred with σ = 1 px (0.7 px: 0.031, 1.4 px: 0.053 px).
 
+use crate::error::Invalid;
 use crate::image::filter::Grey;
 use glam::DVec2;
 use std::collections::HashMap;
@@ -57,7 +58,7 @@ impl Default for DetectOptions {
 }
 
 /// Detects the board; `Err` says why the view has no complete board.
-pub fn detect(img: &Grey, board: BoardSize, opts: &DetectOptions) -> Result<Vec<DVec2>, String> {
+pub fn detect(img: &Grey, board: BoardSize, opts: &DetectOptions) -> Result<Vec<DVec2>, Invalid> {
     find(img, board, opts).map(|f| f.corners)
 }
 
@@ -70,9 +71,11 @@ pub struct Found {
 }
 
 /// `detect`, saying whether the board found lies inside a larger grid.
-pub fn find(img: &Grey, board: BoardSize, opts: &DetectOptions) -> Result<Found, String> {
+pub fn find(img: &Grey, board: BoardSize, opts: &DetectOptions) -> Result<Found, Invalid> {
     if board.cols < 2 || board.rows < 2 {
-        return Err(format!("a board needs at least 2×2 inner corners, not {}×{}", board.cols, board.rows));
+        return Err(
+            format!("a board needs at least 2×2 inner corners, not {}×{}", board.cols, board.rows).into()
+        );
     }
     let sampler = img.blur(1.0);
     let points = corner_candidates(img, &sampler);
@@ -83,7 +86,8 @@ pub fn find(img: &Grey, board: BoardSize, opts: &DetectOptions) -> Result<Found,
             board.cols * board.rows,
             board.cols,
             board.rows
-        ));
+        )
+        .into());
     }
     let (grid, larger_grid) = find_grid(&points, board, &sampler)?;
     let ordered = order(&grid, board, &sampler);
@@ -216,7 +220,7 @@ fn find_grid(
     points: &[DVec2],
     board: BoardSize,
     img: &Grey,
-) -> Result<(HashMap<(i32, i32), DVec2>, Option<(usize, usize)>), String> {
+) -> Result<(HashMap<(i32, i32), DVec2>, Option<(usize, usize)>), Invalid> {
     let mut largest = (0usize, 0i32, 0i32);
     let ring = ring_offsets();
     for seed in 0..points.len().min(60) {
@@ -301,7 +305,7 @@ fn find_grid(
     Err(format!(
         "the largest grid of corners found spans {}×{} with {} corners, not a whole {}×{} board: is the whole board visible?",
         largest.1, largest.2, largest.0, board.cols, board.rows
-    ))
+    ).into())
 }
 
 /// Fraction of the squares around a window of corners whose brightness continues the checker

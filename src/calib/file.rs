@@ -4,6 +4,7 @@
 //! read back wherever a camera is expected. Writes are atomic (temporary file, then rename).
 
 use super::{Calibration, Error, StdDev};
+use crate::error::Invalid;
 use std::path::Path;
 
 /// A number as OpenCV writes doubles: 17 significant digits, exponent with sign and 2 digits.
@@ -65,24 +66,24 @@ pub fn write(path: &Path, c: &Calibration) -> Result<(), Error> {
             })
         }
     };
-    crate::image::io::write_atomically(path, |tmp| std::fs::write(tmp, &text).map_err(|e| e.to_string()))
-        .map_err(|e| {
-            let message = match e {
-                crate::image::io::Error::Write { message, .. } => format!("cannot write: {message}"),
-                other => other.to_string(),
-            };
-            Error::File { path: path.into(), message }
-        })
+    crate::image::io::write_atomically(path, |tmp| std::fs::write(tmp, &text)).map_err(|e| {
+        let message = match e {
+            crate::image::io::Error::Write { message, .. } => format!("cannot write: {message}"),
+            other => other.to_string(),
+        };
+        Error::Io { path: path.into(), message }
+    })
 }
 
 /// Reads a calibration written by lumen or OpenCV (`.yaml`/`.yml`/`.json`).
 pub fn read(path: &Path) -> Result<Calibration, Error> {
     let err = |message: String| Error::File { path: path.into(), message };
-    let text = std::fs::read_to_string(path).map_err(|e| err(format!("cannot read: {e}")))?;
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| Error::Io { path: path.into(), message: format!("cannot read: {e}") })?;
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     let c = match ext.as_str() {
         "json" => serde_json::from_str::<Calibration>(&text).map_err(|e| err(e.to_string()))?,
-        "yaml" | "yml" => from_yaml(&text).map_err(err)?,
+        "yaml" | "yml" => from_yaml(&text).map_err(|e| err(e.0))?,
         _ => return Err(err("expected a file name ending in .yaml, .yml or .json".into())),
     };
     let k = &c.camera_matrix;
@@ -111,7 +112,7 @@ struct FileStorage {
 }
 
 impl FileStorage {
-    fn parse(text: &str) -> Result<FileStorage, String> {
+    fn parse(text: &str) -> Result<FileStorage, Invalid> {
         let mut entries: Vec<(String, String, Vec<String>)> = Vec::new();
         for (n, raw) in text.lines().enumerate() {
             let line = raw.split('#').next().unwrap_or("").trim_end();
@@ -121,16 +122,16 @@ impl FileStorage {
             if line.starts_with([' ', '\t']) {
                 match entries.last_mut() {
                     Some(last) => last.2.push(line.trim().to_string()),
-                    None => return Err(format!("line {}: indented before any key", n + 1)),
+                    None => return Err(format!("line {}: indented before any key", n + 1).into()),
                 }
                 continue;
             }
             let Some((key, value)) = line.split_once(':') else {
-                return Err(format!("line {}: expected `key: value`", n + 1));
+                return Err(format!("line {}: expected `key: value`", n + 1).into());
             };
             let key = key.trim().to_string();
             if entries.iter().any(|e| e.0 == key) {
-                return Err(format!("`{key}` is given twice (line {})", n + 1));
+                return Err(format!("`{key}` is given twice (line {})", n + 1).into());
             }
             entries.push((key, value.trim().to_string(), Vec::new()));
         }
@@ -146,48 +147,50 @@ impl FileStorage {
     }
 
     /// An `!!opencv-matrix`: (rows, cols, data in row order).
-    fn matrix(&self, key: &str) -> Result<(usize, usize, Vec<f64>), String> {
-        let (_, tag, block) = self.get(key).ok_or_else(|| format!("no `{key}`"))?;
+    fn matrix(&self, key: &str) -> Result<(usize, usize, Vec<f64>), Invalid> {
+        let (_, tag, block) = self.get(key).ok_or_else(|| Invalid(format!("no `{key}`")))?;
         if tag != "!!opencv-matrix" {
-            return Err(format!("`{key}` is `{tag}`, expected an !!opencv-matrix"));
+            return Err(format!("`{key}` is `{tag}`, expected an !!opencv-matrix").into());
         }
         let field =
             |name: &str| block.iter().find_map(|l| l.strip_prefix(&format!("{name}:")).map(str::trim));
-        let count = |name: &str| -> Result<usize, String> {
+        let count = |name: &str| -> Result<usize, Invalid> {
             field(name)
                 .and_then(|v| v.parse().ok())
                 .filter(|&v: &usize| v >= 1)
-                .ok_or_else(|| format!("`{key}` has no positive `{name}`"))
+                .ok_or_else(|| Invalid(format!("`{key}` has no positive `{name}`")))
         };
         let (rows, cols) = (count("rows")?, count("cols")?);
         let at = block
             .iter()
             .position(|l| l.starts_with("data:"))
-            .ok_or_else(|| format!("`{key}` has no `data`"))?;
+            .ok_or_else(|| Invalid(format!("`{key}` has no `data`")))?;
         let list = block[at..].join(" ");
-        let open = list.find('[').ok_or_else(|| format!("`{key}.data` is not a list"))?;
-        let close = list.find(']').ok_or_else(|| format!("`{key}.data` is not closed"))?;
+        let open = list.find('[').ok_or_else(|| Invalid(format!("`{key}.data` is not a list")))?;
+        let close = list.find(']').ok_or_else(|| Invalid(format!("`{key}.data` is not closed")))?;
         let values = list[open + 1..close]
             .split(',')
             .map(str::trim)
             .filter(|w| !w.is_empty())
-            .map(|w| w.parse::<f64>().map_err(|_| format!("`{key}.data` holds '{w}', not a number")))
-            .collect::<Result<Vec<f64>, String>>()?;
+            .map(|w| w.parse::<f64>().map_err(|_| Invalid(format!("`{key}.data` holds '{w}', not a number"))))
+            .collect::<Result<Vec<f64>, Invalid>>()?;
         if values.len() != rows * cols {
-            return Err(format!("`{key}` has {} values, but rows × cols = {rows}×{cols}", values.len()));
+            return Err(
+                format!("`{key}` has {} values, but rows × cols = {rows}×{cols}", values.len()).into()
+            );
         }
         Ok((rows, cols, values))
     }
 }
 
-fn from_yaml(text: &str) -> Result<Calibration, String> {
+fn from_yaml(text: &str) -> Result<Calibration, Invalid> {
     if !text.trim_start().starts_with("%YAML") {
         return Err("not an OpenCV FileStorage YAML file (no %YAML header)".into());
     }
     let fs = FileStorage::parse(text)?;
     let (rows, cols, k) = fs.matrix("camera_matrix")?;
     if (rows, cols) != (3, 3) {
-        return Err(format!("`camera_matrix` is {rows}×{cols}, expected 3×3"));
+        return Err(format!("`camera_matrix` is {rows}×{cols}, expected 3×3").into());
     }
     // OpenCV writes 4, 5, 8, 12 or 14 coefficients: k1 k2 p1 p2 [k3 [k4 k5 k6 [s1 … s4 [τx τy]]]].
     // lumen's model is k1 k2 p1 p2 k3: the rational, thin-prism and tilt terms must be zero.
@@ -195,22 +198,22 @@ fn from_yaml(text: &str) -> Result<Calibration, String> {
     if rows.min(cols) != 1 || ![4, 5, 8, 12, 14].contains(&d.len()) {
         return Err(format!(
             "`distortion_coefficients` is {rows}×{cols}: expected a row or column of 4, 5, 8, 12 or 14 (OpenCV's models)"
-        ));
+        ).into());
     }
     if d.iter().skip(5).any(|v| *v != 0.0) {
         return Err(format!(
             "`distortion_coefficients` has {} terms, and those after k3 (rational k4–k6, thin prism s1–s4, tilt τx, τy) are not zero: lumen's model has k1, k2, p1, p2, k3 only",
             d.len()
-        ));
+        ).into());
     }
     let mut five = [0.0; 5];
     five[..d.len().min(5)].copy_from_slice(&d[..d.len().min(5)]);
-    let size = |key: &str| -> Result<u32, String> {
-        let v = fs.scalar(key).ok_or_else(|| format!("no number `{key}`"))?;
+    let size = |key: &str| -> Result<u32, Invalid> {
+        let v = fs.scalar(key).ok_or_else(|| Invalid(format!("no number `{key}`")))?;
         if v >= 1.0 && v.fract() == 0.0 && v <= 1e6 {
             Ok(v as u32)
         } else {
-            Err(format!("`{key}: {v}`: expected a whole number of pixels from 1 to 1000000"))
+            Err(format!("`{key}: {v}`: expected a whole number of pixels from 1 to 1000000").into())
         }
     };
     Ok(Calibration {
@@ -248,18 +251,19 @@ mod tests {
         // Four coefficients (k3 = 0), and eight whose rational terms are zero.
         assert!(from_yaml(&yaml(K, "-0.1, 0.01, 0., 0.", "")).is_ok());
         assert!(from_yaml(&yaml(K, "-0.1, 0.01, 0., 0., 0.001, 0., 0., 0.", "")).is_ok());
-        let e = from_yaml(&yaml(K, "-0.1, 0.01, 0., 0., 0.001, 0.2, 0., 0.", "")).unwrap_err();
+        let e = from_yaml(&yaml(K, "-0.1, 0.01, 0., 0., 0.001, 0.2, 0., 0.", "")).unwrap_err().0;
         assert!(e.contains("8 terms") && e.contains("rational"), "{e}");
-        let e = from_yaml(&yaml(K, "-0.1, 0.01, 0., 0., 0., 0.", "")).unwrap_err();
+        let e = from_yaml(&yaml(K, "-0.1, 0.01, 0., 0., 0., 0.", "")).unwrap_err().0;
         assert!(e.contains("4, 5, 8, 12 or 14"), "{e}");
         // A key inside a comment is not the key; a key given twice is refused.
         let commented = yaml(K, "0., 0., 0., 0., 0.", "# image_width: 9999\n");
         assert_eq!(from_yaml(&commented).unwrap().image_width, 640);
-        let e = from_yaml(&yaml(K, "0., 0., 0., 0., 0.", "image_width: 800\n")).unwrap_err();
+        let e = from_yaml(&yaml(K, "0., 0., 0., 0., 0.", "image_width: 800\n")).unwrap_err().0;
         assert!(e.contains("`image_width` is given twice"), "{e}");
         let e =
             from_yaml(&yaml(K, "0., 0., 0., 0., 0.", "").replace("image_height: 480", "image_height: 1e12"))
-                .unwrap_err();
+                .unwrap_err()
+                .0;
         assert!(e.contains("image_height: 1000000000000") && e.contains("whole number"), "{e}");
         // The data list may run over several lines, as OpenCV wraps long ones.
         let wrapped =

@@ -24,8 +24,23 @@ pub enum Error {
     BadInput(String),
     #[error("calibration failed: {0}")]
     Numerical(String),
+    /// A calibration file that was read but whose content is wrong.
     #[error("{path}: {message}")]
     File { path: std::path::PathBuf, message: String },
+    /// A file that could not be read or written.
+    #[error("{path}: {message}")]
+    Io { path: std::path::PathBuf, message: String },
+}
+
+impl Error {
+    pub fn fault(&self) -> crate::Fault {
+        use crate::Fault;
+        match self {
+            Error::BadInput(_) | Error::File { .. } => Fault::BadInput,
+            Error::Numerical(_) => Fault::Numerical,
+            Error::Io { .. } => Fault::Io,
+        }
+    }
 }
 
 /// What to calibrate with.
@@ -215,7 +230,7 @@ fn detect_views_checked(images: &[(String, Grey)], config: &Config) -> Result<Ch
                 }
                 views.push((name.clone(), found.corners));
             }
-            Err(reason) => skipped.push(Skipped { name: name.clone(), reason }),
+            Err(reason) => skipped.push(Skipped { name: name.clone(), reason: reason.to_string() }),
         }
     }
     Ok((views, skipped, larger))
@@ -313,7 +328,7 @@ pub fn calibrate_traced(
         }
         hs.push(h);
     }
-    let (k, zhang_cond) = zhang::intrinsics_conditioned(&hs, size).map_err(Error::Numerical)?;
+    let (k, zhang_cond) = zhang::intrinsics_conditioned(&hs, size)?;
     conditioning.zhang = zhang_cond;
     let mut poses = Vec::new();
     for (h, (name, _)) in hs.iter().zip(views) {
@@ -339,8 +354,7 @@ pub fn calibrate_traced(
     camera.distortion.k2 = k2;
     let image: Vec<Vec<DVec2>> = views.iter().map(|(_, c)| c.clone()).collect();
     let problem = refine::Problem { board: &board, image: &image };
-    let sol = refine::refine(&problem, camera, poses, config.flags, config.max_iterations)
-        .map_err(Error::Numerical)?;
+    let sol = refine::refine(&problem, camera, poses, config.flags, config.max_iterations)?;
 
     let total: f64 = sol.residuals.iter().flatten().map(|r| r.length_squared()).sum();
     let count: usize = sol.residuals.iter().map(|v| v.len()).sum();

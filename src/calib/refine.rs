@@ -7,6 +7,7 @@
 //! ∂(R X)/∂ω = −[R X]×. Standard deviations come from σ²·(JᵀJ)⁻¹ at the optimum with
 //! σ² = cost / (residuals − free parameters), as OpenCV's `calibrateCameraExtended` reports.
 
+use super::Error;
 use crate::math::{CameraModel, Distortion, Intrinsics};
 use glam::{DMat3, DVec2, DVec3};
 use nalgebra::{DMatrix, DVector};
@@ -125,7 +126,7 @@ pub fn refine(
     init_poses: Vec<(DMat3, DVec3)>,
     flags: Flags,
     max_iterations: usize,
-) -> Result<Solution, String> {
+) -> Result<Solution, Error> {
     let nv = problem.image.len();
     let (w, h) = (init.width, init.height);
     let mut intr = intrinsic_vector(&init);
@@ -153,7 +154,7 @@ pub fn refine(
     let np = nf + 6 * nv;
     let m: usize = 2 * problem.image.iter().map(|v| v.len()).sum::<usize>();
     if m <= np {
-        return Err(format!("{} residuals cannot determine {np} parameters", m));
+        return Err(Error::Numerical(format!("{} residuals cannot determine {np} parameters", m)));
     }
     let poses = init_poses;
 
@@ -233,11 +234,13 @@ pub fn refine(
     let ((intr, poses), iterations) = (solved.params, solved.iterations);
 
     let (cost, r, j) = evaluate(&intr, &poses, true);
-    let j = j.ok_or("no Jacobian")?;
+    let j = j.ok_or_else(|| Error::Numerical("no Jacobian".into()))?;
     let sigma2 = cost / (m - np) as f64;
-    let cov = (j.transpose() * &j)
-        .try_inverse()
-        .ok_or("the calibration is degenerate: the normal equations are singular at the optimum")?;
+    let cov = (j.transpose() * &j).try_inverse().ok_or_else(|| {
+        Error::Numerical(
+            "the calibration is degenerate: the normal equations are singular at the optimum".into(),
+        )
+    })?;
     let sd = |k: usize| (sigma2 * cov[(k, k)]).max(0.0).sqrt();
     let mut std_intrinsics = [0.0; NI];
     let mut unit_std_intrinsics = [0.0; NI];

@@ -3,13 +3,14 @@
 //! (only valid pixels) and an outer one (every source pixel); `alpha` = 0 maps the inner one
 //! onto the output image, 1 the outer one, and values between interpolate fx, fy, cx, cy.
 
+use crate::error::Invalid;
 use crate::image::Image;
 use crate::math::{CameraModel, Intrinsics};
 use glam::DVec2;
 
 /// Undistorted normalised coordinates of points along the image border (400 per side, so the
 /// extremes of each curved side are found to well under 1e-3 px).
-fn border(cam: &CameraModel) -> Result<Vec<(DVec2, usize)>, String> {
+fn border(cam: &CameraModel) -> Result<Vec<(DVec2, usize)>, Invalid> {
     let (w, h) = (cam.width as f64 - 1.0, cam.height as f64 - 1.0);
     let n = 400;
     let mut out = Vec::new();
@@ -32,12 +33,14 @@ fn border(cam: &CameraModel) -> Result<Vec<(DVec2, usize)>, String> {
 }
 
 /// The new intrinsics for `alpha` in [0, 1], for an output of the same size.
-pub fn new_camera_matrix(cam: &CameraModel, alpha: f64) -> Result<Intrinsics, String> {
+pub fn new_camera_matrix(cam: &CameraModel, alpha: f64) -> Result<Intrinsics, Invalid> {
     if !(0.0..=1.0).contains(&alpha) {
-        return Err(format!("alpha = {alpha}: expected a value in [0, 1]"));
+        return Err(format!("alpha = {alpha}: expected a value in [0, 1]").into());
     }
     if cam.width < 2 || cam.height < 2 {
-        return Err(format!("a {}×{} image: undistortion needs at least 2×2 pixels", cam.width, cam.height));
+        return Err(
+            format!("a {}×{} image: undistortion needs at least 2×2 pixels", cam.width, cam.height).into()
+        );
     }
     let pts = border(cam)?;
     let (mut outer_lo, mut outer_hi) = (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY));

@@ -15,6 +15,7 @@
 //! determined (`calib::calibrate` refuses it beyond 10 %). Image coordinates are
 //! first scaled to about ±1 so the system is well conditioned (Hartley 1997).
 
+use super::Error;
 use glam::{DMat3, DVec2, DVec3};
 use nalgebra::{DMatrix, DVector, Matrix3, SVD};
 
@@ -138,14 +139,14 @@ const UNOBSERVABLE: &str =
      or to the image plane): tilt the board differently between views";
 
 /// Intrinsics (fx, fy, cx, cy; zero skew) from ≥ 2 homographies, `size` = image (w, h).
-pub fn intrinsics(hs: &[Homography], size: (u32, u32)) -> Result<DMat3, String> {
+pub fn intrinsics(hs: &[Homography], size: (u32, u32)) -> Result<DMat3, Error> {
     intrinsics_conditioned(hs, size).map(|(k, _)| k)
 }
 
 /// The intrinsics and the condition number of Zhang's system for b (as `null_vector`).
-pub fn intrinsics_conditioned(hs: &[Homography], size: (u32, u32)) -> Result<(DMat3, f64), String> {
+pub fn intrinsics_conditioned(hs: &[Homography], size: (u32, u32)) -> Result<(DMat3, f64), Error> {
     if hs.len() < 2 {
-        return Err(format!("{} view(s): Zhang's method needs at least 2", hs.len()));
+        return Err(Error::Numerical(format!("{} view(s): Zhang's method needs at least 2", hs.len())));
     }
     // Scale image coordinates to about ±1: H' = N·H, and K = N⁻¹·K'.
     let s = 0.5 * (size.0 + size.1) as f64;
@@ -179,9 +180,10 @@ pub fn intrinsics_conditioned(hs: &[Homography], size: (u32, u32)) -> Result<(DM
     let mut sv: Vec<f64> = sv.iter().copied().collect();
     sv.sort_by(|x, y| x.total_cmp(y));
     if sv[1] <= 1e-10 * sv[5] {
-        return Err(UNOBSERVABLE.into());
+        return Err(Error::Numerical(UNOBSERVABLE.into()));
     }
-    let (b, cond) = null_vector(&a).ok_or("the homographies give no solution")?;
+    let (b, cond) =
+        null_vector(&a).ok_or_else(|| Error::Numerical("the homographies give no solution".into()))?;
     let (b11, b12, b22, b13, b23, b33) = (b[0], b[1], b[2], b[3], b[4], b[5]);
     let den = b11 * b22 - b12 * b12;
     let v0 = (b12 * b13 - b11 * b23) / den;
@@ -200,7 +202,7 @@ pub fn intrinsics_conditioned(hs: &[Homography], size: (u32, u32)) -> Result<(DM
             // initIntrinsicParams2D does; the refinement frees it again.
             centred_focal(hs, &n)?
         };
-    let k = n.try_inverse().ok_or("singular normaliser")? * kn;
+    let k = n.try_inverse().ok_or_else(|| Error::Numerical("singular normaliser".into()))? * kn;
     let k = k / k[(2, 2)];
     Ok((DMat3::from_cols_array(&[k[(0, 0)], 0.0, 0.0, 0.0, k[(1, 1)], 0.0, k[(0, 2)], k[(1, 2)], 1.0]), cond))
 }
@@ -209,7 +211,7 @@ pub fn intrinsics_conditioned(hs: &[Homography], size: (u32, u32)) -> Result<(DM
 /// coordinates `n` gives): with B = diag(1/α², 1/β², 1), each view's two equations are linear
 /// in (1/α², 1/β²): h₁₁h₁₂/α² + h₂₁h₂₂/β² = −h₃₁h₃₂ and (h₁₁² − h₁₂²)/α² + (h₂₁² − h₂₂²)/β²
 /// = −(h₃₁² − h₃₂²). Returns K in normalised coordinates and the system's condition number.
-fn centred_focal(hs: &[Homography], n: &Matrix3<f64>) -> Result<(Matrix3<f64>, f64), String> {
+fn centred_focal(hs: &[Homography], n: &Matrix3<f64>) -> Result<(Matrix3<f64>, f64), Error> {
     let mut a = DMatrix::<f64>::zeros(2 * hs.len(), 2);
     let mut rhs = DVector::<f64>::zeros(2 * hs.len());
     for (k, h) in hs.iter().enumerate() {
@@ -225,12 +227,12 @@ fn centred_focal(hs: &[Homography], n: &Matrix3<f64>) -> Result<(Matrix3<f64>, f
     let svd = SVD::new(a.clone(), true, true);
     let sv = &svd.singular_values;
     let cond = if sv.min() > 0.0 { sv.max() / sv.min() } else { f64::INFINITY };
-    let x = svd.solve(&rhs, 1e-300).map_err(|_| UNOBSERVABLE.to_string())?;
+    let x = svd.solve(&rhs, 1e-300).map_err(|_| Error::Numerical(UNOBSERVABLE.into()))?;
     // Noise and distortion can push a poorly determined 1/α² below zero: take its size, as
     // OpenCV does, and leave the rest to the refinement (which reports the uncertainty).
     let (ia2, ib2) = (x[0].abs(), x[1].abs());
     if !(ia2 > 0.0 && ib2 > 0.0 && ia2.is_finite() && ib2.is_finite()) {
-        return Err(UNOBSERVABLE.into());
+        return Err(Error::Numerical(UNOBSERVABLE.into()));
     }
     Ok((Matrix3::new(1.0 / ia2.sqrt(), 0.0, 0.0, 0.0, 1.0 / ib2.sqrt(), 0.0, 0.0, 0.0, 1.0), cond))
 }

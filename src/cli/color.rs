@@ -114,7 +114,8 @@ fn read_linear(path: &Path, linear: bool) -> Result<(Image, &'static str)> {
 
 fn fit(a: &FitArgs) -> Result<()> {
     let out = &a.out;
-    let model: color::Model = a.model.parse().map_err(|e: String| anyhow::anyhow!("--model: {e}"))?;
+    let model: color::Model =
+        a.model.parse().map_err(|e: lumen::error::Invalid| anyhow::Error::new(e).context("--model"))?;
     if !(1..=24).contains(&a.white_patch) {
         bail!("--white-patch {}: expected a patch number 1 to 24", a.white_patch);
     }
@@ -183,7 +184,7 @@ fn fit(a: &FitArgs) -> Result<()> {
         report: Some(result.clone()),
     };
     let json = serde_json::to_string_pretty(&file)?;
-    image::io::write_atomically(out, |tmp| std::fs::write(tmp, json).map_err(|e| e.to_string()))?;
+    image::io::write_atomically(out, |tmp| std::fs::write(tmp, json))?;
     let loo = result.loo_mean_de2000.map_or("none".to_string(), |v| format!("{v:.3}"));
     eprintln!(
         "{how}; {}: {} patches used, mean ΔE2000 {:.3}, max {:.3}, leave-one-out mean {loo} (fit {:.1} ms, leave-one-out {:.1} ms); wrote {}",
@@ -296,9 +297,7 @@ fn spectral(camera: &str, illuminant: &str, out: &Path) -> Result<()> {
             "# the white of {illuminant} (CIE 1931 2°)\nX,Y,Z\n{:e},{:e},{:e}\n",
             white[0], white[1], white[2]
         );
-        image::io::write_atomically(&dir.join("white.csv"), |tmp| {
-            std::fs::write(tmp, text).map_err(|e| e.to_string())
-        })?;
+        image::io::write_atomically(&dir.join("white.csv"), |tmp| std::fs::write(tmp, text))?;
         Ok(())
     })?;
     eprintln!(

@@ -121,7 +121,7 @@ pub fn run(a: &HdrArgs) -> Result<()> {
         (other, _) => bail!("--weights {other}: expected hat or noise"),
     };
     let smoothness: response::Smoothness =
-        a.smoothness.parse().map_err(|e: String| anyhow::anyhow!("--{e}"))?;
+        a.smoothness.parse().map_err(|e: lumen::error::Invalid| anyhow::anyhow!("--{e}"))?;
     if !(a.lambda.is_finite() && (0.0..=hdr::MAX_LAMBDA).contains(&a.lambda)) {
         bail!("--lambda {:e}: expected 0 to {:e}", a.lambda, hdr::MAX_LAMBDA);
     }
@@ -154,7 +154,7 @@ pub fn run(a: &HdrArgs) -> Result<()> {
         image::io::write_exr(&exr, &radiance)?;
         let write = |name: &str, bytes: Vec<u8>| -> Result<()> {
             let p = dir.join(name);
-            image::io::write_atomically(&p, |tmp| std::fs::write(tmp, &bytes).map_err(|e| e.to_string()))?;
+            image::io::write_atomically(&p, |tmp| std::fs::write(tmp, &bytes))?;
             Ok(())
         };
         write("response.csv", response::to_csv(&out.response).into_bytes())?;

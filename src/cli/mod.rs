@@ -396,10 +396,33 @@ pub fn main() -> i32 {
     match result {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            match fault(&e) {
+                Some(f) => eprintln!("error ({f}): {e:#}"),
+                None => eprintln!("error: {e:#}"),
+            }
             1
         }
     }
+}
+
+/// Whose fault an error is, as the library error in its chain says (`None` for the command
+/// line's own glue).
+fn fault(e: &anyhow::Error) -> Option<lumen::Fault> {
+    e.chain().find_map(|c| {
+        let c = c as &(dyn std::error::Error + 'static);
+        None.or_else(|| c.downcast_ref::<lumen::Error>().map(|e| e.fault()))
+            .or_else(|| c.downcast_ref::<lumen::pipeline::Error>().map(|e| e.fault()))
+            .or_else(|| c.downcast_ref::<lumen::pipeline::file::Error>().map(|e| e.fault()))
+            .or_else(|| c.downcast_ref::<lumen::pipeline::stages::StageError>().map(|e| e.fault()))
+            .or_else(|| c.downcast_ref::<lumen::render::Error>().map(|e| e.fault()))
+            .or_else(|| c.downcast_ref::<lumen::image::io::Error>().map(|e| e.fault()))
+            .or_else(|| c.downcast_ref::<lumen::calib::Error>().map(|e| e.fault()))
+            .or_else(|| c.downcast_ref::<lumen::photometric::Error>().map(|e| e.fault()))
+            .or_else(|| c.downcast_ref::<lumen::error::FitError>().map(|e| e.fault()))
+            .or_else(|| c.downcast_ref::<lumen::sfm::Error>().map(|e| e.fault()))
+            .or_else(|| c.downcast_ref::<lumen::error::Invalid>().map(|e| e.fault()))
+            .or_else(|| c.downcast_ref::<lumen::render::integrators::UnknownIntegrator>().map(|e| e.fault()))
+    })
 }
 
 /// `NAME.ext` → `NAME.<suffix>.exr`.
@@ -528,8 +551,10 @@ fn render_cmd(a: &RenderArgs) -> Result<()> {
 }
 
 fn preview_cmd(files: &[PathBuf], kind: Option<&str>) -> Result<()> {
-    let kind: Option<lumen::image::preview::Kind> =
-        kind.map(|k| k.parse()).transpose().map_err(|e: String| anyhow::anyhow!("--kind: {e}"))?;
+    let kind: Option<lumen::image::preview::Kind> = kind
+        .map(|k| k.parse())
+        .transpose()
+        .map_err(|e: lumen::error::Invalid| anyhow::Error::new(e).context("--kind"))?;
     for (png, k) in write_previews(files, kind)? {
         eprintln!("wrote {} ({k:?})", png.display());
     }
@@ -696,7 +721,7 @@ fn write_overlays(
 
 fn ps_cmd(dir: &Path, model: &str, start_iterations: Option<u64>, out: &Path) -> Result<()> {
     let model: lumen::photometric::Model =
-        model.parse().map_err(|e: String| anyhow::anyhow!("--model: {e}"))?;
+        model.parse().map_err(|e: lumen::error::Invalid| anyhow::Error::new(e).context("--model"))?;
     let mut config = lumen::photometric::Config::new(model);
     if let Some(k) = start_iterations {
         config.start_iterations = lumen::photometric::check_start_iterations(k)

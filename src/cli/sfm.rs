@@ -134,7 +134,7 @@ pub fn run(a: &SfmArgs) -> Result<()> {
     image::io::write_together(&a.out, |dir| -> Result<()> {
         for (name, text) in files {
             let p = dir.join(name);
-            image::io::write_atomically(&p, |tmp| std::fs::write(tmp, &text).map_err(|e| e.to_string()))?;
+            image::io::write_atomically(&p, |tmp| std::fs::write(tmp, &text))?;
         }
         Ok(())
     })?;

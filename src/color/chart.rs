@@ -18,6 +18,7 @@
 //! not above zero: its value is lost in the
 //! noise or the black level.
 
+use crate::error::Invalid;
 use crate::image::Image;
 use glam::DVec2;
 use serde::{Deserialize, Serialize};
@@ -56,9 +57,9 @@ pub fn grid_homography(
     corners: [[f64; 2]; 4],
     width: u32,
     height: u32,
-) -> Result<crate::calib::zhang::Homography, String> {
+) -> Result<crate::calib::zhang::Homography, Invalid> {
     if let Some(c) = corners.iter().flatten().find(|v| !v.is_finite()) {
-        return Err(format!("corner coordinate {c}: expected finite numbers"));
+        return Err(format!("corner coordinate {c}: expected finite numbers").into());
     }
     let (w, h) = (width as f64, height as f64);
     for (k, c) in corners.iter().enumerate() {
@@ -70,7 +71,7 @@ pub fn grid_homography(
                 c[1],
                 w - 0.5,
                 h - 0.5
-            ));
+            ).into());
         }
     }
     // The quadrilateral must be convex and traversed clockwise on screen (top-left,
@@ -92,7 +93,7 @@ pub fn grid_homography(
         DVec2::new(COLS as f64, ROWS as f64),
         DVec2::new(0.0, ROWS as f64),
     ];
-    crate::calib::zhang::homography(&grid, &p).ok_or_else(|| "the corners define no homography".to_string())
+    crate::calib::zhang::homography(&grid, &p).ok_or_else(|| "the corners define no homography".into())
 }
 
 fn map(h: &crate::calib::zhang::Homography, p: DVec2) -> DVec2 {
@@ -105,9 +106,9 @@ fn map(h: &crate::calib::zhang::Homography, p: DVec2) -> DVec2 {
 
 /// Samples the 24 patches. `saturation` is the level at which a channel clips (1 for
 /// images scaled to full scale).
-pub fn sample(image: &Image, corners: [[f64; 2]; 4], saturation: f64) -> Result<Vec<Sample>, String> {
+pub fn sample(image: &Image, corners: [[f64; 2]; 4], saturation: f64) -> Result<Vec<Sample>, Invalid> {
     if image.channels < 3 {
-        return Err(format!("the image has {} channel(s): expected RGB", image.channels));
+        return Err(format!("the image has {} channel(s): expected RGB", image.channels).into());
     }
     let h = grid_homography(corners, image.width, image.height)?;
     let inv = h.try_inverse().ok_or("the corners define no invertible homography")?;
@@ -142,10 +143,10 @@ pub fn sample(image: &Image, corners: [[f64; 2]; 4], saturation: f64) -> Result<
                 "patch {} is sampled from {n} pixel(s) (the central {:.0} % of its cell): expected at least {MIN_PIXELS}; is the chart that small in the image, or are the corners wrong?",
                 k + 1,
                 100.0 * SAMPLED_FRACTION
-            ));
+            ).into());
         }
         if let Some(v) = values.iter().flatten().find(|v| !v.is_finite()) {
-            return Err(format!("patch {} holds a pixel value {v}: expected finite numbers", k + 1));
+            return Err(format!("patch {} holds a pixel value {v}: expected finite numbers", k + 1).into());
         }
         let clipped = values
             .iter()
@@ -194,7 +195,7 @@ fn robust_sd(sorted: &[f64]) -> f64 {
 }
 
 /// The centres of the 24 cells in the image (for overlays and tests).
-pub fn patch_centres(corners: [[f64; 2]; 4], width: u32, height: u32) -> Result<Vec<[f64; 2]>, String> {
+pub fn patch_centres(corners: [[f64; 2]; 4], width: u32, height: u32) -> Result<Vec<[f64; 2]>, Invalid> {
     let h = grid_homography(corners, width, height)?;
     Ok((0..COLS * ROWS)
         .map(|k| {
@@ -256,13 +257,13 @@ mod tests {
         let good = [[5.0, 5.0], [95.0, 5.0], [95.0, 75.0], [5.0, 75.0]];
         assert!(sample(&img, good, 1.0).is_ok());
         let swapped = [[95.0, 5.0], [5.0, 5.0], [5.0, 75.0], [95.0, 75.0]];
-        assert!(sample(&img, swapped, 1.0).unwrap_err().contains("convex"));
+        assert!(sample(&img, swapped, 1.0).unwrap_err().0.contains("convex"));
         let outside = [[5.0, 5.0], [120.0, 5.0], [95.0, 75.0], [5.0, 75.0]];
-        assert!(sample(&img, outside, 1.0).unwrap_err().contains("corner 2"));
+        assert!(sample(&img, outside, 1.0).unwrap_err().0.contains("corner 2"));
         let nan = [[f64::NAN, 5.0], [95.0, 5.0], [95.0, 75.0], [5.0, 75.0]];
-        assert!(sample(&img, nan, 1.0).unwrap_err().contains("finite"));
+        assert!(sample(&img, nan, 1.0).unwrap_err().0.contains("finite"));
         let tiny = [[5.0, 5.0], [11.0, 5.0], [11.0, 9.0], [5.0, 9.0]];
-        assert!(sample(&img, tiny, 1.0).unwrap_err().contains("expected at least 9"));
-        assert!(sample(&Image::new(100, 80, 1), good, 1.0).unwrap_err().contains("channel"));
+        assert!(sample(&img, tiny, 1.0).unwrap_err().0.contains("expected at least 9"));
+        assert!(sample(&Image::new(100, 80, 1), good, 1.0).unwrap_err().0.contains("channel"));
     }
 }

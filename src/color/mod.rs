@@ -15,6 +15,7 @@
 //! `spectra` holds the spectral data the pipeline's chart renders use and the published
 //! chart values; `delta_e` the colour differences.
 
+use crate::error::Invalid;
 pub mod chart;
 pub mod delta_e;
 pub mod models;
@@ -25,21 +26,10 @@ pub use models::{Fitted, Model};
 
 use delta_e::{delta_e2000, delta_e76, lab};
 use serde::{Deserialize, Serialize};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-#[derive(Debug, thiserror::Error)]
-pub enum Error {
-    /// The input or a setting is wrong (names what and why).
-    #[error("{0}")]
-    BadInput(String),
-    /// The patches do not determine the model.
-    #[error("{0}")]
-    Unsolvable(String),
-    #[error("{path}: {message}")]
-    File { path: PathBuf, message: String },
-    #[error(transparent)]
-    Image(#[from] crate::image::io::Error),
-}
+/// The colour fit's error: the one the hdr fit has too.
+pub use crate::error::FitError as Error;
 
 /// One patch as the solver sees it.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -311,7 +301,7 @@ pub const MAX_MODEL_OUTPUT: f64 = 1e6;
 
 /// Refuses a model whose output for camera values in the unit cube (its corners and greys)
 /// is not finite or beyond `MAX_MODEL_OUTPUT`.
-fn check_model_range(m: &models::Fitted) -> Result<(), String> {
+fn check_model_range(m: &models::Fitted) -> Result<(), Invalid> {
     let mut probes: Vec<[f64; 3]> =
         (0..8).map(|c| [(c & 1) as f64, ((c >> 1) & 1) as f64, ((c >> 2) & 1) as f64]).collect();
     probes.extend([0.01, 0.18, 0.5].map(|g| [g, g, g]));
@@ -320,7 +310,7 @@ fn check_model_range(m: &models::Fitted) -> Result<(), String> {
         if !xyz.iter().all(|v| v.is_finite() && v.abs() <= MAX_MODEL_OUTPUT) {
             return Err(format!(
                 "camera RGB {rgb:?} maps to XYZ {xyz:?}: expected finite values within ±{MAX_MODEL_OUTPUT:e} for camera values from 0 to 1"
-            ));
+            ).into());
         }
     }
     Ok(())
@@ -346,7 +336,8 @@ pub fn read_patch_rgb(path: &Path) -> Result<Vec<[f64; 3]>, Error> {
 
 fn read_table(path: &Path, columns: [&str; 4], negative_ok: bool) -> Result<Vec<[f64; 3]>, Error> {
     let err = |message: String| Error::File { path: path.into(), message };
-    let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
+    let text =
+        std::fs::read_to_string(path).map_err(|e| Error::Io { path: path.into(), message: e.to_string() })?;
     let mut lines =
         text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
     let header: Vec<String> = lines
@@ -403,11 +394,11 @@ pub fn write_table(path: &Path, columns: [&str; 3], rows: &[[f64; 3]], comment: 
     for (i, r) in rows.iter().enumerate() {
         text.push_str(&format!("{},{:e},{:e},{:e}\n", i + 1, r[0], r[1], r[2]));
     }
-    Ok(crate::image::io::write_atomically(path, |tmp| std::fs::write(tmp, &text).map_err(|e| e.to_string()))?)
+    Ok(crate::image::io::write_atomically(path, |tmp| std::fs::write(tmp, &text))?)
 }
 
 /// Parses `X,Y,Z` (a white) or `x1,y1,…` (corners): `n` finite numbers.
-pub fn parse_numbers<const N: usize>(s: &str, what: &str) -> Result<[f64; N], String> {
+pub fn parse_numbers<const N: usize>(s: &str, what: &str) -> Result<[f64; N], Invalid> {
     let v: Vec<f64> = s
         .split(',')
         .map(|x| x.trim().parse::<f64>())
@@ -416,7 +407,7 @@ pub fn parse_numbers<const N: usize>(s: &str, what: &str) -> Result<[f64; N], St
     let arr: [f64; N] =
         v.try_into().map_err(|v: Vec<f64>| format!("{what} `{s}`: {} numbers, expected {N}", v.len()))?;
     if arr.iter().any(|x| !x.is_finite()) {
-        return Err(format!("{what} `{s}`: expected finite numbers"));
+        return Err(format!("{what} `{s}`: expected finite numbers").into());
     }
     Ok(arr)
 }
@@ -439,7 +430,8 @@ pub const CCM_FORMAT: &str = "lumen-ccm";
 
 pub fn read_ccm(path: &Path) -> Result<CcmFile, Error> {
     let err = |message: String| Error::File { path: path.into(), message };
-    let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
+    let text =
+        std::fs::read_to_string(path).map_err(|e| Error::Io { path: path.into(), message: e.to_string() })?;
     let de = &mut serde_json::Deserializer::from_str(&text);
     let file: CcmFile =
         serde_path_to_error::deserialize(de).map_err(|e| err(format!("{}: {}", e.path(), e.inner())))?;

@@ -28,6 +28,7 @@
 //! solved into NaN.
 
 use super::delta_e::{delta_e2000, lab};
+use crate::error::Invalid;
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
@@ -121,8 +122,8 @@ pub const CHEUNG_TERMS: [u8; 14] = [3, 4, 5, 7, 8, 10, 11, 14, 16, 17, 19, 20, 2
 pub const MODEL_NAMES: &str = "linear-3x3, white-preserving, affine, root-poly-2, root-poly-3, cheung-N (N = 3, 4, 5, 7, 8, 10, 11, 14, 16, 17, 19, 20, 22, 35), de2000-opt (3×3) or de2000-opt:BASE (BASE one of linear-3x3, affine, root-poly-2, root-poly-3, cheung-N)";
 
 impl std::str::FromStr for Model {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Model, String> {
+    type Err = Invalid;
+    fn from_str(s: &str) -> Result<Model, Invalid> {
         Ok(match s {
             "linear-3x3" => Model::Linear3x3,
             "white-preserving" => Model::WhitePreserving,
@@ -137,12 +138,12 @@ impl std::str::FromStr for Model {
                     Model::Affine => Basis::Affine,
                     Model::RootPoly(d) => Basis::RootPoly(d),
                     Model::Cheung(n) => Basis::Cheung(n),
-                    _ => return Err(format!("model `{s}`: de2000-opt starts from linear-3x3, affine, root-poly-2, root-poly-3 or cheung-N")),
+                    _ => return Err(format!("model `{s}`: de2000-opt starts from linear-3x3, affine, root-poly-2, root-poly-3 or cheung-N").into()),
                 })
             }
             _ => match s.strip_prefix("cheung-").map(str::parse::<u8>) {
                 Some(Ok(n)) if CHEUNG_TERMS.contains(&n) => Model::Cheung(n),
-                _ => return Err(format!("model `{s}`: expected one of {MODEL_NAMES}")),
+                _ => return Err(format!("model `{s}`: expected one of {MODEL_NAMES}").into()),
             },
         })
     }
@@ -285,12 +286,12 @@ impl Fitted {
 
     /// The model read from a file is usable: three rows as long as its terms, every number
     /// finite, roots and exponents as the models use them.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), Invalid> {
         if self.terms.is_empty() || self.terms.len() > 64 {
-            return Err(format!("{} terms: expected 1 to 64", self.terms.len()));
+            return Err(format!("{} terms: expected 1 to 64", self.terms.len()).into());
         }
         if let Some(t) = self.terms.iter().find(|t| t.exponents.iter().any(|&e| e > 8) || t.root > 8) {
-            return Err(format!("term {t:?}: exponents and roots must be at most 8"));
+            return Err(format!("term {t:?}: exponents and roots must be at most 8").into());
         }
         for (c, row) in self.matrix.iter().enumerate() {
             if row.len() != self.terms.len() {
@@ -298,10 +299,11 @@ impl Fitted {
                     "matrix row {c} has {} coefficients for {} terms",
                     row.len(),
                     self.terms.len()
-                ));
+                )
+                .into());
             }
             if let Some(v) = row.iter().find(|v| !v.is_finite()) {
-                return Err(format!("matrix row {c} holds {v}: expected finite numbers"));
+                return Err(format!("matrix row {c} holds {v}: expected finite numbers").into());
             }
         }
         Ok(())
@@ -555,7 +557,7 @@ mod tests {
         assert!("cheung-6".parse::<Model>().is_err());
         assert!("de2000-opt:white-preserving".parse::<Model>().is_err());
         assert_eq!("de2000-opt:root-poly-2".parse::<Model>().unwrap().terms().len(), 6);
-        assert!("poly".parse::<Model>().unwrap_err().contains("root-poly-2"));
+        assert!("poly".parse::<Model>().unwrap_err().0.contains("root-poly-2"));
     }
 
     /// Root-polynomial terms scale with the exposure: e(k·rgb) = k·e(rgb).

@@ -18,6 +18,7 @@
 //! weights and signed differences.
 
 use super::Input;
+use crate::error::Invalid;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -44,12 +45,12 @@ impl Default for Mertens {
 }
 
 impl Mertens {
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), Invalid> {
         for (name, v) in
             [("contrast", self.contrast), ("saturation", self.saturation), ("exposedness", self.exposedness)]
         {
             if !(v.is_finite() && (0.0..=10.0).contains(&v)) {
-                return Err(format!("fusion {name} exponent = {v}: expected 0 to 10"));
+                return Err(format!("fusion {name} exponent = {v}: expected 0 to 10").into());
             }
         }
         Ok(())

@@ -3,10 +3,11 @@
 //! line, and 8- or 16-bit frames read as code values (no transfer function).
 
 use super::{Error, Frame, Input};
+use crate::error::Invalid;
 use std::path::{Path, PathBuf};
 
 /// `1/30`, `0.5` or `6.1035e-05` seconds.
-pub fn parse_time(s: &str) -> Result<f64, String> {
+pub fn parse_time(s: &str) -> Result<f64, Invalid> {
     let bad = || format!("exposure time `{s}`: expected a number or a fraction such as 1/30");
     let v = match s.split_once('/') {
         Some((a, b)) => {
@@ -17,7 +18,7 @@ pub fn parse_time(s: &str) -> Result<f64, String> {
         None => s.trim().parse().map_err(|_| bad())?,
     };
     if !(v.is_finite() && v > 0.0) {
-        return Err(format!("exposure time `{s}`: expected a positive, finite number of seconds"));
+        return Err(format!("exposure time `{s}`: expected a positive, finite number of seconds").into());
     }
     Ok(v)
 }
@@ -26,7 +27,8 @@ pub fn parse_time(s: &str) -> Result<f64, String> {
 /// file's folder, `#` comments and blank lines skipped.
 pub fn read_list(list: &Path) -> Result<Vec<(PathBuf, f64)>, Error> {
     let file_err = |message: String| Error::File { path: list.into(), message };
-    let text = std::fs::read_to_string(list).map_err(|e| file_err(format!("cannot read: {e}")))?;
+    let text = std::fs::read_to_string(list)
+        .map_err(|e| Error::Io { path: list.into(), message: format!("cannot read: {e}") })?;
     let dir = list.parent().unwrap_or(Path::new("."));
     let mut out = Vec::new();
     for (n, line) in text.lines().enumerate() {

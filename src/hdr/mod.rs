@@ -27,19 +27,8 @@ pub use response::Response;
 
 use serde::{Deserialize, Serialize};
 
-#[derive(Debug, thiserror::Error)]
-pub enum Error {
-    /// The stack or a setting is wrong (names what and why).
-    #[error("{0}")]
-    BadInput(String),
-    /// The stack does not determine a response.
-    #[error("{0}")]
-    Unsolvable(String),
-    #[error("{path}: {message}")]
-    File { path: std::path::PathBuf, message: String },
-    #[error(transparent)]
-    Image(#[from] crate::image::io::Error),
-}
+/// The hdr fit's error: the one the colour fit has too.
+pub use crate::error::FitError as Error;
 
 /// One exposure: interleaved RGB code values.
 #[derive(Clone, Debug)]
@@ -300,7 +289,7 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     let t = std::time::Instant::now();
     let fusion = match &config.fusion {
         Some(p) => {
-            p.validate().map_err(Error::BadInput)?;
+            p.validate()?;
             Some(fusion::mertens(input, p))
         }
         None => None,

@@ -47,6 +47,8 @@
 //! Inputs above 10 bits are binned to 1024 levels for the fit (a 65536-level system would be
 //! mostly empty); g is then interpolated between bin centres.
 
+use super::Error;
+use crate::error::Invalid;
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
@@ -231,12 +233,12 @@ pub enum Smoothness {
 }
 
 impl std::str::FromStr for Smoothness {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Smoothness, String> {
+    type Err = Invalid;
+    fn from_str(s: &str) -> Result<Smoothness, Invalid> {
         match s {
             "logit" => Ok(Smoothness::Logit),
             "even" => Ok(Smoothness::Even),
-            other => Err(format!("smoothness \"{other}\": expected logit or even")),
+            other => Err(format!("smoothness \"{other}\": expected logit or even").into()),
         }
     }
 }
@@ -247,10 +249,12 @@ pub fn debevec(
     samples: &[usize],
     lambda: f64,
     smoothness: Smoothness,
-) -> Result<Vec<f64>, String> {
+) -> Result<Vec<f64>, Error> {
     let (bins, shift) = binning(ch.levels);
     if samples.is_empty() {
-        return Err("no sample pixel with a value strictly between black and saturation".into());
+        return Err(Error::Unsolvable(
+            "no sample pixel with a value strictly between black and saturation".into(),
+        ));
     }
     // The normal equations [[A, B], [Bᵀ, D]]·[g; ln E] = [r_g; r_E], with D diagonal (each
     // ln Eᵢ enters only its own rows), reduced to the Schur complement over g:
@@ -295,7 +299,7 @@ pub fn debevec(
         }
     }
     if data_rows == 0 {
-        return Err("every sample is black or saturated in every frame".into());
+        return Err(Error::Unsolvable("every sample is black or saturated in every frame".into()));
     }
     // Smoothness: λ·w(z)·d²g/du², u the logit of the value or the value (module docs), scaled to the data
     // rows per value so λ means the same at any number of samples (Debevec & Malik's λ was
@@ -341,12 +345,12 @@ pub fn debevec(
         .cholesky()
         .map(|c| c.solve(&r))
         .or_else(|| s_mat.lu().solve(&r))
-        .ok_or("the response's normal equations are singular")?;
+        .ok_or_else(|| Error::Unsolvable("the response's normal equations are singular".into()))?;
     // Values the samples show carry data; the others only smoothness (filled: module docs).
     let seen: Vec<bool> = observed(ch, shift, bins, samples.iter().copied());
     let g: Vec<f64> = sol.iter().copied().collect();
     if g.iter().any(|v| !v.is_finite()) {
-        return Err("the response's least-squares solution is not finite".into());
+        return Err(Error::Unsolvable("the response's least-squares solution is not finite".into()));
     }
     Ok(unbin(&finish(g, &seen), shift, ch.levels))
 }
@@ -373,7 +377,7 @@ fn observed(
 const CONVERGED: f64 = 1e-4;
 
 /// Robertson et al.'s fit of one channel over every pixel (module docs).
-pub fn robertson(ch: &Channel, valid: &[bool], max_iterations: usize) -> Result<Vec<f64>, String> {
+pub fn robertson(ch: &Channel, valid: &[bool], max_iterations: usize) -> Result<Vec<f64>, Error> {
     let (bins, shift) = binning(ch.levels);
     let n = valid.len();
     let mid = bins / 2;
@@ -381,7 +385,7 @@ pub fn robertson(ch: &Channel, valid: &[bool], max_iterations: usize) -> Result<
     let mut inv: Vec<f64> = (0..bins).map(|m| (m as f64 + 0.5) / (mid as f64 + 0.5)).collect();
     let seen = observed(ch, shift, bins, (0..n).filter(|&i| valid[i]));
     if !seen.iter().any(|&s| s) {
-        return Err("every pixel is black or saturated in every frame".into());
+        return Err(Error::Unsolvable("every pixel is black or saturated in every frame".into()));
     }
     // Every pixel is read once per iteration: the channel is copied out of the interleaved
     // frames once, so each pass reads contiguous codes.
@@ -426,9 +430,9 @@ pub fn robertson(ch: &Channel, valid: &[bool], max_iterations: usize) -> Result<
         smooth_observed(&mut inv, &seen);
         let norm = inv[mid];
         if !(norm.is_finite() && norm > 0.0) {
-            return Err(
-                "the middle value never occurs in a well-exposed pixel: no scale for the response".into()
-            );
+            return Err(Error::Unsolvable(
+                "the middle value never occurs in a well-exposed pixel: no scale for the response".into(),
+            ));
         }
         inv.iter_mut().for_each(|v| *v /= norm);
         let g: Vec<f64> = inv.iter().map(|&v| if v > 0.0 { v.ln() } else { f64::NAN }).collect();
@@ -603,7 +607,7 @@ pub fn to_csv(r: &Response) -> String {
 
 /// Reads a table written by `to_csv` (or by hand): one row per value 0, 1, …, levels − 1,
 /// finite and strictly increasing in every channel.
-pub fn from_csv(text: &str) -> Result<Response, String> {
+pub fn from_csv(text: &str) -> Result<Response, Invalid> {
     let mut rows =
         text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
     match rows.next() {
@@ -614,19 +618,21 @@ pub fn from_csv(text: &str) -> Result<Response, String> {
     for (n, line) in rows {
         let cells: Vec<&str> = line.split(',').map(str::trim).collect();
         if cells.len() != 4 {
-            return Err(format!("line {}: {} fields, expected 4", n + 1, cells.len()));
+            return Err(format!("line {}: {} fields, expected 4", n + 1, cells.len()).into());
         }
         let z: usize =
             cells[0].parse().map_err(|_| format!("line {}: value `{}` is not a number", n + 1, cells[0]))?;
         if z != g[0].len() {
-            return Err(format!("line {}: value {z}, expected {} (rows in order from 0)", n + 1, g[0].len()));
+            return Err(
+                format!("line {}: value {z}, expected {} (rows in order from 0)", n + 1, g[0].len()).into()
+            );
         }
         for c in 0..3 {
             let v: f64 = cells[c + 1]
                 .parse()
                 .map_err(|_| format!("line {}: `{}` is not a number", n + 1, cells[c + 1]))?;
             if !v.is_finite() {
-                return Err(format!("line {}: {v} is not finite", n + 1));
+                return Err(format!("line {}: {v} is not finite", n + 1).into());
             }
             // Radiance is e^g / t in float32: with times down to 10⁻¹² s, |g| ≤ 60 keeps it
             // within float32's range (e^60 · 10¹² ≈ 10³⁸).
@@ -634,18 +640,20 @@ pub fn from_csv(text: &str) -> Result<Response, String> {
                 return Err(format!(
                     "line {}: ln exposure {v:e} is outside ±60: e^g would leave float32's range in the radiance",
                     n + 1
-                ));
+                ).into());
             }
             g[c].push(v);
         }
     }
     let levels = g[0].len();
     if !(2..=65536).contains(&levels) {
-        return Err(format!("{levels} values: expected 2 to 65536"));
+        return Err(format!("{levels} values: expected 2 to 65536").into());
     }
     for (c, gc) in g.iter().enumerate() {
         if let Some(z) = gc.windows(2).position(|w| w[1] <= w[0]) {
-            return Err(format!("channel {c}: ln exposure does not increase from value {z} to {}", z + 1));
+            return Err(
+                format!("channel {c}: ln exposure does not increase from value {z} to {}", z + 1).into()
+            );
         }
     }
     Ok(Response { levels, g })

@@ -8,12 +8,26 @@ use std::path::{Path, PathBuf};
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
+    /// The file is missing or unreadable.
     #[error("cannot read image {path}: {message}")]
     Read { path: PathBuf, message: String },
+    /// The file was read but is not an image lumen can decode, or is too large to.
+    #[error("cannot read image {path}: {message}")]
+    Decode { path: PathBuf, message: String },
     #[error("cannot write {path}: {message}")]
     Write { path: PathBuf, message: String },
     #[error("unsupported image format for {path}: expected a .exr or .png file name")]
     Format { path: PathBuf },
+}
+
+impl Error {
+    pub fn fault(&self) -> crate::error::Fault {
+        use crate::error::Fault;
+        match self {
+            Error::Read { .. } | Error::Write { .. } => Fault::Io,
+            Error::Format { .. } | Error::Decode { .. } => Fault::BadInput,
+        }
+    }
 }
 
 /// The files of `dir` whose extension is one of `extensions` (lower case; matched without
@@ -31,7 +45,10 @@ pub fn files_with_extensions(dir: &Path, extensions: &[&str]) -> std::io::Result
 }
 
 /// Writes to `path.tmp` with `write`, then renames to `path`.
-pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<(), String>) -> Result<(), Error> {
+pub fn write_atomically<E: std::fmt::Display>(
+    path: &Path,
+    write: impl FnOnce(&Path) -> Result<(), E>,
+) -> Result<(), Error> {
     let err = |message: String| Error::Write { path: path.to_path_buf(), message };
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|e| err(e.to_string()))?;
@@ -40,7 +57,7 @@ pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<(), Str
     let tmp = path.with_extension(format!("partial.{ext}"));
     if let Err(e) = write(&tmp) {
         let _ = std::fs::remove_file(&tmp);
-        return Err(err(e));
+        return Err(err(e.to_string()));
     }
     std::fs::rename(&tmp, path).map_err(|e| {
         let _ = std::fs::remove_file(&tmp);
@@ -158,8 +175,14 @@ pub const MAX_DECODED_BYTES: u64 = 512 * 1024 * 1024;
 /// Reads the first layer of an OpenEXR file as f32: R G B if present, else Y (one channel).
 pub fn read_exr(path: &Path) -> Result<Image, Error> {
     use exr::prelude::{read, ReadChannels, ReadLayers};
-    let err = |message: String| Error::Read { path: path.to_path_buf(), message };
-    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| err(e.to_string()))?;
+    let err = |message: String| Error::Decode { path: path.to_path_buf(), message };
+    let exr_err = |e: exr::error::Error| match e {
+        exr::error::Error::Io(e) if e.kind() != std::io::ErrorKind::UnexpectedEof => {
+            Error::Read { path: path.to_path_buf(), message: e.to_string() }
+        }
+        e => err(e.to_string()),
+    };
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(exr_err)?;
     for h in &meta.headers {
         let (w, hh) = (h.layer_size.0 as u64, h.layer_size.1 as u64);
         let bytes = w.saturating_mul(hh).saturating_mul(h.channels.list.len() as u64).saturating_mul(4);
@@ -179,7 +202,7 @@ pub fn read_exr(path: &Path) -> Result<Image, Error> {
         .first_valid_layer()
         .all_attributes()
         .from_file(path)
-        .map_err(|e| err(e.to_string()))?;
+        .map_err(exr_err)?;
     let layer = &image.layer_data;
     let (w, h) = (layer.size.0, layer.size.1);
     let find =
@@ -260,10 +283,9 @@ pub const MAX_PIXELS: u64 = 1 << 27;
 
 /// Opens a PNG, JPEG or TIFF, refusing from its header one above `MAX_PIXELS`.
 pub fn open_limited(path: &Path) -> Result<image::DynamicImage, Error> {
-    let err = |message: String| Error::Read { path: path.to_path_buf(), message };
-    let reader = image::ImageReader::open(path)
-        .and_then(|r| r.with_guessed_format())
-        .map_err(|e| err(e.to_string()))?;
+    let err = |message: String| Error::Decode { path: path.to_path_buf(), message };
+    let unreadable = |e: std::io::Error| Error::Read { path: path.to_path_buf(), message: e.to_string() };
+    let reader = image::ImageReader::open(path).and_then(|r| r.with_guessed_format()).map_err(unreadable)?;
     let (w, h) = reader.into_dimensions().map_err(|e| err(e.to_string()))?;
     if w as u64 * h as u64 > MAX_PIXELS {
         return Err(err(format!(
@@ -271,7 +293,10 @@ pub fn open_limited(path: &Path) -> Result<image::DynamicImage, Error> {
             MAX_PIXELS / 1_000_000
         )));
     }
-    image::open(path).map_err(|e| err(e.to_string()))
+    image::open(path).map_err(|e| match e {
+        image::ImageError::IoError(e) => unreadable(e),
+        e => err(e.to_string()),
+    })
 }
 
 /// Reads a PNG or JPEG as linear floats in [0, 1] without any transfer function (raw code

@@ -1,6 +1,7 @@
 //! Image metrics: comparison of a Monte Carlo render with a reference render.
 
 use super::Image;
+use crate::error::Invalid;
 use crate::math::stats;
 use serde::Serialize;
 
@@ -33,13 +34,14 @@ pub fn agreement(
     b: &Image,
     var_b: &Image,
     alpha: f64,
-) -> Result<Agreement, String> {
+) -> Result<Agreement, Invalid> {
     for (name, img) in [("variance", var_a), ("reference", b), ("reference variance", var_b)] {
         if (img.width, img.height, img.channels) != (a.width, a.height, a.channels) {
             return Err(format!(
                 "{name} is {}x{}x{}, the render {}x{}x{}",
                 img.width, img.height, img.channels, a.width, a.height, a.channels
-            ));
+            )
+            .into());
         }
     }
     let tested = a.data.len();

@@ -5,6 +5,7 @@
 //! Pixels without a value (depth exactly 0, normal 0, id 0, not finite) are black.
 
 use super::{colormap, io, Image};
+use crate::error::Invalid;
 use std::path::{Path, PathBuf};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -23,8 +24,8 @@ pub enum Kind {
 pub const KIND_NAMES: &str = "radiance, normal, depth, id, albedo, position or scalar";
 
 impl std::str::FromStr for Kind {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Kind, String> {
+    type Err = Invalid;
+    fn from_str(s: &str) -> Result<Kind, Invalid> {
         Ok(match s {
             "radiance" => Kind::Radiance,
             "normal" | "normal_camera" => Kind::Normal,
@@ -33,7 +34,7 @@ impl std::str::FromStr for Kind {
             "albedo" => Kind::Albedo,
             "position" => Kind::Position,
             "scalar" | "variance" => Kind::Scalar,
-            other => return Err(format!("kind `{other}`: expected {KIND_NAMES}")),
+            other => return Err(format!("kind `{other}`: expected {KIND_NAMES}").into()),
         })
     }
 }
@@ -179,7 +180,7 @@ mod tests {
         assert_eq!(kind_of(Path::new("box.exr"), &three), Kind::Radiance);
         assert_eq!(kind_of(Path::new("box.variance.exr"), &three), Kind::Scalar);
         assert_eq!(kind_of(Path::new("thing.exr"), &one), Kind::Scalar);
-        assert!("shiny".parse::<Kind>().unwrap_err().contains("expected radiance"));
+        assert!("shiny".parse::<Kind>().unwrap_err().0.contains("expected radiance"));
     }
 
     #[test]

@@ -13,6 +13,7 @@
 //! `undistortPoints` uses a fixed-point iteration that stops far from machine precision; Newton
 //! reaches 1e-12 px in a few steps, which the renderer needs for exact primary rays).
 
+use crate::error::Invalid;
 use glam::{DVec2, DVec3};
 use serde::{Deserialize, Serialize};
 
@@ -171,25 +172,25 @@ impl CameraModel {
     }
 
     /// Checks that the numbers describe a usable camera; names the first bad field.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), Invalid> {
         let k = &self.intrinsics;
         if self.width == 0 || self.height == 0 {
-            return Err(format!("image size {}x{} must be positive", self.width, self.height));
+            return Err(format!("image size {}x{} must be positive", self.width, self.height).into());
         }
         for (name, v) in [("fx", k.fx), ("fy", k.fy)] {
             if !(v.is_finite() && v > 0.0) {
-                return Err(format!("{name} = {v} must be a positive finite number of pixels"));
+                return Err(format!("{name} = {v} must be a positive finite number of pixels").into());
             }
         }
         for (name, v) in [("cx", k.cx), ("cy", k.cy)] {
             if !v.is_finite() {
-                return Err(format!("{name} = {v} must be finite"));
+                return Err(format!("{name} = {v} must be finite").into());
             }
         }
         let names = ["k1", "k2", "p1", "p2", "k3"];
         for (name, v) in names.iter().zip(self.distortion.to_array()) {
             if !v.is_finite() {
-                return Err(format!("distortion {name} = {v} must be finite"));
+                return Err(format!("distortion {name} = {v} must be finite").into());
             }
         }
         Ok(())

@@ -24,6 +24,10 @@ fn bad(path: &Path, message: impl Into<String>) -> Error {
     Error::BadInput { path: path.to_path_buf(), message: message.into() }
 }
 
+fn unreadable(path: &Path, e: std::io::Error) -> Error {
+    Error::Read { path: path.to_path_buf(), message: e.to_string() }
+}
+
 /// Writes `input` (and `truth`, as `Normal_gt.mat`) in the layout `read` reads, into `dir`
 /// as (file name, bytes) pairs: `images` are the raw per-light images (linear, EXR) whose
 /// masked pixels, divided by the intensities, are `input`'s observations. Light directions are
@@ -63,7 +67,7 @@ pub fn layout(
 
 /// Rows of whitespace-separated numbers, each with exactly `cols` values.
 fn table(path: &Path, cols: usize) -> Result<Vec<Vec<f64>>, Error> {
-    let text = std::fs::read_to_string(path).map_err(|e| bad(path, e.to_string()))?;
+    let text = std::fs::read_to_string(path).map_err(|e| unreadable(path, e))?;
     let mut rows = Vec::new();
     for (k, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
         let row: Vec<f64> = line
@@ -83,7 +87,7 @@ fn table(path: &Path, cols: usize) -> Result<Vec<Vec<f64>>, Error> {
 pub fn read(dir: &Path) -> Result<Dataset, Error> {
     let list = dir.join("filenames.txt");
     let names: Vec<String> = std::fs::read_to_string(&list)
-        .map_err(|e| bad(&list, e.to_string()))?
+        .map_err(|e| unreadable(&list, e))?
         .lines()
         .map(|l| l.trim().to_string())
         .filter(|l| !l.is_empty())
@@ -162,8 +166,8 @@ pub fn read(dir: &Path) -> Result<Dataset, Error> {
 
     let gt_path = dir.join("Normal_gt.mat");
     let truth = if gt_path.exists() {
-        let bytes = std::fs::read(&gt_path).map_err(|e| bad(&gt_path, e.to_string()))?;
-        let a = super::mat::read_variable(&bytes, "Normal_gt").map_err(|m| bad(&gt_path, m))?;
+        let bytes = std::fs::read(&gt_path).map_err(|e| unreadable(&gt_path, e))?;
+        let a = super::mat::read_variable(&bytes, "Normal_gt").map_err(|m| bad(&gt_path, m.0))?;
         if a.dims != [height, width, 3] {
             return Err(bad(
                 &gt_path,

@@ -5,6 +5,7 @@
 //! uses are read; anything else is refused by name. Format: MathWorks, "MAT-File Format",
 //! version 5 (2021 edition), chapter 1.
 
+use crate::error::Invalid;
 use std::io::Read;
 
 const MI_INT8: u32 = 1;
@@ -28,7 +29,7 @@ pub struct Array {
 }
 
 /// One data element: (type, payload, bytes consumed including padding to 8).
-fn element(bytes: &[u8]) -> Result<(u32, &[u8], usize), String> {
+fn element(bytes: &[u8]) -> Result<(u32, &[u8], usize), Invalid> {
     if bytes.len() < 8 {
         return Err("truncated data element tag".into());
     }
@@ -37,19 +38,19 @@ fn element(bytes: &[u8]) -> Result<(u32, &[u8], usize), String> {
         // Small element: type and size in one word, up to 4 bytes of data in the next.
         let (ty, size) = (word & 0xffff, (word >> 16) as usize);
         if size > 4 {
-            return Err(format!("small data element of {size} bytes"));
+            return Err(format!("small data element of {size} bytes").into());
         }
         return Ok((ty, &bytes[4..4 + size], 8));
     }
     let size = u32::from_le_bytes(bytes[4..8].try_into().unwrap_or_default()) as usize;
     if bytes.len() < 8 + size {
-        return Err(format!("data element of {size} bytes runs past the end"));
+        return Err(format!("data element of {size} bytes runs past the end").into());
     }
     let padded = if word == MI_COMPRESSED { size } else { size.div_ceil(8) * 8 };
     Ok((word, &bytes[8..8 + size], (8 + padded).min(bytes.len())))
 }
 
-fn numbers(ty: u32, data: &[u8]) -> Result<Vec<f64>, String> {
+fn numbers(ty: u32, data: &[u8]) -> Result<Vec<f64>, Invalid> {
     fn each<const N: usize>(data: &[u8], f: impl Fn([u8; N]) -> f64) -> Vec<f64> {
         data.chunks_exact(N).map(|c| f(c.try_into().unwrap_or([0; N]))).collect()
     }
@@ -60,14 +61,14 @@ fn numbers(ty: u32, data: &[u8]) -> Result<Vec<f64>, String> {
         MI_UINT32 => each::<4>(data, |b| u32::from_le_bytes(b) as f64),
         MI_UINT8 => data.iter().map(|&v| v as f64).collect(),
         MI_INT8 => data.iter().map(|&v| v as i8 as f64).collect(),
-        other => return Err(format!("numeric data of MAT type {other} is not supported")),
+        other => return Err(format!("numeric data of MAT type {other} is not supported").into()),
     })
 }
 
 /// Parses a `miMATRIX` payload; returns its name and array.
-fn matrix(payload: &[u8]) -> Result<(String, Array), String> {
+fn matrix(payload: &[u8]) -> Result<(String, Array), Invalid> {
     let mut at = 0;
-    let mut next = || -> Result<(u32, &[u8]), String> {
+    let mut next = || -> Result<(u32, &[u8]), Invalid> {
         let (ty, data, used) = element(&payload[at.min(payload.len())..])?;
         at += used;
         Ok((ty, data))
@@ -80,7 +81,8 @@ fn matrix(payload: &[u8]) -> Result<(String, Array), String> {
         return Err(format!(
             "array class {class}{} is not a real numeric array",
             if complex { " (complex)" } else { "" }
-        ));
+        )
+        .into());
     }
     let (ty, dims) = next()?;
     let dims: Vec<usize> = numbers(ty, dims)?.into_iter().map(|d| d as usize).collect();
@@ -89,13 +91,13 @@ fn matrix(payload: &[u8]) -> Result<(String, Array), String> {
     let (ty, real) = next()?;
     let data = numbers(ty, real)?;
     if data.len() != dims.iter().product::<usize>() {
-        return Err(format!("`{name}`: {} values for dimensions {dims:?}", data.len()));
+        return Err(format!("`{name}`: {} values for dimensions {dims:?}", data.len()).into());
     }
     Ok((name, Array { dims, data }))
 }
 
 /// The variable `name` from the MAT-file bytes.
-pub fn read_variable(bytes: &[u8], name: &str) -> Result<Array, String> {
+pub fn read_variable(bytes: &[u8], name: &str) -> Result<Array, Invalid> {
     if bytes.len() < 128 || !bytes.starts_with(b"MATLAB 5.0 MAT-file") {
         return Err("not a MATLAB 5.0 MAT-file".into());
     }
@@ -119,7 +121,8 @@ pub fn read_variable(bytes: &[u8], name: &str) -> Result<Array, String> {
                 return Err(format!(
                     "a compressed element inflates to more than {} MB, the limit for a normal map",
                     MAX_INFLATED_BYTES >> 20
-                ));
+                )
+                .into());
             }
             inflated = out;
             let (t, p, _) = element(&inflated)?;
@@ -136,7 +139,7 @@ pub fn read_variable(bytes: &[u8], name: &str) -> Result<Array, String> {
         }
         seen.push(n);
     }
-    Err(format!("no variable `{name}` (the file holds {seen:?})"))
+    Err(format!("no variable `{name}` (the file holds {seen:?})").into())
 }
 
 /// One data element: tag, payload, zero padding to 8 bytes.
@@ -188,9 +191,9 @@ mod tests {
         assert_eq!((a.dims.clone(), a.data.clone()), (vec![2, 3], vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]));
         let b = read_variable(&file, "B").unwrap();
         assert_eq!(b.data, vec![-0.5, 0.25]);
-        let e = read_variable(&file, "C").unwrap_err();
+        let e = read_variable(&file, "C").unwrap_err().0;
         assert!(e.contains("`C`") && e.contains("\"A\""), "{e}");
-        assert!(read_variable(b"hello", "A").unwrap_err().contains("not a MATLAB"));
+        assert!(read_variable(b"hello", "A").unwrap_err().0.contains("not a MATLAB"));
         // Truncated: an error, not a panic.
         assert!(read_variable(&file[..file.len() - 10], "B").is_err());
     }
@@ -210,7 +213,7 @@ mod tests {
         file.extend(MI_COMPRESSED.to_le_bytes());
         file.extend((packed.len() as u32).to_le_bytes());
         file.extend(packed);
-        let e = read_variable(&file, "B").unwrap_err();
+        let e = read_variable(&file, "B").unwrap_err().0;
         assert!(e.contains("inflates to more than 512 MB"), "{e}");
     }
 }

@@ -9,6 +9,7 @@
 //! `accuracy` measures an output against truth normals; `write` puts the result files in a
 //! folder.
 
+use crate::error::Invalid;
 pub mod blinn_phong;
 pub mod dataset;
 pub mod integrate;
@@ -33,6 +34,21 @@ pub enum Error {
     Image(#[from] crate::image::io::Error),
     #[error("cannot write {path}: {message}")]
     Write { path: PathBuf, message: String },
+    /// A dataset file that could not be read.
+    #[error("{path}: {message}")]
+    Read { path: PathBuf, message: String },
+}
+
+impl Error {
+    pub fn fault(&self) -> crate::Fault {
+        use crate::Fault;
+        match self {
+            Error::BadInput { .. } | Error::Input { .. } => Fault::BadInput,
+            Error::Unsolvable { .. } => Fault::Numerical,
+            Error::Image(e) => e.fault(),
+            Error::Write { .. } | Error::Read { .. } => Fault::Io,
+        }
+    }
 }
 
 /// Raw values (fractions of the largest code) at or above this are saturated.
@@ -100,13 +116,13 @@ impl Model {
 }
 
 impl std::str::FromStr for Model {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Model, String> {
+    type Err = Invalid;
+    fn from_str(s: &str) -> Result<Model, Invalid> {
         match s {
             "lambertian" => Ok(Model::Lambertian),
             "robust" => Ok(Model::Robust),
             "blinn-phong" => Ok(Model::BlinnPhong),
-            _ => Err(format!("unknown model `{s}`: expected lambertian, robust or blinn-phong")),
+            _ => Err(format!("unknown model `{s}`: expected lambertian, robust or blinn-phong").into()),
         }
     }
 }
@@ -150,11 +166,11 @@ pub const START_ITERATIONS: std::ops::RangeInclusive<u64> = 1..=100;
 
 /// `k` if it is a valid `Config::start_iterations`, else "k: expected 1 to 100", for the
 /// caller to prefix with the name the user gave it.
-pub fn check_start_iterations(k: u64) -> Result<u64, String> {
+pub fn check_start_iterations(k: u64) -> Result<u64, Invalid> {
     if START_ITERATIONS.contains(&k) {
         Ok(k)
     } else {
-        Err(format!("{k}: expected {} to {}", START_ITERATIONS.start(), START_ITERATIONS.end()))
+        Err(format!("{k}: expected {} to {}", START_ITERATIONS.start(), START_ITERATIONS.end()).into())
     }
 }
 
@@ -499,7 +515,7 @@ fn write_files(dir: &Path, data: &Input, out: &Output, truth: Option<&[DVec3]>) 
         io::write_exr(&dir.join("depth.exr"), &depth)?;
         let obj = integrate::to_obj(data.width, &data.pixels, &out.normals, &z);
         let path = dir.join("surface.obj");
-        io::write_atomically(&path, |tmp| std::fs::write(tmp, obj).map_err(|e| e.to_string()))?;
+        io::write_atomically(&path, |tmp| std::fs::write(tmp, obj))?;
     }
     #[derive(Serialize)]
     struct Written<'a> {
@@ -512,7 +528,7 @@ fn write_files(dir: &Path, data: &Input, out: &Output, truth: Option<&[DVec3]>) 
     let json = serde_json::to_string_pretty(&written)
         .map_err(|e| Error::Write { path: dir.join("summary.json"), message: e.to_string() })?;
     let path = dir.join("summary.json");
-    io::write_atomically(&path, |tmp| std::fs::write(tmp, json).map_err(|e| e.to_string()))?;
+    io::write_atomically(&path, |tmp| std::fs::write(tmp, json))?;
     Ok(())
 }
 

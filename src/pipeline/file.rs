@@ -22,7 +22,8 @@
 //! ```
 
 use super::metric::BoundSpec;
-use super::stages::{from_table, parse_stage, Stage, ERROR_KINDS};
+use super::stages::{from_table, parse_stage, Stage};
+use crate::error::{Fault, Invalid};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -33,6 +34,15 @@ pub enum Error {
     Io { path: PathBuf, message: String },
     #[error("{path}: {message}")]
     Parse { path: PathBuf, message: String },
+}
+
+impl Error {
+    pub fn fault(&self) -> Fault {
+        match self {
+            Error::Io { .. } => Fault::Io,
+            Error::Parse { .. } => Fault::BadInput,
+        }
+    }
 }
 
 /// What every entry has besides its stage's settings.
@@ -135,12 +145,12 @@ pub fn parse(text: &str, path: &Path) -> Result<PipelineFile, Error> {
                 return Err(err("missing `stage` (render, calibrate, photometric, color, hdr or sfm)".into()))
             }
         };
-        let common: Common = from_table(common_t).map_err(err)?;
+        let common: Common = from_table(common_t).map_err(|e| err(e.0))?;
         let err = |message: String| Error::Parse {
             path: path.into(),
             message: format!("stages[{i}] (line {line}, case {}): {message}", common.case),
         };
-        check_common(&common).map_err(err)?;
+        check_common(&common).map_err(|e| err(e.0))?;
         for (key, values) in &common.sweep {
             if COMMON_KEYS.contains(&key.as_str()) {
                 return Err(err(format!("sweep.{key}: only a stage's own fields can be swept")));
@@ -160,7 +170,7 @@ pub fn parse(text: &str, path: &Path) -> Result<PipelineFile, Error> {
                 t.insert(k.clone(), v.clone());
                 shown.insert(k.clone(), v.to_string());
             }
-            let stage = parse_stage(&stage_name, t).map_err(|m| err(m))?;
+            let stage = parse_stage(&stage_name, t).map_err(|e| err(e.0))?;
             let mut c = Common {
                 case: common.case.clone(),
                 seed: common.seed,
@@ -190,7 +200,7 @@ pub fn parse(text: &str, path: &Path) -> Result<PipelineFile, Error> {
     Ok(PipelineFile { name: raw.name, seed: raw.seed, cases })
 }
 
-fn check_common(c: &Common) -> Result<(), String> {
+fn check_common(c: &Common) -> Result<(), Invalid> {
     if c.case.trim().is_empty() {
         return Err("`case` is empty: give the case a name".into());
     }
@@ -199,12 +209,15 @@ fn check_common(c: &Common) -> Result<(), String> {
     }
     for name in c.expected_miss.keys() {
         if !c.bounds.contains_key(name) {
-            return Err(format!("expected_miss.{name}: `{name}` has no bound, so there is nothing to miss"));
+            return Err(
+                format!("expected_miss.{name}: `{name}` has no bound, so there is nothing to miss").into()
+            );
         }
     }
     if let Some(k) = &c.expect_error {
-        if !ERROR_KINDS.contains(&k.as_str()) {
-            return Err(format!("expect_error = \"{k}\": expected one of {}", ERROR_KINDS.join(", ")));
+        if k.parse::<Fault>().is_err() {
+            let names: Vec<&str> = Fault::ALL.iter().map(|f| f.name()).collect();
+            return Err(format!("expect_error = \"{k}\": expected one of {}", names.join(", ")).into());
         }
     }
     Ok(())

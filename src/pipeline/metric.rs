@@ -9,6 +9,7 @@
 //! expected failure does (`Report::misses_now_met`).
 
 use super::report::fmt_value;
+use crate::error::Invalid;
 use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
@@ -131,7 +132,7 @@ impl BoundSpec {
     }
 
     /// Refuses a non-finite end, an empty table, or min above max.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), Invalid> {
         let ends = match self {
             BoundSpec::Plain(b) => vec![("", *b)],
             BoundSpec::Range(r) => {
@@ -147,12 +148,14 @@ impl BoundSpec {
         };
         for (key, v) in &ends {
             if !v.is_finite() {
-                return Err(format!("{key} = {v}: expected a finite number"));
+                return Err(format!("{key} = {v}: expected a finite number").into());
             }
         }
         if let BoundSpec::Range(Bound { min: Some(a), max: Some(b) }) = self {
             if a > b {
-                return Err(format!(" = {{ min = {a}, max = {b} }}: min is above max, so no value meets it"));
+                return Err(
+                    format!(" = {{ min = {a}, max = {b} }}: min is above max, so no value meets it").into()
+                );
             }
         }
         Ok(())

@@ -4,6 +4,7 @@
 //! stage is three plain functions (`stages` docs); only listed cases run, and each renders
 //! only what it consumes.
 
+use crate::error::Invalid;
 pub mod cache;
 pub mod file;
 pub mod metric;
@@ -26,7 +27,7 @@ pub enum Error {
     #[error(transparent)]
     File(#[from] file::Error),
     #[error("{path}: stages[{entry}] (line {line}, case {case}): {kind} error: {error}")]
-    Stage { path: PathBuf, entry: usize, line: usize, case: String, kind: &'static str, error: StageError },
+    Stage { path: PathBuf, entry: usize, line: usize, case: String, kind: crate::Fault, error: StageError },
     #[error("{path}: {message}")]
     Bounds { path: PathBuf, message: String },
     #[error("--threads {0}: expected 1 to {MAX_THREADS}")]
@@ -39,11 +40,25 @@ pub enum Error {
     Merge { path: PathBuf, message: String },
 }
 
+impl Error {
+    pub fn fault(&self) -> crate::Fault {
+        use crate::Fault;
+        match self {
+            Error::File(e) => e.fault(),
+            Error::Stage { error, .. } => error.fault(),
+            Error::Bounds { .. } | Error::Threads(_) | Error::Merge { .. } => Fault::BadInput,
+            Error::Pool(..) | Error::Write { .. } => Fault::Io,
+        }
+    }
+}
+
 impl From<crate::image::io::Error> for Error {
     fn from(e: crate::image::io::Error) -> Error {
         use crate::image::io::Error as I;
         match e {
-            I::Write { path, message } | I::Read { path, message } => Error::Write { path, message },
+            I::Write { path, message } | I::Read { path, message } | I::Decode { path, message } => {
+                Error::Write { path, message }
+            }
             I::Format { path } => Error::Write { path, message: "expected a .exr or .png file name".into() },
         }
     }
@@ -259,8 +274,8 @@ fn report_case(
             Ok((st, r.files))
         }
         Err(e) if common.expect_error.is_some() => {
-            st.outcome.actual = format!("error: {}", e.kind());
-            st.error = Some(StageFailure { kind: e.kind().into(), message: e.to_string() });
+            st.outcome.actual = format!("error: {}", e.fault());
+            st.error = Some(StageFailure { kind: e.fault().to_string(), message: e.to_string() });
             Ok((st, Vec::new()))
         }
         Err(error) => Err(Error::Stage {
@@ -268,7 +283,7 @@ fn report_case(
             entry: case.entry - 1,
             line: case.line,
             case: common.case.clone(),
-            kind: error.kind(),
+            kind: error.fault(),
             error,
         }),
     }
@@ -277,14 +292,14 @@ fn report_case(
 /// Attaches each metric's bound and verdict. A bound or expected miss that names a metric the
 /// stage did not produce is an error, so a typo cannot silently disable a check; a skipped
 /// metric keeps its bound but gets no verdict.
-fn apply_bounds(mut metrics: Vec<Metric>, common: &file::Common) -> Result<Vec<Metric>, String> {
+fn apply_bounds(mut metrics: Vec<Metric>, common: &file::Common) -> Result<Vec<Metric>, Invalid> {
     for name in common.bounds.keys().chain(common.expected_miss.keys()) {
         if !metrics.iter().any(|m| &m.name == name) {
             let known: Vec<&str> = metrics.iter().map(|m| m.name.as_str()).collect();
             return Err(format!(
                 "bound or expected_miss names metric `{name}`, which this stage does not report (it reports: {})",
                 known.join(", ")
-            ));
+            ).into());
         }
     }
     for m in &mut metrics {

@@ -379,28 +379,24 @@ impl Report {
             let path = dir.join(name);
             match kept {
                 super::stages::Kept::Image(img) => crate::image::io::write(&path, img).map(|_| ()),
-                super::stages::Kept::Bytes(b) => crate::image::io::write_atomically(&path, |tmp| {
-                    std::fs::write(tmp, b).map_err(|e| e.to_string())
-                }),
+                super::stages::Kept::Bytes(b) => {
+                    crate::image::io::write_atomically(&path, |tmp| std::fs::write(tmp, b))
+                }
             }
             .map_err(|e| werr(&path, e.to_string()))?;
         }
         for (group, cases) in self.sweeps() {
             let path = dir.join("plots").join(format!("{}.svg", file_stem(group)));
             let svg = plot_svg(group, &cases);
-            crate::image::io::write_atomically(&path, |tmp| {
-                std::fs::write(tmp, &svg).map_err(|e| e.to_string())
-            })
-            .map_err(|e| werr(&path, e.to_string()))?;
+            crate::image::io::write_atomically(&path, |tmp| std::fs::write(tmp, &svg))
+                .map_err(|e| werr(&path, e.to_string()))?;
         }
         let json =
             serde_json::to_string_pretty(self).map_err(|e| werr(&dir.join("report.json"), e.to_string()))?;
         for (name, text) in [("report.json", json), ("report.md", self.to_markdown())] {
             let path = dir.join(name);
-            crate::image::io::write_atomically(&path, |tmp| {
-                std::fs::write(tmp, &text).map_err(|e| e.to_string())
-            })
-            .map_err(|e| werr(&path, e.to_string()))?;
+            crate::image::io::write_atomically(&path, |tmp| std::fs::write(tmp, &text))
+                .map_err(|e| werr(&path, e.to_string()))?;
         }
         Ok(())
     }

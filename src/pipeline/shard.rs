@@ -6,6 +6,7 @@
 
 use super::report::Report;
 use super::Error;
+use crate::error::Invalid;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -21,12 +22,12 @@ pub const MAX_SHARDS: usize = 1000;
 
 impl Shard {
     /// `K/N` with 1 ≤ K ≤ N ≤ `MAX_SHARDS`.
-    pub fn parse(s: &str) -> Result<Shard, String> {
+    pub fn parse(s: &str) -> Result<Shard, Invalid> {
         let expected = format!("expected K/N with 1 <= K <= N <= {MAX_SHARDS}, e.g. 2/3");
         let (k, n) = s.split_once('/').ok_or_else(|| expected.clone())?;
         match (k.trim().parse::<usize>(), n.trim().parse::<usize>()) {
             (Ok(k), Ok(n)) if 1 <= k && k <= n && n <= MAX_SHARDS => Ok(Shard { k, n }),
-            _ => Err(expected),
+            _ => Err(expected.into()),
         }
     }
 

@@ -12,6 +12,7 @@
 //!
 //! lumen never talks to Slurm except through `sbatch`; users read and adapt the scripts.
 
+use crate::error::Invalid;
 use std::path::{Path, PathBuf};
 
 /// What the scripts run and ask Slurm for. Paths are absolute: the jobs start on other nodes,
@@ -34,10 +35,10 @@ pub struct Job {
 
 /// Refuses a value that would break a script line (`--partition`, `--time`): it must be a
 /// plain word of letters, digits and `-_:.,+`.
-pub fn check_word(flag: &str, value: &str) -> Result<(), String> {
+pub fn check_word(flag: &str, value: &str) -> Result<(), Invalid> {
     let plain = |c: char| c.is_ascii_alphanumeric() || "-_:.,+".contains(c);
     if value.is_empty() || !value.chars().all(plain) {
-        return Err(format!("{flag} {value:?}: expected letters, digits and -_:.,+ only"));
+        return Err(format!("{flag} {value:?}: expected letters, digits and -_:.,+ only").into());
     }
     Ok(())
 }

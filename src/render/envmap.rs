@@ -20,6 +20,7 @@
 //! the density is P(cell)/Ω — exact and piecewise-constant in solid angle. A cell whose four
 //! corners are black has no light and is never picked.
 
+use crate::error::Invalid;
 use crate::image::Image;
 use glam::Vec3A;
 use std::f32::consts::PI;
@@ -71,10 +72,10 @@ fn invert(cdf: &[f32], u: f32) -> Option<(usize, f32)> {
 impl EnvMap {
     /// Builds the map from a linear RGB (or grey) image of at least 2 × 2 texels. Errors name
     /// the problem: too small, or a negative or non-finite texel.
-    pub fn new(img: &Image) -> Result<EnvMap, String> {
+    pub fn new(img: &Image) -> Result<EnvMap, Invalid> {
         let (w, h) = (img.width as usize, img.height as usize);
         if w < 2 || h < 2 {
-            return Err(format!("{w}×{h}: a latitude-longitude map needs at least 2×2 texels"));
+            return Err(format!("{w}×{h}: a latitude-longitude map needs at least 2×2 texels").into());
         }
         if img.channels == 2 {
             return Err("2 channels: expected RGB (or one grey channel)".into());
@@ -85,7 +86,9 @@ impl EnvMap {
                 let c = img.pixel(x as u32, y as u32);
                 let v = if c.len() >= 3 { Vec3A::new(c[0], c[1], c[2]) } else { Vec3A::splat(c[0]) };
                 if !v.is_finite() || v.min_element() < 0.0 {
-                    return Err(format!("texel ({x}, {y}) is {v}: expected finite, non-negative radiance"));
+                    return Err(
+                        format!("texel ({x}, {y}) is {v}: expected finite, non-negative radiance").into()
+                    );
                 }
                 texels.push(v);
             }
@@ -295,15 +298,15 @@ mod tests {
 
     #[test]
     fn bad_maps_are_refused() {
-        assert!(EnvMap::new(&Image::new(1, 4, 3)).unwrap_err().contains("2×2"));
-        assert!(EnvMap::new(&Image::new(4, 4, 2)).unwrap_err().contains("RGB"));
+        assert!(EnvMap::new(&Image::new(1, 4, 3)).unwrap_err().0.contains("2×2"));
+        assert!(EnvMap::new(&Image::new(4, 4, 2)).unwrap_err().0.contains("RGB"));
         let mut grey = Image::new(4, 4, 1);
         grey.data.fill(0.5);
         assert_eq!(EnvMap::new(&grey).unwrap().mean_radiance, Vec3A::splat(0.5));
         let mut img = Image::new(4, 4, 3);
         img.data[7] = -1.0;
-        assert!(EnvMap::new(&img).unwrap_err().contains("texel (2, 0)"));
+        assert!(EnvMap::new(&img).unwrap_err().0.contains("texel (2, 0)"));
         img.data[7] = f32::NAN;
-        assert!(EnvMap::new(&img).unwrap_err().contains("non-negative"));
+        assert!(EnvMap::new(&img).unwrap_err().0.contains("non-negative"));
     }
 }

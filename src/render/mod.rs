@@ -50,6 +50,21 @@ pub enum Error {
     OutOfMemory { what: String, bytes: u64 },
 }
 
+impl Error {
+    pub fn fault(&self) -> crate::Fault {
+        use crate::Fault;
+        match self {
+            Error::Io { .. } => Fault::Io,
+            Error::Obj(e) => e.fault(),
+            Error::Image(e) => e.fault(),
+            Error::Parse { .. }
+            | Error::Invalid { .. }
+            | Error::EmptyMesh { .. }
+            | Error::OutOfMemory { .. } => Fault::BadInput,
+        }
+    }
+}
+
 /// A progress bar on stderr when `show` is set and stderr is a terminal; hidden otherwise.
 pub fn progress_bar(len: u64, what: &str, show: bool) -> indicatif::ProgressBar {
     if !show {

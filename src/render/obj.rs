@@ -12,8 +12,19 @@ use std::path::Path;
 #[error("{path}:{line}: {message}")]
 pub struct ObjError {
     pub path: String,
+    /// 1-based; 0 when the file could not be read at all.
     pub line: usize,
     pub message: String,
+}
+
+impl ObjError {
+    pub fn fault(&self) -> crate::Fault {
+        if self.line == 0 {
+            crate::Fault::Io
+        } else {
+            crate::Fault::BadInput
+        }
+    }
 }
 
 #[derive(Clone, Debug, Default)]

@@ -11,6 +11,7 @@
 //! against. Noise is drawn from a generator seeded by (seed, pixel), so it does not depend on
 //! the thread count.
 
+use crate::error::Invalid;
 use crate::image::Image;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal, Poisson};
@@ -76,20 +77,20 @@ fn memorial() -> &'static [f64] {
 }
 
 impl Response {
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), Invalid> {
         match *self {
             Response::Gamma { gamma } if !(gamma.is_finite() && (0.1..=10.0).contains(&gamma)) => {
-                Err(format!("response gamma = {gamma}: expected 0.1 to 10"))
+                Err(format!("response gamma = {gamma}: expected 0.1 to 10").into())
             }
             Response::Film { stops } if !(stops.is_finite() && (0.0..=10.0).contains(&stops)) => {
-                Err(format!("response stops = {stops}: expected 0 to 10"))
+                Err(format!("response stops = {stops}: expected 0 to 10").into())
             }
             Response::Sigmoid { gamma, a } => {
                 if let Some(g) = gamma.iter().find(|g| !(g.is_finite() && (0.1..=10.0).contains(*g))) {
-                    return Err(format!("response gamma = {g} (of {gamma:?}): expected 0.1 to 10"));
+                    return Err(format!("response gamma = {g} (of {gamma:?}): expected 0.1 to 10").into());
                 }
                 if let Some(v) = a.iter().find(|v| !(v.is_finite() && (1e-3..=1e3).contains(*v))) {
-                    return Err(format!("response a = {v} (of {a:?}): expected 0.001 to 1000"));
+                    return Err(format!("response a = {v} (of {a:?}): expected 0.001 to 1000").into());
                 }
                 Ok(())
             }
@@ -193,18 +194,18 @@ impl Default for Sensor {
 }
 
 impl Sensor {
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), Invalid> {
         if !(self.exposure.is_finite() && self.exposure > 0.0) {
-            return Err(format!("exposure = {} must be positive", self.exposure));
+            return Err(format!("exposure = {} must be positive", self.exposure).into());
         }
         if !(self.full_well.is_finite() && self.full_well >= 1.0) {
-            return Err(format!("full_well = {} must be at least 1 electron", self.full_well));
+            return Err(format!("full_well = {} must be at least 1 electron", self.full_well).into());
         }
         if !(self.read_noise.is_finite() && self.read_noise >= 0.0) {
-            return Err(format!("read_noise = {} must be non-negative", self.read_noise));
+            return Err(format!("read_noise = {} must be non-negative", self.read_noise).into());
         }
         if ![8, 10, 12, 16].contains(&self.bits) {
-            return Err(format!("bits = {} must be 8, 10, 12 or 16", self.bits));
+            return Err(format!("bits = {} must be 8, 10, 12 or 16", self.bits).into());
         }
         self.response.validate()
     }

@@ -35,6 +35,7 @@
 //! Pixel centres at integers.
 
 use super::reduced;
+use crate::error::Invalid;
 use nalgebra::{
     Matrix2, Matrix2x3, Matrix3, Matrix6, Matrix6x3, SMatrix, SVector, Vector2, Vector3, Vector6,
 };
@@ -115,7 +116,7 @@ impl Refine {
     }
 
     /// From names: any of `focal`, `principal-point`, `k1`, `k2`.
-    pub fn from_names<S: AsRef<str>>(names: &[S]) -> Result<Refine, String> {
+    pub fn from_names<S: AsRef<str>>(names: &[S]) -> Result<Refine, Invalid> {
         let mut r = Refine::NONE;
         for name in names {
             match name.as_ref() {
@@ -123,7 +124,7 @@ impl Refine {
                 "principal-point" => r.principal_point = true,
                 "k1" => r.k1 = true,
                 "k2" => r.k2 = true,
-                other => return Err(format!("\"{other}\": expected focal, principal-point, k1 or k2")),
+                other => return Err(format!("\"{other}\": expected focal, principal-point, k1 or k2").into()),
             }
         }
         Ok(r)

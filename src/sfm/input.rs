@@ -18,7 +18,8 @@ fn file_error(path: &Path, message: impl Into<String>) -> Error {
 
 /// The whitespace-separated numbers of a text file; `expected` says what, when one is not.
 fn numbers(path: &Path, expected: &str) -> Result<Vec<f64>, Error> {
-    let text = std::fs::read_to_string(path).map_err(|e| file_error(path, format!("cannot read: {e}")))?;
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| Error::Io { path: path.into(), message: format!("cannot read: {e}") })?;
     text.split_whitespace()
         .map(str::parse::<f64>)
         .collect::<Result<_, _>>()
@@ -31,7 +32,10 @@ fn numbers(path: &Path, expected: &str) -> Result<Vec<f64>, Error> {
 pub fn read_camera(path: &Path) -> Result<CameraModel, Error> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     if ext != "txt" {
-        let c = crate::calib::file::read(path).map_err(|e| file_error(path, e.to_string()))?;
+        let c = crate::calib::file::read(path).map_err(|e| match e.fault() {
+            crate::Fault::Io => Error::Io { path: path.into(), message: e.to_string() },
+            _ => file_error(path, e.to_string()),
+        })?;
         return Ok(c.camera());
     }
     let v = numbers(path, "expected 9 numbers (K, row by row)")?;
@@ -65,7 +69,7 @@ pub fn read_camera(path: &Path) -> Result<CameraModel, Error> {
 /// The photographs of a folder, in name order (`EXTENSIONS`).
 pub fn photographs(dir: &Path) -> Result<Vec<PathBuf>, Error> {
     let files = crate::image::io::files_with_extensions(dir, &EXTENSIONS)
-        .map_err(|e| file_error(dir, format!("not a readable folder: {e}")))?;
+        .map_err(|e| Error::Io { path: dir.into(), message: format!("not a readable folder: {e}") })?;
     if files.len() < 2 {
         return Err(file_error(
             dir,

@@ -35,6 +35,7 @@ use super::bundle::{self, Observation, Pose, Problem};
 use super::features::Features;
 use super::tracks::{self, Node, PairMatches};
 use super::{matching, pnp, two_view};
+use crate::error::Invalid;
 use nalgebra::{Matrix3, Vector3};
 
 #[derive(Clone, Copy, Debug)]
@@ -125,17 +126,17 @@ impl PairSelection {
 }
 
 impl std::str::FromStr for PairSelection {
-    type Err = String;
+    type Err = Invalid;
     /// `exhaustive`, or `sequential:N` with N ≥ 1.
-    fn from_str(s: &str) -> Result<PairSelection, String> {
+    fn from_str(s: &str) -> Result<PairSelection, Invalid> {
         let bad = || format!("\"{s}\": expected exhaustive or sequential:N with N at least 1");
         match s.split_once(':') {
             None if s == "exhaustive" => Ok(PairSelection::Exhaustive),
             Some(("sequential", n)) => match n.parse::<usize>() {
                 Ok(overlap) if overlap >= 1 => Ok(PairSelection::Sequential { overlap }),
-                _ => Err(bad()),
+                _ => Err(bad().into()),
             },
-            _ => Err(bad()),
+            _ => Err(bad().into()),
         }
     }
 }
@@ -840,7 +841,7 @@ mod tests {
         assert_eq!("sequential:10".parse(), Ok(PairSelection::Sequential { overlap: 10 }));
         assert_eq!("exhaustive".parse(), Ok(PairSelection::Exhaustive));
         for bad in ["sequential:0", "sequential:", "sequential", "vocab-tree", "sequential:x"] {
-            assert!(bad.parse::<PairSelection>().unwrap_err().contains("expected exhaustive"), "{bad}");
+            assert!(bad.parse::<PairSelection>().unwrap_err().0.contains("expected exhaustive"), "{bad}");
         }
     }
 

@@ -8,6 +8,7 @@
 //! image's camera model, then the mapper on the given intrinsics (refining the shared ones
 //! `mapper::Options::refine` names where they are a guess).
 
+use crate::error::Invalid;
 pub mod bundle;
 pub mod bytes;
 pub mod colmap;
@@ -32,11 +33,25 @@ pub enum Error {
     /// The images or a setting are wrong (names what and why).
     #[error("{0}")]
     BadInput(String),
-    /// A camera, ground-truth or folder file that cannot be read or is malformed.
+    /// A camera, ground-truth or folder file that is malformed.
     #[error("{path}: {message}")]
     File { path: std::path::PathBuf, message: String },
+    /// A file or folder that could not be read or written.
+    #[error("{path}: {message}")]
+    Io { path: std::path::PathBuf, message: String },
     #[error(transparent)]
     Image(#[from] crate::image::io::Error),
+}
+
+impl Error {
+    pub fn fault(&self) -> crate::Fault {
+        use crate::Fault;
+        match self {
+            Error::BadInput(_) | Error::File { .. } => Fault::BadInput,
+            Error::Io { .. } => Fault::Io,
+            Error::Image(e) => e.fault(),
+        }
+    }
 }
 
 /// One image: its name, grey levels in [0, 1], 8-bit colours (row-major, for the points'
@@ -127,7 +142,7 @@ pub const FIELD_OF_VIEW_DEG: [f64; 2] = [0.5, 170.0];
 /// `FIELD_OF_VIEW_DEG`, or a distortion that folds back (stops growing with the radius)
 /// inside the ellipse inscribed in the image, where keypoints could not be undistorted.
 /// Beyond that ellipse, in the corners, a calibration may fold; keypoints there are dropped.
-pub fn plausible(cam: &CameraModel) -> Result<(), String> {
+pub fn plausible(cam: &CameraModel) -> Result<(), Invalid> {
     let (w, h) = (cam.width as f64, cam.height as f64);
     let k = &cam.intrinsics;
     let fov = |size: f64, f: f64| 2.0 * (size / (2.0 * f)).atan().to_degrees();
@@ -141,7 +156,7 @@ pub fn plausible(cam: &CameraModel) -> Result<(), String> {
             return Err(format!(
                 "{name} = {f:e} px gives a field of view of {:.3}° over {size} pixels: expected {lo}° to {hi}° ({name} from {f_lo:.1} to {f_hi:.0} px)",
                 fov(size, f)
-            ));
+            ).into());
         }
     }
     if !cam.distortion.is_zero() {
@@ -152,7 +167,7 @@ pub fn plausible(cam: &CameraModel) -> Result<(), String> {
                 return Err(format!(
                     "the distortion (k1 {}, k2 {}, k3 {}) folds back before the image's edge at pixel ({x:.0}, {y:.0}): no point maps there, so it cannot be this camera's",
                     d.k1, d.k2, d.k3
-                ));
+                ).into());
             }
         }
     }

@@ -31,6 +31,16 @@ pub fn lumen(args: &[&str]) -> (i32, String) {
     (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stderr).into_owned())
 }
 
+/// The kind of fault a `lumen` error message declares (`error (bad-input): …` → `bad-input`),
+/// or "" when it declares none.
+pub fn fault_in(stderr: &str) -> &str {
+    stderr
+        .lines()
+        .find_map(|l| l.strip_prefix("error ("))
+        .and_then(|rest| rest.split_once("):"))
+        .map_or("", |(kind, _)| kind)
+}
+
 /// The project root.
 pub fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

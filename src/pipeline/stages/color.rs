@@ -165,7 +165,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(color::Input, Truth, Fin
             spectra::ILLUMINANTS.join(", ")
         ))
     })?;
-    c.model.parse::<Model>().map_err(StageError::Config)?;
+    c.model.parse::<Model>()?;
     if !["spectral", "published"].contains(&c.reference.as_str()) {
         return Err(StageError::Config(format!(
             "reference = \"{}\": expected spectral or published",
@@ -187,7 +187,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(color::Input, Truth, Fin
     sensor.bits = c.bits.unwrap_or(sensor.bits);
     sensor.read_noise = c.read_noise.unwrap_or(sensor.read_noise);
     sensor.full_well = c.full_well.unwrap_or(sensor.full_well);
-    sensor.validate().map_err(StageError::Config)?;
+    sensor.validate()?;
 
     let to_light = match scene.lights.as_slice() {
         [Light::Directional { to_light, .. }] => to_light.normalize(),
@@ -370,7 +370,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(color::Input, Truth, Fin
 }
 
 pub fn solve(c: &Config, input: &color::Input) -> Result<color::Output, StageError> {
-    let model: Model = c.model.parse().map_err(StageError::Config)?;
+    let model: Model = c.model.parse()?;
     Ok(color::run(input, &color::Config::new(model))?)
 }
 

@@ -172,7 +172,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(hdr::Input, Truth, Findi
         bits: c.bits,
         response: c.response,
     };
-    sensor.validate().map_err(StageError::Config)?;
+    sensor.validate()?;
     // Settings checked before the render; the weights also serve the noise floor below.
     let (_, weights) = method(c)?;
     let scene_path = ctx.dir.join(&c.scene);

@@ -14,6 +14,7 @@
 //! run through those three functions, and its share of the shard passes (`share`). A new
 //! stage is one file here and one line in `REGISTRY`.
 
+use crate::error::Invalid;
 pub mod calibrate;
 pub mod color;
 pub mod hdr;
@@ -66,12 +67,12 @@ pub struct Kind {
     pub marked_by: Option<&'static str>,
     /// The key naming this kind's real data: an entry may not give it beside `scene`.
     pub real_data: Option<&'static str>,
-    pub parse: fn(toml::Table) -> Result<Box<dyn Settings>, String>,
+    pub parse: fn(toml::Table) -> Result<Box<dyn Settings>, Invalid>,
 }
 
 fn parse<T: Settings + serde::de::DeserializeOwned + 'static>(
     t: toml::Table,
-) -> Result<Box<dyn Settings>, String> {
+) -> Result<Box<dyn Settings>, Invalid> {
     from_table::<T>(t).map(|c| Box::new(c) as Box<dyn Settings>)
 }
 
@@ -100,7 +101,7 @@ pub const REGISTRY: &[Kind] = &[
 ];
 
 /// The entry's stage from its name and its own keys, through `REGISTRY`.
-pub fn parse_stage(name: &str, own: toml::Table) -> Result<Stage, String> {
+pub fn parse_stage(name: &str, own: toml::Table) -> Result<Stage, Invalid> {
     let kinds: Vec<&Kind> = REGISTRY.iter().filter(|k| k.stage == name).collect();
     let Some(first) = kinds.first() else {
         let mut names: Vec<&str> = Vec::new();
@@ -110,7 +111,7 @@ pub fn parse_stage(name: &str, own: toml::Table) -> Result<Stage, String> {
             }
         }
         let (last, rest) = names.split_last().map_or(("", &[][..]), |(l, r)| (*l, r));
-        return Err(format!("unknown stage `{name}`: expected {} or {last}", rest.join(", ")));
+        return Err(format!("unknown stage `{name}`: expected {} or {last}", rest.join(", ")).into());
     };
     // A stage on real data is told apart from its rendered variant by one key; both keys
     // given would blame the other variant's keys, so the pair is refused by name.
@@ -118,7 +119,7 @@ pub fn parse_stage(name: &str, own: toml::Table) -> Result<Stage, String> {
         if own.contains_key(key) && own.contains_key("scene") {
             return Err(format!(
                 "`{key}` and `scene` are both given: a {name} entry runs on real data (`{key}`) or on renders of a scene (`scene`), not both"
-            ));
+            ).into());
         }
     }
     let kind = kinds
@@ -130,15 +131,11 @@ pub fn parse_stage(name: &str, own: toml::Table) -> Result<Stage, String> {
 }
 
 /// Deserialises a table, naming the key at fault in the error.
-pub fn from_table<T: serde::de::DeserializeOwned>(t: toml::Table) -> Result<T, String> {
+pub fn from_table<T: serde::de::DeserializeOwned>(t: toml::Table) -> Result<T, Invalid> {
     serde_path_to_error::deserialize(toml::Value::Table(t)).map_err(|e| {
         let path = e.path().to_string();
         let inner = e.into_inner().message().trim().to_string();
-        if path == "." {
-            inner
-        } else {
-            format!("`{path}`: {inner}")
-        }
+        Invalid(if path == "." { inner } else { format!("`{path}`: {inner}") })
     })
 }
 
@@ -166,6 +163,7 @@ pub fn dataset_path(ctx: &Context, path: &str) -> Result<PathBuf, StageError> {
 
 use super::cache::{Cache, Pass};
 use super::metric::Metric;
+use crate::error::Fault;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -187,10 +185,9 @@ pub enum StageError {
     Calib(#[from] crate::calib::Error),
     #[error(transparent)]
     Photometric(#[from] crate::photometric::Error),
+    /// The colour or the hdr fit's.
     #[error(transparent)]
-    Color(#[from] crate::color::Error),
-    #[error(transparent)]
-    Hdr(#[from] crate::hdr::Error),
+    Fit(#[from] crate::error::FitError),
     #[error(transparent)]
     Sfm(#[from] crate::sfm::Error),
     /// A render share (`Cache::share`) asked for the case's renders and stops there.
@@ -198,42 +195,25 @@ pub enum StageError {
     RendersOnly,
 }
 
-/// The kinds a pipeline entry can declare with `expect_error`.
-pub const ERROR_KINDS: [&str; 3] = ["bad-input", "numerical", "io"];
+impl From<Invalid> for StageError {
+    fn from(e: Invalid) -> StageError {
+        StageError::Config(e.0)
+    }
+}
 
 impl StageError {
-    /// `bad-input` (the entry, a scene or a data file is wrong), `numerical` (a solver could
-    /// not reach an answer) or `io` (a file could not be read or written).
-    pub fn kind(&self) -> &'static str {
-        use crate::calib::Error as C;
-        use crate::image::io::Error as I;
-        use crate::photometric::Error as P;
-        use crate::render::Error as R;
+    /// Whose fault it is, as the module that raised the error decided. (A render share's
+    /// stop is no fault: it never reaches a report.)
+    pub fn fault(&self) -> Fault {
         match self {
-            StageError::Config(_) => "bad-input",
-            StageError::Absent(_) => "io",
-            StageError::Render(R::Io { .. }) | StageError::Image(I::Read { .. } | I::Write { .. }) => "io",
-            StageError::Render(R::Image(I::Read { .. })) => "io",
-            StageError::Render(_) | StageError::Image(_) => "bad-input",
-            StageError::Calib(C::Numerical(_)) => "numerical",
-            StageError::Calib(C::BadInput(_)) => "bad-input",
-            StageError::Calib(C::File { .. }) => "io",
-            StageError::Photometric(P::Write { .. }) => "io",
-            StageError::Photometric(P::Unsolvable { .. }) => "numerical",
-            StageError::Photometric(P::Image(I::Read { .. })) => "io",
-            StageError::Photometric(_) => "bad-input",
-            StageError::Color(crate::color::Error::Unsolvable(_)) => "numerical",
-            StageError::Color(crate::color::Error::File { .. }) => "io",
-            StageError::Color(crate::color::Error::Image(I::Read { .. } | I::Write { .. })) => "io",
-            StageError::Color(_) => "bad-input",
-            StageError::Hdr(crate::hdr::Error::Unsolvable(_)) => "numerical",
-            StageError::Hdr(crate::hdr::Error::File { .. }) => "io",
-            StageError::Hdr(crate::hdr::Error::Image(I::Read { .. } | I::Write { .. })) => "io",
-            StageError::Hdr(_) => "bad-input",
-            StageError::Sfm(crate::sfm::Error::File { .. }) => "io",
-            StageError::Sfm(crate::sfm::Error::Image(I::Read { .. } | I::Write { .. })) => "io",
-            StageError::Sfm(_) => "bad-input",
-            StageError::RendersOnly => "renders-only",
+            StageError::Config(_) => Fault::BadInput,
+            StageError::Absent(_) | StageError::RendersOnly => Fault::Io,
+            StageError::Render(e) => e.fault(),
+            StageError::Image(e) => e.fault(),
+            StageError::Calib(e) => e.fault(),
+            StageError::Photometric(e) => e.fault(),
+            StageError::Fit(e) => e.fault(),
+            StageError::Sfm(e) => e.fault(),
         }
     }
 }

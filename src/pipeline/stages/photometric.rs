@@ -169,7 +169,7 @@ struct LightRecipe<'a> {
 }
 
 pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Truth, Findings), StageError> {
-    let model: Model = c.model.parse().map_err(StageError::Config)?;
+    let model: Model = c.model.parse()?;
     check_start_iterations(c.start_iterations)?;
     if !(3..=MAX_RENDERS).contains(&c.lights) {
         return Err(StageError::Config(format!(
@@ -344,7 +344,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Trut
 
 /// Reads a real dataset (`DataConfig`), keeping its ground truth apart from the input.
 pub fn read(c: &DataConfig, ctx: &Context) -> Result<(photometric::Input, Truth, Findings), StageError> {
-    let model: Model = c.model.parse().map_err(StageError::Config)?;
+    let model: Model = c.model.parse()?;
     check_start_iterations(c.start_iterations)?;
     let dir = super::dataset_path(ctx, &c.dataset)?;
     let data = photometric::dataset::read(&dir)?;
@@ -377,7 +377,7 @@ pub fn solve_data(c: &DataConfig, input: &photometric::Input) -> Result<Output, 
 }
 
 fn solve_model(model: &str, start_iterations: u64, input: &photometric::Input) -> Result<Output, StageError> {
-    let model: Model = model.parse().map_err(StageError::Config)?;
+    let model: Model = model.parse()?;
     let config = photometric::Config { model, trace: model == Model::BlinnPhong, start_iterations };
     let main = photometric::run(input, &config)?;
     // The Lambertian baseline on the same images, for the improvement the glossy model buys.

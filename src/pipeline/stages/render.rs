@@ -73,7 +73,7 @@ pub struct Truth {
     uniform: Option<[f64; 3]>,
     /// With `max_depth = 1`, the pixels that may be lit (`emitter_footprint`); `Err` says why
     /// it is not known.
-    footprint: Option<Result<Vec<bool>, String>>,
+    footprint: Option<Result<Vec<bool>, &'static str>>,
 }
 
 pub struct Output {
@@ -141,7 +141,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(Input, Truth, Findings),
     let footprint = (settings.max_depth == 1).then(|| {
         render::truth::emitter_footprint(&scene, 8)
             .map(|f| dilate(&f, scene.camera.width as usize))
-            .ok_or_else(|| "the scene has a thin lens; the footprint is traced through a pinhole".to_string())
+            .ok_or("the scene has a thin lens; the footprint is traced through a pinhole")
     });
     Ok((Input { scene, settings }, Truth { reference, uniform: c.expect_uniform, footprint }, found))
 }
@@ -260,7 +260,7 @@ pub fn validate(c: &Config, out: &Output, truth: &Truth) -> Findings {
     match &truth.footprint {
         None => {}
         Some(Err(why)) => {
-            f.metrics.push(Metric::missing("lit_pixels_off_emitters", "pixels", Better::Lower, why))
+            f.metrics.push(Metric::missing("lit_pixels_off_emitters", "pixels", Better::Lower, *why))
         }
         Some(Ok(may)) if may.len() != lit.len() => f.metrics.push(Metric::missing(
             "lit_pixels_off_emitters",

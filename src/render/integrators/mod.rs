@@ -64,6 +64,12 @@ pub fn find(name: &str) -> Result<&'static Kind, UnknownIntegrator> {
 #[error("unknown integrator `{0}`: expected one of {names}", names = names())]
 pub struct UnknownIntegrator(pub String);
 
+impl UnknownIntegrator {
+    pub fn fault(&self) -> crate::Fault {
+        crate::Fault::Unsupported
+    }
+}
+
 /// The registry's names, as `"a", "b"` for messages.
 pub fn names() -> String {
     REGISTRY.iter().map(|k| format!("\"{}\"", k.name)).collect::<Vec<_>>().join(", ")

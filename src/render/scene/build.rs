@@ -99,7 +99,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
         return Err(field_err(path, "render.max_depth", "must be at least 1"));
     }
     if let Some(s) = &file.sensor {
-        s.validate().map_err(|m| field_err(path, "sensor", m))?;
+        s.validate().map_err(|m| field_err(path, "sensor", m.0))?;
     }
 
     let mut materials = Vec::new();
@@ -483,7 +483,7 @@ fn build_camera(c: &CameraSpec, path: &Path) -> Result<(CameraModel, Pose), Erro
     if let Some(d) = c.distortion {
         camera.distortion = Distortion::from_array(d);
     }
-    camera.validate().map_err(|m| field_err(path, "camera", m))?;
+    camera.validate().map_err(|m| field_err(path, "camera", m.0))?;
     if c.width as u64 * c.height as u64 > 1 << 28 {
         return Err(field_err(
             path,
