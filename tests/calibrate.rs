@@ -84,11 +84,13 @@ fn two_views_with_zero_skew() {
 #[test]
 fn parallel_views_are_refused() {
     let views = synthetic_views(&truth(), 8, 0.0);
-    let e = calib::calibrate(&views, (640, 480), &config()).unwrap_err().to_string();
-    assert!(e.contains("parallel"), "{e}");
+    let e = calib::calibrate(&views, (640, 480), &config()).unwrap_err();
+    assert_eq!(e.fault(), lumen::Fault::Numerical, "{e}");
+    assert!(e.to_string().contains("parallel"), "{e}");
     let one = &views[..1];
-    let e = calib::calibrate(one, (640, 480), &config()).unwrap_err().to_string();
-    assert!(e.contains("at least 2"), "{e}");
+    let e = calib::calibrate(one, (640, 480), &config()).unwrap_err();
+    assert_eq!(e.fault(), lumen::Fault::BadInput, "{e}");
+    assert!(e.to_string().contains("at least 2"), "{e}");
 }
 
 fn real_images() -> Option<Vec<(String, lumen::image::filter::Grey)>> {
@@ -151,8 +153,11 @@ fn files_round_trip() {
     // Broken files name the problem.
     let bad = dir.path().join("bad.yaml");
     std::fs::write(&bad, "%YAML:1.0\nimage_width: 640\nimage_height: 480\ncamera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ 1, 2 ]\n").unwrap();
-    let e = calib::file::read(&bad).unwrap_err().to_string();
-    assert!(e.contains("bad.yaml") && e.contains("camera_matrix"), "{e}");
+    let e = calib::file::read(&bad).unwrap_err();
+    assert_eq!(e.fault(), lumen::Fault::BadInput, "{e}");
+    assert!(e.to_string().contains("bad.yaml") && e.to_string().contains("camera_matrix"), "{e}");
+    let e = calib::file::read(&dir.path().join("absent.yaml")).unwrap_err();
+    assert_eq!(e.fault(), lumen::Fault::Io, "{e}");
 }
 
 #[test]

@@ -82,6 +82,7 @@ fn every_model_is_finite_or_refused() {
     let mut huge = spectral_input();
     huge.patches[3].rgb = [1e300, 1.0, 1.0];
     let err = color::run(&huge, &color::Config::new(Model::RootPoly(2))).unwrap_err();
+    assert_eq!(err.fault(), lumen::Fault::BadInput, "{err}");
     assert!(err.to_string().contains("patch 4") && err.to_string().contains("1e30"), "{err}");
     let mut big = spectral_input();
     big.patches.iter_mut().enumerate().for_each(|(i, p)| p.rgb = [1e29 * (i + 1) as f64, 1e28, 1e-30]);
@@ -94,6 +95,7 @@ fn every_model_is_finite_or_refused() {
     let mut few = spectral_input();
     few.patches.iter_mut().skip(4).for_each(|p| p.flag = Some(color::Flag::Clipped));
     let err = color::run(&few, &color::Config::new(Model::RootPoly(2))).unwrap_err();
+    assert_eq!(err.fault(), lumen::Fault::BadInput, "{err}");
     assert!(err.to_string().contains("4 usable patch(es), but the model needs at least 6"), "{err}");
     let ok = color::run(&few, &color::Config::new(Model::Linear3x3)).unwrap();
     assert_eq!(ok.used_patches, 4);

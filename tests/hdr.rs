@@ -208,14 +208,20 @@ fn hard_stacks() {
 #[test]
 fn refusals() {
     let (_, mut same) = synthetic(1e3, &[1.0, 1.0]);
-    let e = hdr::run(&same, &hdr::Config::default()).unwrap_err().to_string();
+    let e = hdr::run(&same, &hdr::Config::default()).unwrap_err();
+    assert_eq!(e.fault(), lumen::Fault::BadInput, "{e}");
+    let e = e.to_string();
     assert!(e.contains("two different times"), "{e}");
     same.frames[1].time_s = 0.5;
     same.frames[1].codes.pop();
-    let e = hdr::run(&same, &hdr::Config::default()).unwrap_err().to_string();
+    let e = hdr::run(&same, &hdr::Config::default()).unwrap_err();
+    assert_eq!(e.fault(), lumen::Fault::BadInput, "{e}");
+    let e = e.to_string();
     assert!(e.contains("values, expected"), "{e}");
     same.frames.truncate(1);
-    let e = hdr::run(&same, &hdr::Config::default()).unwrap_err().to_string();
+    let e = hdr::run(&same, &hdr::Config::default()).unwrap_err();
+    assert_eq!(e.fault(), lumen::Fault::BadInput, "{e}");
+    let e = e.to_string();
     assert!(e.contains("at least 2"), "{e}");
 }
 
@@ -260,7 +266,9 @@ fn exposure_fusion() {
     assert!(fifths.windows(2).all(|p| p[1] > p[0] + 0.02), "mean fused green per fifth: {fifths:?}");
     let bad = hdr::fusion::Mertens { contrast: f64::NAN, ..mertens };
     let config = hdr::Config { fusion: Some(bad), ..hdr::Config::default() };
-    let err = hdr::run(&input, &config).unwrap_err().to_string();
+    let err = hdr::run(&input, &config).unwrap_err();
+    assert_eq!(err.fault(), lumen::Fault::BadInput, "{err}");
+    let err = err.to_string();
     assert!(err.contains("contrast"), "{err}");
 }
 
