@@ -25,6 +25,7 @@ pub mod color;
 #[cfg(feature = "opencv")]
 pub mod cv;
 pub mod error;
+pub mod fit;
 pub mod hdr;
 pub mod image;
 pub mod math;
@@ -49,7 +50,7 @@ pub enum Error {
     Photometric(#[from] photometric::Error),
     /// The colour or the hdr fit's.
     #[error(transparent)]
-    Fit(#[from] error::FitError),
+    Fit(#[from] fit::FitError),
     #[error(transparent)]
     Sfm(#[from] sfm::Error),
 }

@@ -418,7 +418,7 @@ fn fault(e: &anyhow::Error) -> Option<lumen::Fault> {
             .or_else(|| c.downcast_ref::<lumen::image::io::Error>().map(|e| e.fault()))
             .or_else(|| c.downcast_ref::<lumen::calib::Error>().map(|e| e.fault()))
             .or_else(|| c.downcast_ref::<lumen::photometric::Error>().map(|e| e.fault()))
-            .or_else(|| c.downcast_ref::<lumen::error::FitError>().map(|e| e.fault()))
+            .or_else(|| c.downcast_ref::<lumen::fit::FitError>().map(|e| e.fault()))
             .or_else(|| c.downcast_ref::<lumen::sfm::Error>().map(|e| e.fault()))
             .or_else(|| c.downcast_ref::<lumen::error::Invalid>().map(|e| e.fault()))
             .or_else(|| c.downcast_ref::<lumen::render::integrators::UnknownIntegrator>().map(|e| e.fault()))

@@ -102,7 +102,7 @@ pub fn slurm_cmd(path: &Path, a: SlurmArgs) -> Result<i32> {
         pipeline: absolute(path)?,
         out: out.clone(),
         cache,
-        name: pipeline::report::file_stem(&name),
+        name: pipeline::names::file_stem(&name),
         shards: a.shards,
         cpus_per_task: a.cpus_per_task,
         time: a.time,

@@ -29,7 +29,7 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// The colour fit's error: the one the hdr fit has too.
-pub use crate::error::FitError as Error;
+pub use crate::fit::FitError as Error;
 
 /// One patch as the solver sees it.
 #[derive(Clone, Debug, Serialize, Deserialize)]

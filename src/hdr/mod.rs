@@ -28,7 +28,7 @@ pub use response::Response;
 use serde::{Deserialize, Serialize};
 
 /// The hdr fit's error: the one the colour fit has too.
-pub use crate::error::FitError as Error;
+pub use crate::fit::FitError as Error;
 
 /// One exposure: interleaved RGB code values.
 #[derive(Clone, Debug)]

@@ -8,7 +8,6 @@
 //! case of its entry meets the bound, the run fails until the declaration goes, as a strict
 //! expected failure does (`Report::misses_now_met`).
 
-use super::report::fmt_value;
 use crate::error::Invalid;
 use serde::{Deserialize, Serialize};
 
@@ -184,5 +183,16 @@ impl<'de> Deserialize<'de> for BoundSpec {
                 "expected a number, or a table with `min`, `max` or both (numbers), e.g. { max = 0 }",
             )),
         }
+    }
+}
+
+/// Numbers as a person reads them: 4 significant digits, scientific when tiny or huge.
+pub fn fmt_value(v: f64) -> String {
+    if v == 0.0 || (1e-3..1e6).contains(&v.abs()) {
+        let s = format!("{v:.6}");
+        let s = s.trim_end_matches('0').trim_end_matches('.');
+        s.to_string()
+    } else {
+        format!("{v:.3e}")
     }
 }

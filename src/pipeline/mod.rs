@@ -8,6 +8,7 @@ use crate::error::Invalid;
 pub mod cache;
 pub mod file;
 pub mod metric;
+pub mod names;
 pub mod report;
 pub mod shard;
 pub mod slurm;

@@ -3,7 +3,8 @@
 //! The report is the only place that sees estimates and truth side by side.
 
 use super::cache::Event;
-use super::metric::Metric;
+use super::metric::{fmt_value, Metric};
+use super::names::file_stem;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -110,7 +111,7 @@ pub struct Report {
     pub warnings: Vec<String>,
     /// Set in a shard's fragment (`lumen run --shard K/N`): which part of the pipeline it holds.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub fragment: Option<super::shard::Fragment>,
+    pub fragment: Option<Fragment>,
     /// Files cases asked to keep, written with the report.
     #[serde(skip)]
     pub files: Vec<(PathBuf, super::stages::Kept)>,
@@ -402,6 +403,22 @@ impl Report {
     }
 }
 
+/// What a fragment holds besides its cases' reports: enough to check, when merging, that the
+/// fragments come from one pipeline file run by one lumen, and where each case goes.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Fragment {
+    pub shard: usize,
+    pub shards: usize,
+    /// FNV-1a 128 of the pipeline file's bytes.
+    pub pipeline_digest: String,
+    /// Cases in the whole pipeline.
+    pub cases: usize,
+    /// Each of this fragment's stages' position in the pipeline (0-based), in order.
+    pub indices: Vec<usize>,
+    /// Files the cases kept, relative to the fragment's folder.
+    pub kept: Vec<PathBuf>,
+}
+
 /// The processor model (from /proc/cpuinfo where there is one) and the logical cores.
 fn machine() -> String {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -415,11 +432,6 @@ fn machine() -> String {
         .filter(|m| !m.is_empty())
         .unwrap_or_else(|| std::env::consts::ARCH.to_string());
     format!("{model}, {cores} logical cores")
-}
-
-/// A case name as a file name: letters, digits, `-`, `_`, `.` kept, the rest `_`.
-pub fn file_stem(name: &str) -> String {
-    name.chars().map(|c| if c.is_ascii_alphanumeric() || "-_.".contains(c) { c } else { '_' }).collect()
 }
 
 /// Each case's (time, error): solve time for solver stages, the render's time for the
@@ -504,17 +516,6 @@ fn value_text(m: &Metric) -> String {
         (Some(v), _) => fmt_value(v),
         (None, Some(why)) if m.skipped.is_none() => format!("— ({why})"),
         _ => "—".into(),
-    }
-}
-
-/// Numbers as a person reads them: 4 significant digits, scientific when tiny or huge.
-pub fn fmt_value(v: f64) -> String {
-    if v == 0.0 || (1e-3..1e6).contains(&v.abs()) {
-        let s = format!("{v:.6}");
-        let s = s.trim_end_matches('0').trim_end_matches('.');
-        s.to_string()
-    } else {
-        format!("{v:.3e}")
     }
 }
 

@@ -7,7 +7,6 @@
 use super::report::Report;
 use super::Error;
 use crate::error::Invalid;
-use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// Shard `k` of `n`, counted from 1.
@@ -42,21 +41,7 @@ impl Shard {
     }
 }
 
-/// What a fragment holds besides its cases' reports: enough to check, when merging, that the
-/// fragments come from one pipeline file run by one lumen, and where each case goes.
-#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub struct Fragment {
-    pub shard: usize,
-    pub shards: usize,
-    /// FNV-1a 128 of the pipeline file's bytes.
-    pub pipeline_digest: String,
-    /// Cases in the whole pipeline.
-    pub cases: usize,
-    /// Each of this fragment's stages' position in the pipeline (0-based), in order.
-    pub indices: Vec<usize>,
-    /// Files the cases kept, relative to the fragment's folder.
-    pub kept: Vec<PathBuf>,
-}
+pub use super::report::Fragment;
 
 /// The digest a fragment records for the pipeline file at `path`.
 pub fn digest(path: &Path) -> Result<String, Error> {

@@ -1,45 +1,8 @@
-//! What a render is asked for and what it hands back: the settings, the film (mean and
-//! variance of the mean per pixel), and the per-pixel statistics the integrators fill it with.
+//! What a render hands back: the film (mean and variance of the mean per pixel), and the
+//! per-pixel statistics the integrators fill it with.
 
-use super::sampler::SamplerKind;
-use super::scene::Scene;
 use crate::image::Image;
 use glam::Vec3A;
-
-/// What to render: samples, depth, seed, and which part of the image.
-#[derive(Clone, Debug)]
-pub struct Settings {
-    /// The light-transport algorithm (`render::integrators`).
-    pub integrator: &'static super::integrators::Kind,
-    pub spp: u32,
-    pub max_depth: u32,
-    pub seed: u64,
-    pub sampler: SamplerKind,
-    /// Pixel window [x0, y0, x1, y1) to render; the whole image when `None`.
-    pub crop: Option<[u32; 4]>,
-    /// Worker threads; all available cores when `None`.
-    pub threads: Option<usize>,
-    pub progress: bool,
-    /// Trace eight paths at once where the integrator and the scene allow it
-    /// (`integrators::path::lanes`; the image is the same either way). False forces the one-path loop, for comparisons.
-    pub lanes: bool,
-}
-
-impl Settings {
-    pub fn from_scene(scene: &Scene) -> Settings {
-        Settings {
-            integrator: scene.render.integrator,
-            spp: scene.render.spp,
-            max_depth: scene.render.max_depth,
-            seed: scene.render.seed,
-            sampler: scene.render.sampler,
-            crop: None,
-            threads: None,
-            progress: false,
-            lanes: true,
-        }
-    }
-}
 
 /// The film after rendering: mean radiance and the variance of that mean, per pixel.
 pub struct Film {

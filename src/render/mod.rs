@@ -24,7 +24,8 @@ pub mod texture;
 pub mod transport;
 pub mod truth;
 
-pub use film::{Film, Settings};
+pub use film::Film;
+pub use integrators::Settings;
 pub use integrators::{render, try_render};
 pub use scene::{load, Scene};
 pub use truth::{truth, Truth};

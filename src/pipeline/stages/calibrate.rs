@@ -359,7 +359,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Fin
         for (name, g) in &images {
             let img =
                 Image { width: g.width as u32, height: g.height as u32, channels: 1, data: g.data.clone() };
-            let folder = crate::pipeline::report::file_stem(ctx.case);
+            let folder = crate::pipeline::names::file_stem(ctx.case);
             found.files.push((std::path::Path::new(&folder).join(format!("{name}.exr")), Kept::Image(img)));
         }
     }

@@ -355,7 +355,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(color::Input, Truth, Fin
     )];
     let mut files = Vec::new();
     if c.save_image {
-        let name = format!("{}.exr", crate::pipeline::report::file_stem(ctx.case));
+        let name = format!("{}.exr", crate::pipeline::names::file_stem(ctx.case));
         notes.push(format!(
             "The exposed chart is {name}: `lumen color fit --image {name} --corners {}`.",
             corner_text.join(",")

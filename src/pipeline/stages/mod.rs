@@ -187,7 +187,7 @@ pub enum StageError {
     Photometric(#[from] crate::photometric::Error),
     /// The colour or the hdr fit's.
     #[error(transparent)]
-    Fit(#[from] crate::error::FitError),
+    Fit(#[from] crate::fit::FitError),
     #[error(transparent)]
     Sfm(#[from] crate::sfm::Error),
     /// A render share (`Cache::share`) asked for the case's renders and stops there.

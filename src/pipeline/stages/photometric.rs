@@ -334,7 +334,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Trut
     };
     let mut files = Vec::new();
     if c.save_dataset {
-        let folder = std::path::PathBuf::from(crate::pipeline::report::file_stem(ctx.case));
+        let folder = std::path::PathBuf::from(crate::pipeline::names::file_stem(ctx.case));
         let (images, bytes) = photometric::dataset::layout(&input, kept_images, Some(&normals));
         files.extend(images.into_iter().map(|(n, img)| (folder.join(n), Kept::Image(img))));
         files.extend(bytes.into_iter().map(|(n, b)| (folder.join(n), Kept::Bytes(b))));

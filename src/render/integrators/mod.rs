@@ -14,9 +14,10 @@
 pub mod path;
 
 use super::camera_ray::{camera_direction, camera_ray, needs_lens_sample};
-use super::film::{Film, Settings};
+use super::film::Film;
 use super::geometry::Ray;
 use super::sampler::Sampler;
+use super::sampler::SamplerKind;
 use super::scene::Scene;
 use crate::image::Image;
 use rayon::prelude::*;
@@ -51,6 +52,41 @@ impl fmt::Debug for Kind {
 impl PartialEq for Kind {
     fn eq(&self, o: &Kind) -> bool {
         self.name == o.name
+    }
+}
+
+/// What to render: samples, depth, seed, and which part of the image.
+#[derive(Clone, Debug)]
+pub struct Settings {
+    /// The light-transport algorithm (`render::integrators`).
+    pub integrator: &'static Kind,
+    pub spp: u32,
+    pub max_depth: u32,
+    pub seed: u64,
+    pub sampler: SamplerKind,
+    /// Pixel window [x0, y0, x1, y1) to render; the whole image when `None`.
+    pub crop: Option<[u32; 4]>,
+    /// Worker threads; all available cores when `None`.
+    pub threads: Option<usize>,
+    pub progress: bool,
+    /// Trace eight paths at once where the integrator and the scene allow it
+    /// (`integrators::path::lanes`; the image is the same either way). False forces the one-path loop, for comparisons.
+    pub lanes: bool,
+}
+
+impl Settings {
+    pub fn from_scene(scene: &Scene) -> Settings {
+        Settings {
+            integrator: scene.render.integrator,
+            spp: scene.render.spp,
+            max_depth: scene.render.max_depth,
+            seed: scene.render.seed,
+            sampler: scene.render.sampler,
+            crop: None,
+            threads: None,
+            progress: false,
+            lanes: true,
+        }
     }
 }
 

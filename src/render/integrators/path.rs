@@ -38,11 +38,12 @@ mod lanes;
 pub use lanes::supported as lanes_supported;
 
 use super::super::bsdf::Bsdf;
-use super::super::film::{pixel_stats, Film, Settings, RR_START};
+use super::super::film::{pixel_stats, Film, RR_START};
 use super::super::geometry::Ray;
 use super::super::sampler::Sampler;
 use super::super::scene::Scene;
 use super::super::transport::{self, epsilon};
+use super::Settings;
 use super::{camera_path, power_heuristic, render_rows};
 use glam::Vec3A;
 

@@ -1,7 +1,6 @@
 //! The samplers of eight lanes: PCG32 and Owen-scrambled Sobol points, bit-identical to
 //! `render::sampler` lane by lane.
 
-use super::super::film::Settings;
 use super::super::sampler::{self, Sampler, SamplerKind};
 use super::vector::*;
 use std::arch::x86_64::*;
@@ -82,12 +81,14 @@ pub(crate) struct Samplers {
 const DIMS: u32 = sampler::SOBOL_DIMENSIONS as u32;
 
 impl Samplers {
-    pub(crate) fn new(settings: &Settings, y: u32, gx0: u32, gx1: u32, width: u32) -> Samplers {
+    /// The samplers of row `y`'s pixels `gx0..gx1` (of a `width`-pixel image) under `kind`
+    /// seeded by `seed`.
+    pub(crate) fn new(kind: SamplerKind, seed: u64, y: u32, gx0: u32, gx1: u32, width: u32) -> Samplers {
         let mut s = Samplers::default();
-        if settings.sampler == SamplerKind::Sobol {
+        if kind == SamplerKind::Sobol {
             for x in gx0..gx1 {
                 let pixel = y as u64 * width as u64 + x as u64;
-                for (hi, hx, hy) in sampler::sobol_seeds(settings.seed, pixel) {
+                for (hi, hx, hy) in sampler::sobol_seeds(seed, pixel) {
                     s.seeds[0].push(hi);
                     s.seeds[1].push(hx);
                     s.seeds[2].push(hy);

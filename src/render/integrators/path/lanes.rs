@@ -26,8 +26,9 @@
 
 use crate::render::bsdf::Bsdf;
 use crate::render::camera_ray::{camera_direction, camera_ray, needs_lens_sample};
-use crate::render::film::{pixel_stats, Settings, RR_START};
+use crate::render::film::{pixel_stats, RR_START};
 use crate::render::geometry::{Prim, Ray};
+use crate::render::integrators::Settings;
 use crate::render::sampler::Sampler;
 use crate::render::scene::{Light, Scene};
 use glam::Vec3A;

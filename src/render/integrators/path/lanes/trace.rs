@@ -66,7 +66,7 @@ pub unsafe fn trace_group(
         depth: [0; 8],
         slot: [0; 8],
         x: [0; 8],
-        samplers: Samplers::new(settings, y, gx0, gx1, scene.camera.width),
+        samplers: Samplers::new(settings.sampler, settings.seed, y, gx0, gx1, scene.camera.width),
         active: 0,
     };
     let mut v = Vertex::default();
