@@ -421,9 +421,12 @@ fn cli_inputs_and_refusals() {
         ),
         (
             vec!["--images", &a, &b, "--times", "1", "2", "--read-noise", "3"],
-            "--read-noise 3: give it with --full-well",
+            "--read-noise: read noise 3: give it with the full well",
         ),
-        (vec!["--images", &a, &b, "--times", "1", "2", "--weights", "tent"], "hat or noise"),
+        (
+            vec!["--images", &a, &b, "--times", "1", "2", "--weights", "tent"],
+            "`tent`: expected hat, noise or noise-from-stack",
+        ),
         (vec!["--images", &a, &b, "--times", "1", "2", "--lambda", "nan"], "--lambda"),
         (vec!["--images", &a, &b, "--times", "1", "2", "--smoothness", "odd"], "--smoothness \"odd\""),
         (vec!["--images", &a, &b, "--times", "1", "2", "--exclude-color", "0,0"], "--exclude-color"),

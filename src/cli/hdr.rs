@@ -1,7 +1,7 @@
 //! `lumen hdr`: recover a camera's response from an exposure stack and merge the radiance.
 
 use anyhow::{bail, Context, Result};
-use lumen::hdr::{self, input, merge, response, Method, Weights};
+use lumen::hdr::{self, input, merge, response, Method};
 use lumen::image::{self, Image};
 use std::path::{Path, PathBuf};
 
@@ -34,8 +34,8 @@ pub struct HdrArgs {
     #[arg(long, default_value = "logit")]
     pub smoothness: String,
     /// noise (inverse variance under photon, read and quantisation noise, with the full
-    /// well and read noise the stack itself shows, or --full-well and --read-noise) or hat
-    /// (Debevec & Malik's).
+    /// well and read noise the stack itself shows, or --full-well and --read-noise),
+    /// noise-from-stack (the stack's own, even with --full-well) or hat (Debevec & Malik's).
     #[arg(long, default_value = "noise")]
     pub weights: String,
     /// For --weights noise: the sensor's electrons at full scale, instead of the stack's
@@ -100,26 +100,11 @@ pub fn run(a: &HdrArgs) -> Result<()> {
         bail!("--out {}: the radiance is written as .exr", a.out.display());
     }
     let frames_in = stack(a)?;
-    let weights = match (a.weights.as_str(), a.full_well) {
-        ("hat", _) => Weights::Hat,
-        ("noise", Some(fw))
-            if fw.is_finite() && fw >= 1.0 && a.read_noise.is_finite() && a.read_noise >= 0.0 =>
-        {
-            Weights::Noise { full_well: fw, read_noise: a.read_noise }
-        }
-        ("noise", Some(fw)) => bail!(
-            "--full-well {fw} --read-noise {}: expected at least 1 electron and a non-negative read noise",
-            a.read_noise
-        ),
-        ("noise", None) if a.read_noise != 0.0 => {
-            bail!(
-                "--read-noise {}: give it with --full-well (without, both come from the stack)",
-                a.read_noise
-            )
-        }
-        ("noise", None) => Weights::NoiseFromStack,
-        (other, _) => bail!("--weights {other}: expected hat or noise"),
-    };
+    let weights = a
+        .weights
+        .parse::<hdr::WeightsName>()
+        .and_then(|w| w.resolve(a.full_well, a.read_noise))
+        .map_err(|e| anyhow::Error::new(e).context("--weights, --full-well, --read-noise"))?;
     let smoothness: response::Smoothness =
         a.smoothness.parse().map_err(|e: lumen::error::Invalid| anyhow::anyhow!("--{e}"))?;
     if !(a.lambda.is_finite() && (0.0..=hdr::MAX_LAMBDA).contains(&a.lambda)) {
@@ -133,10 +118,10 @@ pub fn run(a: &HdrArgs) -> Result<()> {
     let input = input::read_stack(&frames_in, exclude)?;
     let read_s = t.elapsed().as_secs_f64();
     let (w, h) = (input.width as u32, input.height as u32);
-    let method = match a.response.as_str() {
-        "debevec" => Method::Debevec { lambda: a.lambda, samples_per_value: a.samples_per_value, smoothness },
-        "robertson" => Method::Robertson { iterations: hdr::ROBERTSON_MAX_ITERATIONS },
-        file => {
+    let method = match a.response.parse::<hdr::Fit>() {
+        Ok(fit) => fit.method(a.lambda, a.samples_per_value, smoothness),
+        Err(_) => {
+            let file = a.response.as_str();
             let text = std::fs::read_to_string(file)
                 .with_context(|| format!("--response {file}: not debevec, robertson or a readable file"))?;
             Method::Given(response::from_csv(&text).map_err(|m| anyhow::anyhow!("--response {file}: {m}"))?)

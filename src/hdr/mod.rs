@@ -85,6 +85,84 @@ pub const MAX_TIME_S: f64 = 1e6;
 /// iterations (on the Memorial stack it does before 50).
 pub const ROBERTSON_MAX_ITERATIONS: usize = 200;
 
+/// A response fit by name: `debevec` or `robertson`. The one parser of `lumen hdr --response`
+/// and a pipeline entry's `method`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Fit {
+    Debevec,
+    Robertson,
+}
+
+impl std::str::FromStr for Fit {
+    type Err = crate::error::Invalid;
+    fn from_str(s: &str) -> Result<Fit, Self::Err> {
+        match s {
+            "debevec" => Ok(Fit::Debevec),
+            "robertson" => Ok(Fit::Robertson),
+            other => Err(format!("`{other}`: expected debevec or robertson").into()),
+        }
+    }
+}
+
+impl Fit {
+    /// The method with Debevec's settings (Robertson's iterations are `ROBERTSON_MAX_ITERATIONS`).
+    pub fn method(self, lambda: f64, samples_per_value: usize, smoothness: response::Smoothness) -> Method {
+        match self {
+            Fit::Debevec => Method::Debevec { lambda, samples_per_value, smoothness },
+            Fit::Robertson => Method::Robertson { iterations: ROBERTSON_MAX_ITERATIONS },
+        }
+    }
+}
+
+/// Merge weights by name: `hat`, `noise` or `noise-from-stack`. The one parser of `lumen hdr
+/// --weights` and a pipeline entry's `weights`; `resolve` adds the sensor's numbers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WeightsName {
+    Hat,
+    Noise,
+    NoiseFromStack,
+}
+
+impl std::str::FromStr for WeightsName {
+    type Err = crate::error::Invalid;
+    fn from_str(s: &str) -> Result<WeightsName, Self::Err> {
+        match s {
+            "hat" => Ok(WeightsName::Hat),
+            "noise" => Ok(WeightsName::Noise),
+            "noise-from-stack" => Ok(WeightsName::NoiseFromStack),
+            other => Err(format!("`{other}`: expected hat, noise or noise-from-stack").into()),
+        }
+    }
+}
+
+impl WeightsName {
+    /// The weights, with the sensor's full well and read noise in electrons for `noise`. With
+    /// no full well given, `noise` is the noise the stack itself shows (`NoiseFromStack`), and
+    /// a read noise without a full well is refused.
+    pub fn resolve(self, full_well: Option<f64>, read_noise: f64) -> Result<Weights, crate::error::Invalid> {
+        Ok(match (self, full_well) {
+            (WeightsName::Hat, _) => Weights::Hat,
+            (WeightsName::NoiseFromStack, _) => Weights::NoiseFromStack,
+            (WeightsName::Noise, Some(fw)) if fw.is_finite() && fw >= 1.0 && read_noise.is_finite() && read_noise >= 0.0 => {
+                Weights::Noise { full_well: fw, read_noise }
+            }
+            (WeightsName::Noise, Some(fw)) => {
+                return Err(format!(
+                    "full well {fw}, read noise {read_noise}: expected at least 1 electron and a non-negative read noise"
+                )
+                .into())
+            }
+            (WeightsName::Noise, None) if read_noise != 0.0 => {
+                return Err(format!(
+                    "read noise {read_noise}: give it with the full well (without, both come from the stack)"
+                )
+                .into())
+            }
+            (WeightsName::Noise, None) => Weights::NoiseFromStack,
+        })
+    }
+}
+
 #[derive(Clone, Debug)]
 pub struct Config {
     pub method: Method,

@@ -269,37 +269,26 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(hdr::Input, Truth, Findi
     Ok((input, truth, Findings { notes, ..Default::default() }))
 }
 
-/// The response fit an entry names: `debevec` (with its λ, samples and smoothness) or
-/// `robertson`.
+/// The response fit an entry names (`hdr::Fit`, the parser `lumen hdr --response` uses):
+/// parsed when the case runs, so a wrong name is the case's declared error, not the file's.
 fn fit(
     name: &str,
     lambda: f64,
     samples_per_value: usize,
     smoothness: hdr::response::Smoothness,
 ) -> Result<Method, StageError> {
-    Ok(match name {
-        "debevec" => Method::Debevec { lambda, samples_per_value, smoothness },
-        "robertson" => Method::Robertson { iterations: hdr::ROBERTSON_MAX_ITERATIONS },
-        other => {
-            return Err(StageError::Config(format!("method = \"{other}\": expected debevec or robertson")))
-        }
-    })
+    let fit: hdr::Fit = name.parse().map_err(|e| StageError::Config(format!("method = {e}")))?;
+    Ok(fit.method(lambda, samples_per_value, smoothness))
 }
 
 fn method(c: &Config) -> Result<(Method, Weights), StageError> {
     let m = fit(&c.method, c.lambda, c.samples_per_value, c.smoothness)?;
-    let w = match c.weights.as_str() {
-        "hat" => Weights::Hat,
-        // The sensor's specification, as a camera's data sheet gives it.
-        "noise" => Weights::Noise { full_well: c.full_well, read_noise: c.read_noise },
-        // What `lumen hdr` does by default: the noise the stack itself shows.
-        "noise-from-stack" => Weights::NoiseFromStack,
-        other => {
-            return Err(StageError::Config(format!(
-                "weights = \"{other}\": expected hat, noise or noise-from-stack"
-            )))
-        }
-    };
+    // `noise` is the sensor's specification, as a camera's data sheet gives it.
+    let w = c
+        .weights
+        .parse::<hdr::WeightsName>()
+        .and_then(|w| w.resolve(Some(c.full_well), c.read_noise))
+        .map_err(|e| StageError::Config(format!("weights = {e}")))?;
     Ok((m, w))
 }
 
