@@ -70,6 +70,42 @@ fn report_shape_and_determinism() {
     assert_eq!(m2["value"].as_f64().unwrap(), v1);
 }
 
+/// `lumen report` writes a page per stage from a run's report, with the commit, date and
+/// machine and the case's numbers as the report has them; a file that is not a report is
+/// refused by name, and nothing is written.
+#[test]
+fn report_command_writes_results_pages() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let (code, err) = run(&furnace(0.2, ""), &out);
+    assert_eq!(code, 0, "{err}");
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let docs = dir.path().join("docs");
+    let report = out.join("report.json");
+    let (code, err) = common::lumen(&["report", report.to_str().unwrap(), "--docs", docs.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let page = std::fs::read_to_string(docs.join("render.md")).unwrap();
+    let commit = j["git_commit"].as_str().unwrap();
+    let machine = j["machine"].as_str().unwrap();
+    assert!(page.contains(&format!("commit `{commit}`")) && page.contains(machine), "{page}");
+    let m =
+        j["stages"][0]["metrics"].as_array().unwrap().iter().find(|m| m["name"] == "mean_rel_err").unwrap();
+    let value = lumen::pipeline::metric::fmt_value(m["value"].as_f64().unwrap());
+    assert!(page.contains(&format!("| mean_rel_err | {value} |")), "{page}");
+    let index = std::fs::read_to_string(docs.join("index.md")).unwrap();
+    assert!(index.contains("[render](render.md) | 1 | yes"), "{index}");
+    // Not a report: refused, naming the file, and nothing written.
+    let bogus = dir.path().join("bogus.json");
+    std::fs::write(&bogus, "{\"pipeline\": 3}").unwrap();
+    let fresh = dir.path().join("fresh");
+    let (code, err) = common::lumen(&["report", bogus.to_str().unwrap(), "--docs", fresh.to_str().unwrap()]);
+    assert_eq!(code, 1, "{err}");
+    assert_eq!(common::fault_in(&err), "bad-input", "{err}");
+    assert!(err.contains("bogus.json") && err.contains("not a lumen report.json"), "{err}");
+    assert!(!fresh.exists());
+}
+
 #[test]
 fn missed_bound_exits_3_and_names_metric() {
     let dir = tempfile::tempdir().unwrap();

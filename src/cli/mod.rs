@@ -66,6 +66,18 @@ enum Command {
         /// The output folder the shards wrote to.
         out: PathBuf,
     },
+    /// Write results pages from run reports: one Markdown file per stage (every case's
+    /// outcome, errors, bounds and times, the sweeps' plots), with the commit, date and
+    /// machine each report was measured on, and an index.md.
+    Report {
+        /// The report.json files of `lumen run` (or `lumen merge`).
+        #[arg(required = true)]
+        reports: Vec<PathBuf>,
+        /// The folder to write the pages into (created if need be; other files there are
+        /// left alone).
+        #[arg(long)]
+        docs: PathBuf,
+    },
     /// Write the sbatch scripts that run a pipeline on Slurm: OUT/slurm/render.sbatch (a job
     /// array, each task making its share of every case's renders), OUT/slurm/match.sbatch (a
     /// job array after it, each task matching its share of the image pairs), OUT/slurm/run.sbatch
@@ -342,6 +354,12 @@ pub fn main() -> i32 {
             }
         }
         Command::Merge { out } => merge_cmd(&out),
+        Command::Report { reports, docs } => lumen::pipeline::docs::write(&reports, &docs)
+            .map(|written| {
+                eprintln!("wrote {} pages and plots into {}", written.len(), docs.display());
+                0
+            })
+            .map_err(anyhow::Error::new),
         Command::Slurm { pipeline, shards, out, cache, partition, time, cpus_per_task, submit, wait } => {
             let opts = SlurmArgs { shards, out, cache, partition, time, cpus_per_task, submit, wait };
             slurm_cmd(&pipeline, opts)

@@ -6,6 +6,7 @@
 
 use crate::error::Invalid;
 pub mod cache;
+pub mod docs;
 pub mod file;
 pub mod metric;
 pub mod names;
@@ -39,6 +40,9 @@ pub enum Error {
     Write { path: PathBuf, message: String },
     #[error("cannot merge: {path}: {message}")]
     Merge { path: PathBuf, message: String },
+    /// A report that cannot be read, or is not one `lumen report` can use.
+    #[error("{path}: {message}")]
+    Report { path: PathBuf, message: String },
 }
 
 impl Error {
@@ -47,7 +51,9 @@ impl Error {
         match self {
             Error::File(e) => e.fault(),
             Error::Stage { error, .. } => error.fault(),
-            Error::Bounds { .. } | Error::Threads(_) | Error::Merge { .. } => Fault::BadInput,
+            Error::Bounds { .. } | Error::Threads(_) | Error::Merge { .. } | Error::Report { .. } => {
+                Fault::BadInput
+            }
             Error::Pool(..) | Error::Write { .. } => Fault::Io,
         }
     }

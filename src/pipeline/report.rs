@@ -208,7 +208,7 @@ impl Report {
     }
 
     /// The sweeps: groups of more than one case, in file order.
-    fn sweeps(&self) -> Vec<(&str, Vec<&StageReport>)> {
+    pub fn sweeps(&self) -> Vec<(&str, Vec<&StageReport>)> {
         let mut groups: Vec<(&str, Vec<&StageReport>)> = Vec::new();
         for s in self.stages.iter().filter(|s| !s.sweep.is_empty()) {
             match groups.iter_mut().find(|(g, _)| *g == s.group) {
@@ -296,74 +296,65 @@ impl Report {
             for (group, cases) in &sweeps {
                 let _ = writeln!(s, "### {group}: {}\n", cases[0].plot_metric);
                 let _ = writeln!(s, "![{group}](plots/{}.svg)\n", file_stem(group));
-                let _ = writeln!(
-                    s,
-                    "| case | solve (s) | render (s) | {} | Pareto |\n|---|---:|---:|---:|---|",
-                    cases[0].plot_metric
-                );
-                let points = sweep_points(cases);
-                let front = pareto(&points);
-                for (k, (st, p)) in cases.iter().zip(&points).enumerate() {
-                    let value = p.map_or("—".into(), |(_, e)| fmt_value(e));
-                    let _ = writeln!(
-                        s,
-                        "| {} | {:.3} | {:.2} | {value} | {} |",
-                        st.case,
-                        st.timings_s.get("solve").copied().unwrap_or(0.0),
-                        st.timings_s.get("render").copied().unwrap_or(0.0),
-                        if front.contains(&k) { "yes" } else { "" }
-                    );
-                }
-                let _ = writeln!(s);
+                sweep_table(&mut s, cases);
             }
         }
         for st in &self.stages {
             let _ = writeln!(s, "\n## {} — {}\n", st.stage, st.case);
-            if let Some(e) = &st.error {
-                let _ = writeln!(s, "Ended with a {} error: {}\n", e.kind, e.message);
-            }
-            if let Some(why) = &st.skipped {
-                let _ = writeln!(s, "Skipped: {why}.\n");
-            }
-            if !st.metrics.is_empty() {
-                let _ = writeln!(s, "| metric | value | unit | bound | verdict |\n|---|---:|---|---:|---|");
-            }
-            for m in &st.metrics {
-                let bound = m.bound.map_or("—".into(), |b| b.text());
-                let whole = whole_entry_met(st, &m.name);
-                let verdict = match (m.pass, &m.expected_miss, &m.skipped) {
-                    (_, _, Some(why)) => format!("skipped: {why}"),
-                    (Some(true), Some(why), _) if whole => {
-                        format!("**DECLARED MISS NOW MET** (declared: {why})")
-                    }
-                    (Some(true), Some(why), _) => {
-                        format!("pass (the entry declares a miss some case still has: {why})")
-                    }
-                    (Some(true), None, _) => "pass".to_string(),
-                    (Some(false), Some(why), _) => format!("expected miss: {why}"),
-                    (Some(false), None, _) => "**MISS**".to_string(),
-                    (None, _, _) => "—".to_string(),
-                };
-                let _ = writeln!(s, "| {} | {} | {} | {bound} | {verdict} |", m.name, value_text(m), m.unit);
-            }
-            let times: Vec<String> = st.timings_s.iter().map(|(k, v)| format!("{k} {v:.3} s")).collect();
-            let _ = writeln!(
-                s,
-                "\nTimings: {}. Renders: {} rendered ({:.2} s), {} reused from the cache ({:.2} s).",
-                times.join(", "),
-                st.renders.rendered,
-                st.renders.rendered_s,
-                st.renders.reused,
-                st.renders.reused_s
-            );
-            for n in &st.notes {
-                let _ = writeln!(s, "\n- {n}");
-            }
+            self.case_section(&mut s, st);
         }
         for w in &self.warnings {
             let _ = writeln!(s, "\nWarning: {w}");
         }
         s
+    }
+
+    /// A case's error or skip, its metrics with bounds and verdicts, timings and notes.
+    pub fn case_section(&self, s: &mut String, st: &StageReport) {
+        let now_met_all = self.misses_now_met();
+        let whole_entry_met = |st: &StageReport, name: &str| {
+            now_met_all.iter().any(|(a, b, c)| *a == st.stage && *b == st.group && c == name)
+        };
+        if let Some(e) = &st.error {
+            let _ = writeln!(s, "Ended with a {} error: {}\n", e.kind, e.message);
+        }
+        if let Some(why) = &st.skipped {
+            let _ = writeln!(s, "Skipped: {why}.\n");
+        }
+        if !st.metrics.is_empty() {
+            let _ = writeln!(s, "| metric | value | unit | bound | verdict |\n|---|---:|---|---:|---|");
+        }
+        for m in &st.metrics {
+            let bound = m.bound.map_or("—".into(), |b| b.text());
+            let whole = whole_entry_met(st, &m.name);
+            let verdict = match (m.pass, &m.expected_miss, &m.skipped) {
+                (_, _, Some(why)) => format!("skipped: {why}"),
+                (Some(true), Some(why), _) if whole => {
+                    format!("**DECLARED MISS NOW MET** (declared: {why})")
+                }
+                (Some(true), Some(why), _) => {
+                    format!("pass (the entry declares a miss some case still has: {why})")
+                }
+                (Some(true), None, _) => "pass".to_string(),
+                (Some(false), Some(why), _) => format!("expected miss: {why}"),
+                (Some(false), None, _) => "**MISS**".to_string(),
+                (None, _, _) => "—".to_string(),
+            };
+            let _ = writeln!(s, "| {} | {} | {} | {bound} | {verdict} |", m.name, value_text(m), m.unit);
+        }
+        let times: Vec<String> = st.timings_s.iter().map(|(k, v)| format!("{k} {v:.3} s")).collect();
+        let _ = writeln!(
+            s,
+            "\nTimings: {}. Renders: {} rendered ({:.2} s), {} reused from the cache ({:.2} s).",
+            times.join(", "),
+            st.renders.rendered,
+            st.renders.rendered_s,
+            st.renders.reused,
+            st.renders.reused_s
+        );
+        for n in &st.notes {
+            let _ = writeln!(s, "\n- {n}");
+        }
     }
 
     /// Writes `report.json`, `report.md`, the sweeps' plots and the files cases asked to keep
@@ -419,6 +410,30 @@ pub struct Fragment {
     pub kept: Vec<PathBuf>,
 }
 
+/// A sweep's table: each case's solve and render time, its plotted error, and whether it is
+/// on the Pareto front.
+pub fn sweep_table(s: &mut String, cases: &[&StageReport]) {
+    let _ = writeln!(
+        s,
+        "| case | solve (s) | render (s) | {} | Pareto |\n|---|---:|---:|---:|---|",
+        cases[0].plot_metric
+    );
+    let points = sweep_points(cases);
+    let front = pareto(&points);
+    for (k, (st, p)) in cases.iter().zip(&points).enumerate() {
+        let value = p.map_or("—".into(), |(_, e)| fmt_value(e));
+        let _ = writeln!(
+            s,
+            "| {} | {:.3} | {:.2} | {value} | {} |",
+            st.case,
+            st.timings_s.get("solve").copied().unwrap_or(0.0),
+            st.timings_s.get("render").copied().unwrap_or(0.0),
+            if front.contains(&k) { "yes" } else { "" }
+        );
+    }
+    let _ = writeln!(s);
+}
+
 /// The processor model (from /proc/cpuinfo where there is one) and the logical cores.
 fn machine() -> String {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -461,7 +476,7 @@ pub fn pareto(points: &[Option<(f64, f64)>]) -> Vec<usize> {
 
 /// Error against time on log-log axes, every case a point labelled with its swept values,
 /// the Pareto front as a line.
-fn plot_svg(group: &str, cases: &[&StageReport]) -> String {
+pub fn plot_svg(group: &str, cases: &[&StageReport]) -> String {
     use plotters::prelude::*;
     let points = sweep_points(cases);
     let metric = &cases[0].plot_metric;
@@ -511,7 +526,7 @@ fn plot_svg(group: &str, cases: &[&StageReport]) -> String {
     svg
 }
 
-fn value_text(m: &Metric) -> String {
+pub fn value_text(m: &Metric) -> String {
     match (m.value, &m.missing) {
         (Some(v), _) => fmt_value(v),
         (None, Some(why)) if m.skipped.is_none() => format!("— ({why})"),
