@@ -215,7 +215,7 @@ fn merge_against_truth_beside_merge_debevec() {
 }
 
 /// The Memorial Church stack through `lumen hdr --fusion` and OpenCV's photo module. The
-/// merges are reported (printed; the README quotes them), not bounded: without a truth, a
+/// merges are reported (printed; docs/measurements.md quotes them), not bounded: without a truth, a
 /// difference says only that the weights differ (see `merge_against_truth_beside_merge_debevec`).
 /// `MergeMertens` with the paper's exponents and lumen's fusion are the same algorithm
 /// (OpenCV takes the grey value of BGR frames with RGB's coefficients): within one 8-bit

@@ -234,7 +234,7 @@ fn assert_within_the_bounds(rec: &mapper::Reconstruction, truth: &[Pose]) {
 /// images with the same camera model, SIMPLE_PINHOLE with the principal point at the centre:
 /// pairwise median 0.099°, max 0.262°); the focal length within what the principal point held
 /// at the centre can cost, its distance from the truth's over f (0.81 %; COLMAP gets 0.001 %,
-/// lumen 0.07 %: README "Structure from motion").
+/// lumen 0.07 %: docs/measurements.md, "Structure from motion").
 #[test]
 fn herz_jesu_reconstruction_without_the_camera() {
     let Some(data) = common::shared_data() else { return };

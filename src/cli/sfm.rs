@@ -35,7 +35,7 @@ pub struct SfmArgs {
     pub pairs: String,
     /// Match each verified pair again among only the keypoints near each other's epipolar
     /// lines (COLMAP's guided matching; off by default, as there: on the renders and
-    /// Herz-Jesu it adds matches and costs accuracy, README "Structure from motion").
+    /// Herz-Jesu it adds matches and costs accuracy, docs/measurements.md, "Structure from motion").
     #[arg(long)]
     pub guided_matching: bool,
     /// Output folder: cameras.txt, images.txt, points3D.txt, points.ply, summary.json.

@@ -27,20 +27,9 @@
 //! sample's first coordinate, and Russian roulette, which starts at the fifth vertex, draws
 //! nothing before). Later requests come from the (seed, pixel, sample) PCG stream, as with the
 //! independent sampler. Deeper vertices carry little of the error a stratified point removes.
-//! On the Cornell box at 256 spp (mean squared error against the reference over six seeds,
-//! `lumen render --seed`, and callgrind instructions per path over independent numbers):
-//!
-//! | Sobol requests | MSE | instructions |
-//! |---:|---:|---:|
-//! | 3 | 2.342·10⁻⁵ | +8.0 % |
-//! | 5 | 2.311·10⁻⁵ | +11.5 % |
-//! | 7 | 2.306·10⁻⁵ | +14.3 % |
-//! | 10 | (64 spp: the same as 7) | +17.6 % |
-//!
-//! Three would be 2 % better at equal time on this scene; five keeps the second vertex's
-//! direct light stratified, and a thin lens's sample does not push the first vertex's BSDF
-//! sample out. (These are the one-path loop's instructions. `render::lanes`, which looks the
-//! scramble seeds up per pixel and draws eight lanes' points at once, pays 5 % for five.)
+//! Five keeps the second vertex's direct light stratified, and a thin lens's sample does not
+//! push the first vertex's BSDF sample out; the error and instructions measured for three to
+//! ten Sobol requests are in `docs/measurements.md` ("Renderer: samplers").
 
 /// The (seed, pixel) hash every Sobol dimension's scramble seeds derive from.
 #[inline]

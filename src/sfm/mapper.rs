@@ -46,7 +46,7 @@ pub struct Options {
     /// Reprojection threshold of PnP, triangulation and the bundle's filtering with calibrated
     /// intrinsics, pixels (2: about four standard deviations of the keypoints' noise, whose
     /// reprojection RMS over both coordinates is 0.5–0.7 px on the renders and on Herz-Jesu;
-    /// COLMAP's 4 keeps observations that cost accuracy, README "Structure from motion").
+    /// COLMAP's 4 keeps observations that cost accuracy, docs/measurements.md, "Structure from motion").
     pub reprojection_px: f64,
     /// The same while the focal length is refined (4, COLMAP's): the residuals then hold the
     /// guess's error as well as noise, and 2 px drops good observations before it is gone.

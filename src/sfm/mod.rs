@@ -218,7 +218,7 @@ pub struct IdealFeatures {
 /// focal length and k1, as COLMAP's default camera model (SIMPLE_RADIAL) does. A lens with
 /// barrel distortion needs k1 (a 6-view render through k1 = −0.12 gives 0.25° median rotation
 /// error with the focal length alone, 0.015° with k1); on images without distortion it costs
-/// a little (README "Structure from motion").
+/// a little (docs/measurements.md, "Structure from motion").
 pub const GUESSED_REFINE: bundle::Refine =
     bundle::Refine { focal: true, principal_point: false, k1: true, k2: false };
 

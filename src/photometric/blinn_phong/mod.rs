@@ -28,7 +28,7 @@
 //! starts need their eight iterations (ranked after fewer, the renders' errors grow several
 //! times), and Gauss-Newton's halved steps keep each start near its own basin, where
 //! Levenberg-Marquardt from the same starts, though faster, ends in other basins on the
-//! ball's real photographs (README, "Photometric stereo"). More shininess starts (16, 256)
+//! ball's real photographs (docs/measurements.md, "Photometric stereo"). More shininess starts (16, 256)
 //! double the time for no better answer; shininess 4 alone misses narrow lobes.
 //! Then up to three rounds over the observations that are lit (n·l > 0.02 under the current
 //! normal) and within max(3·1.4826·MAD, 2 % of the prediction + 10⁻⁴) of the model, which
@@ -189,7 +189,7 @@ fn lobe_seen(n: DVec3, e: f64, halves: &[DVec3], used: &[usize]) -> bool {
 /// starts from twice the step the one before accepted (at most 1), the warm start Nocedal &
 /// Wright (2006, §3.5) suggest where steps are badly scaled: a start whose steps are cut to ⅛
 /// iteration after iteration no longer spends three passes over the observations finding
-/// that out again (README, "Photometric stereo", for what it saved). Hand-written on the 7×7 normal equations summed in
+/// that out again (docs/measurements.md, "Photometric stereo", for what it saved). Hand-written on the 7×7 normal equations summed in
 /// lanes, so an iteration allocates nothing; argmin builds the (3m + 7) × 7 Jacobian and JᵀJ
 /// as dynamic matrices each time, which was most of the fit's time.
 fn gauss_newton(fit: &Fit, p0: &Param, iterations: u64) -> Option<(Param, f64, Vec<DVec3>)> {

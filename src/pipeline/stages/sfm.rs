@@ -128,9 +128,9 @@ struct PairsRecipe<'a, R> {
     options: &'a str,
 }
 
-/// Images on each side of a block of pairs the matches pass hands out: 8 × 8 pairs, about
-/// 0.6 s of matching and verification on one thread at 1024×768 px (the courtyard's 80 views:
-/// 79 blocks in 25.5 s over two shares).
+/// Images on each side of a block of pairs the matches pass hands out: 8 × 8 pairs, under a
+/// second of matching and verification on one thread at 1024×768 px, small enough to spread
+/// a case's pairs over the shares (`docs/scale.md`).
 const PAIR_BLOCK: usize = 8;
 
 pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), StageError> {
