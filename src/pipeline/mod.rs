@@ -148,7 +148,7 @@ pub fn render_share(
             if progress {
                 let now = cache.share_count();
                 let what = match result {
-                    Ok(()) | Err(StageError::RendersOnly) => String::new(),
+                    Ok(()) => String::new(),
                     Err(e) => format!(" (stopped: {e})"),
                 };
                 let kind = match pass {

@@ -32,6 +32,7 @@
 //! numbers) and the estimate, to be bounded by a peer's figure on the same photographs. When
 //! the folder is absent (no `../shared` beside a fresh clone) the case is skipped.
 
+use super::Synthesis;
 use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError, MAX_RENDERS};
 use super::{run_case, CaseResult, Settings};
 use crate::calib::{self, detect::BoardSize};
@@ -253,7 +254,7 @@ struct ViewRecipe<'a> {
     sensor: bool,
 }
 
-pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Findings), StageError> {
+pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<calib::Input, Truth>, StageError> {
     let scene_path = ctx.dir.join(&c.scene);
     let mut scene = render::load(&scene_path)?;
     let digest = scene_digest(&scene_path)?;
@@ -353,7 +354,9 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Fin
         bar.inc(1);
     }
     bar.finish_and_clear();
-    ctx.renders_requested()?;
+    if ctx.renders_only() {
+        return Ok(None);
+    }
     let mut found = Findings::default();
     if c.save_views {
         for (name, g) in &images {
@@ -373,7 +376,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(calib::Input, Truth, Fin
         settings.spp,
         if sensor.is_some() { "on" } else { "off" }
     ));
-    Ok((calib::Input { images }, Truth { camera, corners }, found))
+    Ok(Some((calib::Input { images }, Truth { camera, corners }, found)))
 }
 
 pub fn solve(c: &Config, input: &calib::Input) -> Result<calib::Output, StageError> {
@@ -566,6 +569,6 @@ impl Settings for DataConfig {
         "rms_px"
     }
     fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
-        run_case(|| read(self, ctx), |i| solve_data(self, i), validate_data)
+        run_case(|| read(self, ctx).map(Some), |i| solve_data(self, i), validate_data)
     }
 }

@@ -31,6 +31,7 @@
 //! `misflagged_clipped_patches` (the sampler's clipped flags against the truth, where it is
 //! 3σ sure), `fit_s` and `loo_s`.
 
+use super::Synthesis;
 use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError};
 use super::{run_case, CaseResult, Settings};
 use crate::color::{self, chart, spectra, Model, PatchInput};
@@ -150,7 +151,7 @@ fn chart_grid(scene_path: &std::path::Path) -> Result<(DVec3, DVec3, DVec3, DVec
     Ok((c1 - 0.5 * (step_u + step_v), step_u, step_v, n.normalize()))
 }
 
-pub fn synthesize(c: &Config, ctx: &Context) -> Result<(color::Input, Truth, Findings), StageError> {
+pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<color::Input, Truth>, StageError> {
     let cam = spectra::camera(&c.camera).ok_or_else(|| {
         StageError::Config(format!(
             "camera = \"{}\": expected one of {}",
@@ -272,7 +273,9 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(color::Input, Truth, Fin
         bar.inc(1);
     }
     bar.finish_and_clear();
-    ctx.renders_requested()?;
+    if ctx.renders_only() {
+        return Ok(None);
+    }
 
     let radiance = Image {
         width: w as u32,
@@ -362,11 +365,11 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(color::Input, Truth, Fin
         ));
         files.push((std::path::PathBuf::from(name), Kept::Image(exposed)));
     }
-    Ok((
+    Ok(Some((
         input,
         Truth { rgb: truth_rgb, pixel_variance, pixels },
         Findings { notes, files, ..Default::default() },
-    ))
+    )))
 }
 
 pub fn solve(c: &Config, input: &color::Input) -> Result<color::Output, StageError> {

@@ -43,6 +43,7 @@
 //! - with `weights = "noise-from-stack"`, `full_well_rel_err`: the stack's estimate of the
 //!   full well (`hdr::noise`) against the sensor's.
 
+use super::Synthesis;
 use super::{apply_overrides, Context, Findings, SettingsKey, StageError};
 use super::{run_case, CaseResult, Settings};
 use crate::hdr::{self, Frame, Method, Weights};
@@ -157,7 +158,7 @@ struct FilmRecipe<'a> {
     settings: SettingsKey,
 }
 
-pub fn synthesize(c: &Config, ctx: &Context) -> Result<(hdr::Input, Truth, Findings), StageError> {
+pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<hdr::Input, Truth>, StageError> {
     if c.exposures < 2 || c.exposures > 64 {
         return Err(StageError::Config(format!("exposures = {}: expected 2 to 64", c.exposures)));
     }
@@ -185,7 +186,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(hdr::Input, Truth, Findi
     let film = ctx.cache.images(ctx.case, "radiance", &recipe, || {
         Ok::<_, StageError>(vec![render::try_render(&scene, &settings)?.mean])
     })?;
-    let film = film.ok_or(StageError::RendersOnly)?;
+    let Some(film) = film else { return Ok(None) };
     let Some(radiance) = film.into_iter().next() else {
         return Err(StageError::Config("the cached render is empty".into()));
     };
@@ -266,7 +267,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(hdr::Input, Truth, Findi
     };
     let floor = radiance_errors(&truth, &floor_radiance);
     truth.floor = quantile(&floor, 0.5).zip(quantile(&floor, 0.95));
-    Ok((input, truth, Findings { notes, ..Default::default() }))
+    Ok(Some((input, truth, Findings { notes, ..Default::default() })))
 }
 
 /// The response fit an entry names (`hdr::Fit`, the parser `lumen hdr --response` uses):
@@ -718,6 +719,6 @@ impl Settings for DataConfig {
         "loo_median_abs_ln"
     }
     fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
-        run_case(|| read(self, ctx), |i| solve_data(self, i), validate_data)
+        run_case(|| read(self, ctx).map(Some), |i| solve_data(self, i), validate_data)
     }
 }

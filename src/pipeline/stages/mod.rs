@@ -1,9 +1,10 @@
 //! The stages, one file each, and the one table of them (`REGISTRY`). Every stage is three
 //! plain functions around its solver:
 //!
-//! - `synthesize(&Config, &Context) -> (Input, Truth, Findings)`: renders the stage's input
+//! - `synthesize(&Config, &Context) -> Synthesis<Input, Truth>`: renders the stage's input
 //!   through the render cache and keeps the truth beside it (its findings: notes, and the
-//!   input files an entry asks to keep); a case on real data `read`s its input instead;
+//!   input files an entry asks to keep), or, in a share of the shard passes, only asks for
+//!   the renders (`None`); a case on real data `read`s its input instead;
 //! - `solve(&Config, &Input) -> Output`: the solver module's `run`, the function the CLI
 //!   calls too, with a `Config` built from the pipeline entry;
 //! - `validate(&Config, &Output, &Truth) -> Findings`: the only place that holds an
@@ -190,9 +191,6 @@ pub enum StageError {
     Fit(#[from] crate::fit::FitError),
     #[error(transparent)]
     Sfm(#[from] crate::sfm::Error),
-    /// A render share (`Cache::share`) asked for the case's renders and stops there.
-    #[error("the case's renders were requested in a render share")]
-    RendersOnly,
 }
 
 impl From<Invalid> for StageError {
@@ -202,12 +200,11 @@ impl From<Invalid> for StageError {
 }
 
 impl StageError {
-    /// Whose fault it is, as the module that raised the error decided. (A render share's
-    /// stop is no fault: it never reaches a report.)
+    /// Whose fault it is, as the module that raised the error decided.
     pub fn fault(&self) -> Fault {
         match self {
             StageError::Config(_) => Fault::BadInput,
-            StageError::Absent(_) | StageError::RendersOnly => Fault::Io,
+            StageError::Absent(_) => Fault::Io,
             StageError::Render(e) => e.fault(),
             StageError::Image(e) => e.fault(),
             StageError::Calib(e) => e.fault(),
@@ -230,15 +227,16 @@ pub struct Context<'a> {
 }
 
 impl Context<'_> {
-    /// After a stage has asked for all its renders: in a render share (`Cache::share`), whose
-    /// requests hand no image back, the case stops here (`StageError::RendersOnly`).
-    pub fn renders_requested(&self) -> Result<(), StageError> {
-        if self.cache.renders_only() {
-            return Err(StageError::RendersOnly);
-        }
-        Ok(())
+    /// Whether this is a share of the shard passes (`Cache::share`): its render requests
+    /// hand no image back, so a stage's synthesis ends once it has asked for them all.
+    pub fn renders_only(&self) -> bool {
+        self.cache.renders_only()
     }
 }
+
+/// What a stage's synthesis gives: the case's input, truth and findings, or `None` in a
+/// share of the shard passes, which only asks for the renders (`Context::renders_only`).
+pub type Synthesis<I, T> = Option<(I, T, Findings)>;
 
 /// What one case produced.
 pub struct CaseResult {
@@ -267,14 +265,17 @@ pub struct Findings {
     pub files: Vec<(PathBuf, Kept)>,
 }
 
-/// Runs one case: synthesis, solve, validation, each timed.
+/// Runs one case: synthesis (or reading its data), solve, validation, each timed.
 pub fn run_case<I, T, O>(
-    synthesize: impl FnOnce() -> Result<(I, T, Findings), StageError>,
+    synthesize: impl FnOnce() -> Result<Synthesis<I, T>, StageError>,
     solve: impl FnOnce(&I) -> Result<O, StageError>,
     validate: impl FnOnce(&O, &T) -> Findings,
 ) -> Result<CaseResult, StageError> {
     let t = std::time::Instant::now();
-    let (input, truth, mut found) = synthesize()?;
+    // A run's cache hands every render back; only a share's synthesis ends without input.
+    let Some((input, truth, mut found)) = synthesize()? else {
+        return Err(StageError::Config("the case's renders were asked for, but none came back".into()));
+    };
     let render_s = t.elapsed().as_secs_f64();
     let t = std::time::Instant::now();
     let output = solve(&input)?;

@@ -30,6 +30,7 @@
 //! note with the mean error after each iteration (from the solver's trace of
 //! normals, compared with truth here).
 
+use super::Synthesis;
 use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError, MAX_RENDERS};
 use super::{run_case, CaseResult, Settings};
 use crate::image::Image;
@@ -168,7 +169,7 @@ struct LightRecipe<'a> {
     settings: SettingsKey,
 }
 
-pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Truth, Findings), StageError> {
+pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<photometric::Input, Truth>, StageError> {
     let model: Model = c.model.parse()?;
     check_start_iterations(c.start_iterations)?;
     if !(3..=MAX_RENDERS).contains(&c.lights) {
@@ -311,7 +312,9 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Trut
         bar.inc(1);
     }
     bar.finish_and_clear();
-    ctx.renders_requested()?;
+    if ctx.renders_only() {
+        return Ok(None);
+    }
     let notes = vec![format!(
         "{} lights at {e0}°–{e1}° elevation, {} object pixels in the mask ({} more left out: their \
          footprint straddles an occlusion edge or crease), {}x{} px, {} spp, model {}.",
@@ -339,7 +342,11 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(photometric::Input, Trut
         files.extend(images.into_iter().map(|(n, img)| (folder.join(n), Kept::Image(img))));
         files.extend(bytes.into_iter().map(|(n, b)| (folder.join(n), Kept::Bytes(b))));
     }
-    Ok((input, Truth { normals, albedo: Some(albedo) }, Findings { notes, files, ..Default::default() }))
+    Ok(Some((
+        input,
+        Truth { normals, albedo: Some(albedo) },
+        Findings { notes, files, ..Default::default() },
+    )))
 }
 
 /// Reads a real dataset (`DataConfig`), keeping its ground truth apart from the input.
@@ -484,6 +491,6 @@ impl Settings for DataConfig {
         "mean_angular_error_deg"
     }
     fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
-        run_case(|| read(self, ctx), |i| solve_data(self, i), validate)
+        run_case(|| read(self, ctx).map(Some), |i| solve_data(self, i), validate)
     }
 }

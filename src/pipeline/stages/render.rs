@@ -22,6 +22,7 @@
 //! When the reference files are absent (`../shared` is not beside the checkout) the reference
 //! metrics are reported as skipped, with the missing file named.
 
+use super::Synthesis;
 use super::{apply_overrides, Context, Findings, Kept, StageError};
 use super::{run_case, CaseResult, Settings};
 use crate::image::{io, metrics, Image};
@@ -82,7 +83,7 @@ pub struct Output {
     seconds: f64,
 }
 
-pub fn synthesize(c: &Config, ctx: &Context) -> Result<(Input, Truth, Findings), StageError> {
+pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<Input, Truth>, StageError> {
     let scene = render::load(&ctx.dir.join(&c.scene))?;
     let mut settings = render::Settings::from_scene(&scene);
     settings.seed = ctx.seed;
@@ -143,7 +144,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<(Input, Truth, Findings),
             .map(|f| dilate(&f, scene.camera.width as usize))
             .ok_or("the scene has a thin lens; the footprint is traced through a pinhole")
     });
-    Ok((Input { scene, settings }, Truth { reference, uniform: c.expect_uniform, footprint }, found))
+    Ok(Some((Input { scene, settings }, Truth { reference, uniform: c.expect_uniform, footprint }, found)))
 }
 
 /// `mask` (row-major, `w` wide) grown by one pixel in each of the eight directions.

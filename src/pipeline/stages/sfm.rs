@@ -30,6 +30,7 @@
 //! `centre_err_max_rel`; with guessed intrinsics `focal_err_rel`, |f − f_true|/f_true against
 //! the true fx, and on renders `k1_err`, |k1 − k1_true|; and the phases' times as a note.
 
+use super::Synthesis;
 use super::{apply_overrides, Context, Findings, SettingsKey, StageError, MAX_RENDERS};
 use super::{run_case, CaseResult, Settings};
 use crate::math::Pose as CameraPose;
@@ -133,7 +134,7 @@ struct PairsRecipe<'a, R> {
 /// a case's pairs over the shares (`docs/scale.md`).
 const PAIR_BLOCK: usize = 8;
 
-pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), StageError> {
+pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<Synthesis<sfm::Input, Truth>, StageError> {
     if !(2..=MAX_RENDERS).contains(&c.views) {
         return Err(StageError::Config(format!("views = {}: expected 2 to {MAX_RENDERS}", c.views)));
     }
@@ -223,7 +224,9 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth,
         Some(Pass::Renders) => sfm::Prepared::default(),
         _ => prepare(ctx, &images, &recipes, &cfg),
     };
-    ctx.renders_requested()?;
+    if ctx.renders_only() {
+        return Ok(None);
+    }
     let advance =
         if c.forward > 0.0 { format!(", advancing {} towards it", c.forward) } else { String::new() };
     let notes = vec![format!(
@@ -232,11 +235,11 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<(sfm::Input, Truth,
     )];
     let focal = c.guess_intrinsics.then_some(camera.intrinsics.fx);
     let k1 = c.guess_intrinsics.then_some(camera.distortion.k1);
-    Ok((
+    Ok(Some((
         sfm::Input { images, prepared },
         Truth { poses, focal, k1 },
         Findings { notes, ..Default::default() },
-    ))
+    )))
 }
 
 /// A render as the photograph `lumen sfm` would read: 8-bit sRGB codes, read back as
@@ -419,33 +422,59 @@ pub struct Truth {
     k1: Option<f64>,
 }
 
-pub fn read(c: &Config, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), StageError> {
+/// The photographs of a real-data entry, its camera (with the file it came from), the
+/// mapper's settings and each photograph's cache recipe.
+struct Photos {
+    dir: std::path::PathBuf,
+    files: Vec<std::path::PathBuf>,
+    camera: Option<crate::math::CameraModel>,
+    camera_path: Option<std::path::PathBuf>,
+    cfg: sfm::Config,
+    recipes: Vec<PhotoFeaturesRecipe>,
+}
+
+fn photos(c: &Config, ctx: &Context) -> Result<Photos, StageError> {
     if c.max_features < 16 {
         return Err(StageError::Config(format!("max_features = {}: expected at least 16", c.max_features)));
     }
     let dir = super::dataset_path(ctx, &c.images)?;
     let camera_path = c.camera.as_deref().map(|p| super::dataset_path(ctx, p)).transpose()?;
     let camera = camera_path.as_deref().map(sfm::input::read_camera).transpose()?;
-    let truth_dir = super::dataset_path(ctx, &c.truth)?;
     let files = sfm::input::photographs(&dir)?;
     let cfg = config(c.max_features, c.camera.is_none(), &c.refine, c.guided_matching, &c.pairs)?;
     let recipes = photo_recipes(&files, &cfg)?;
-    if ctx.cache.pass() == Some(Pass::Renders) {
-        // A share of the renders pass: the features of the photographs it owns.
-        for (file, recipe) in files.iter().zip(&recipes) {
-            if ctx.cache.owns(recipe) && ctx.cache.bytes(recipe).is_none() {
-                let input = sfm::input::read_images(std::slice::from_ref(file), camera, |_, _, _| {})?;
-                for im in &input.images {
-                    let f = sfm::features::detect(&im.grey, &cfg.features);
-                    ctx.cache.store_bytes(recipe, &sfm::bytes::encode_features(&f));
+    Ok(Photos { dir, files, camera, camera_path, cfg, recipes })
+}
+
+/// A real-data entry's part of the shard passes: in the renders pass, the features of the
+/// photographs this share owns; in the matches pass, its blocks of pairs.
+fn share_photos(c: &Config, ctx: &Context, pass: Pass) -> Result<(), StageError> {
+    let p = photos(c, ctx)?;
+    match pass {
+        Pass::Renders => {
+            for (file, recipe) in p.files.iter().zip(&p.recipes) {
+                if ctx.cache.owns(recipe) && ctx.cache.bytes(recipe).is_none() {
+                    let input = sfm::input::read_images(std::slice::from_ref(file), p.camera, |_, _, _| {})?;
+                    for im in &input.images {
+                        let f = sfm::features::detect(&im.grey, &p.cfg.features);
+                        ctx.cache.store_bytes(recipe, &sfm::bytes::encode_features(&f));
+                    }
                 }
             }
         }
-        return Err(StageError::RendersOnly);
+        Pass::Matches => {
+            let input = sfm::input::read_images(&p.files, p.camera, |_, _, _| {})?;
+            prepare(ctx, &input.images, &p.recipes, &p.cfg);
+        }
     }
+    Ok(())
+}
+
+pub fn read(c: &Config, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), StageError> {
+    let Photos { dir, files, camera, camera_path, cfg, recipes } = photos(c, ctx)?;
+    let truth_dir = super::dataset_path(ctx, &c.truth)?;
     let mut input = sfm::input::read_images(&files, camera, |_, _, _| {})?;
     input.prepared = prepare(ctx, &input.images, &recipes, &cfg);
-    ctx.renders_requested()?;
     let mut poses = Vec::new();
     let mut focal = None;
     for im in &input.images {
@@ -580,10 +609,10 @@ impl Settings for Config {
         "rotation_err_median_deg"
     }
     fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
-        run_case(|| read(self, ctx), |i| solve(self, i), validate)
+        run_case(|| read(self, ctx).map(Some), |i| solve(self, i), validate)
     }
-    /// Both passes: the photographs' features, then the pairs (`read`).
-    fn share(&self, ctx: &Context, _pass: Pass) -> Option<Result<(), StageError>> {
-        Some(read(self, ctx).map(|_| ()))
+    /// Both passes: the photographs' features, then the pairs.
+    fn share(&self, ctx: &Context, pass: Pass) -> Option<Result<(), StageError>> {
+        Some(share_photos(self, ctx, pass))
     }
 }
