@@ -15,7 +15,6 @@
 //! run through those three functions, and its share of the shard passes (`share`). A new
 //! stage is one file here and one line in `REGISTRY`.
 
-use crate::error::Invalid;
 pub mod calibrate;
 pub mod color;
 pub mod hdr;
@@ -164,7 +163,7 @@ pub fn dataset_path(ctx: &Context, path: &str) -> Result<PathBuf, StageError> {
 
 use super::cache::{Cache, Pass};
 use super::metric::Metric;
-use crate::error::Fault;
+use crate::error::{Fault, Invalid};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
