@@ -207,13 +207,11 @@ fn herz_jesu_truth(dir: &Path) -> (Vec<(Matrix3<f64>, Matrix3<f64>, Vector3<f64>
 /// centres within 1 % of the path's extent after a similarity, reprojection RMS ≤ 1 px.
 fn assert_within_the_bounds(rec: &mapper::Reconstruction, truth: &[Pose]) {
     assert!(rec.poses.iter().all(|p| p.is_some()), "{:?}", rec.unregistered);
-    let mut rot = eval::pairwise_rotation_errors(&rec.poses, truth);
+    let truth: Vec<lumen::math::WorldToCamera> = truth.iter().map(Into::into).collect();
+    let mut rot = eval::pairwise_rotation_errors(&rec.poses, &truth);
     rot.sort_by(f64::total_cmp);
-    let centres = eval::centre_errors(&rec.poses, truth).unwrap();
-    let extent = truth
-        .iter()
-        .flat_map(|a| truth.iter().map(move |b| (a.centre() - b.centre()).norm()))
-        .fold(0.0, f64::max);
+    let centres = eval::centre_errors(&rec.poses, &truth).unwrap();
+    let extent = eval::centre_spread(&truth);
     let worst_centre = centres.iter().cloned().fold(0.0, f64::max) / extent;
     eprintln!(
         "rotation median {:.4}°, max {:.4}°; centre max {:.4} % of {extent:.2}; rms {:.3} px",

@@ -13,4 +13,4 @@ pub mod ransac;
 pub mod stats;
 
 pub use camera::{CameraModel, Distortion, Intrinsics};
-pub use pose::Pose;
+pub use pose::{CameraToWorld, Pose, WorldToCamera};

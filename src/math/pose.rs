@@ -1,4 +1,10 @@
 //! Rigid transforms. `t_a_b` maps coordinates in frame b to frame a: p_a = R·p_b + t.
+//!
+//! A camera's pose carries its direction in its type, as rust-cv's `CameraToWorld` and
+//! `WorldToCamera` do: the renderer places a camera by `CameraToWorld` (`t_world_cam`), while
+//! calibration, structure from motion and the files they write (OpenCV's rvec/tvec, COLMAP's
+//! images.txt) hold `WorldToCamera`. `inverse` turns one into the other, so a pose is never
+//! read in the wrong direction. Both hand on `Pose`'s arithmetic.
 
 use glam::{DMat3, DVec3};
 use serde::{Deserialize, Serialize};
@@ -33,18 +39,6 @@ impl Pose {
         }
     }
 
-    /// Camera-to-world pose of a camera at `origin` looking at `target`, OpenCV axes
-    /// (x right, y down, z forward), with `up` pointing up in the image.
-    pub fn look_at(origin: DVec3, target: DVec3, up: DVec3) -> Option<Pose> {
-        let z = (target - origin).normalize_or_zero();
-        let x = z.cross(up).normalize_or_zero();
-        if z == DVec3::ZERO || x == DVec3::ZERO {
-            return None;
-        }
-        let y = z.cross(x);
-        Some(Pose { rotation: DMat3::from_cols(x, y, z), translation: origin })
-    }
-
     /// Rotation from a Rodrigues vector (axis × angle in radians), as OpenCV's `Rodrigues`.
     pub fn rotation_from_rvec(rvec: DVec3) -> DMat3 {
         let angle = rvec.length();
@@ -75,6 +69,61 @@ impl Pose {
         let d = r.transpose() * *r - DMat3::IDENTITY;
         let m = d.to_cols_array().iter().fold(0.0f64, |a, &b| a.max(b.abs()));
         m.max((r.determinant() - 1.0).abs())
+    }
+}
+
+/// A camera's frame mapped to the world's, p_world = R·p_cam + t: t is the camera centre and
+/// R's columns are the camera's axes (x right, y down, z forward) in the world.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct CameraToWorld(pub Pose);
+
+/// The world's frame mapped to a camera's, p_cam = R·p_world + t (OpenCV's rvec and tvec,
+/// COLMAP's images.txt).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct WorldToCamera(pub Pose);
+
+impl CameraToWorld {
+    /// A camera at `origin` looking at `target`, OpenCV axes (x right, y down, z forward),
+    /// with `up` pointing up in the image.
+    pub fn look_at(origin: DVec3, target: DVec3, up: DVec3) -> Option<CameraToWorld> {
+        let z = (target - origin).normalize_or_zero();
+        let x = z.cross(up).normalize_or_zero();
+        if z == DVec3::ZERO || x == DVec3::ZERO {
+            return None;
+        }
+        let y = z.cross(x);
+        Some(CameraToWorld(Pose { rotation: DMat3::from_cols(x, y, z), translation: origin }))
+    }
+
+    pub fn inverse(&self) -> WorldToCamera {
+        WorldToCamera(self.0.inverse())
+    }
+
+    /// The camera centre in the world.
+    pub fn centre(&self) -> DVec3 {
+        self.0.translation
+    }
+}
+
+impl WorldToCamera {
+    pub fn inverse(&self) -> CameraToWorld {
+        CameraToWorld(self.0.inverse())
+    }
+}
+
+impl std::ops::Deref for CameraToWorld {
+    type Target = Pose;
+    fn deref(&self) -> &Pose {
+        &self.0
+    }
+}
+
+impl std::ops::Deref for WorldToCamera {
+    type Target = Pose;
+    fn deref(&self) -> &Pose {
+        &self.0
     }
 }
 
@@ -112,7 +161,7 @@ mod tests {
 
     #[test]
     fn look_at_uses_opencv_axes() {
-        let p = Pose::look_at(DVec3::new(0.0, 0.0, 3.9), DVec3::ZERO, DVec3::Y).unwrap();
+        let p = CameraToWorld::look_at(DVec3::new(0.0, 0.0, 3.9), DVec3::ZERO, DVec3::Y).unwrap();
         assert!((p.rotation.x_axis - DVec3::X).length() < 1e-15);
         assert!((p.rotation.y_axis + DVec3::Y).length() < 1e-15);
         assert!((p.rotation.z_axis + DVec3::Z).length() < 1e-15);

@@ -36,6 +36,7 @@
 
 use super::reduced;
 use crate::error::Invalid;
+use crate::math::WorldToCamera;
 use nalgebra::{
     Matrix2, Matrix2x3, Matrix3, Matrix6, Matrix6x3, SMatrix, SVector, Vector2, Vector3, Vector6,
 };
@@ -45,7 +46,9 @@ use reduced::MAX_SHARED;
 /// Jacobians with respect to the shared intrinsics, in the order of `Refine::unknowns`.
 type SharedJ = SMatrix<f64, 2, MAX_SHARED>;
 
-/// A world-to-camera pose: X_c = R·X + t.
+/// A world-to-camera pose in the solver's own (nalgebra) form, X_c = R·X + t: the
+/// `math::WorldToCamera` the rest of lumen holds, converted where it enters and leaves the
+/// solver (`From` both ways, number for number).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Pose {
     pub r: Matrix3<f64>,
@@ -56,6 +59,23 @@ impl Pose {
     /// The camera centre in world coordinates, −Rᵀt.
     pub fn centre(&self) -> Vector3<f64> {
         -(self.r.transpose() * self.t)
+    }
+}
+
+impl From<&WorldToCamera> for Pose {
+    fn from(p: &WorldToCamera) -> Pose {
+        let (r, t) = (p.rotation, p.translation);
+        Pose { r: Matrix3::from_fn(|i, j| r.col(j)[i]), t: Vector3::new(t.x, t.y, t.z) }
+    }
+}
+
+impl From<&Pose> for WorldToCamera {
+    fn from(p: &Pose) -> WorldToCamera {
+        let col = |j: usize| glam::DVec3::new(p.r[(0, j)], p.r[(1, j)], p.r[(2, j)]);
+        WorldToCamera(crate::math::Pose {
+            rotation: glam::DMat3::from_cols(col(0), col(1), col(2)),
+            translation: glam::DVec3::new(p.t.x, p.t.y, p.t.z),
+        })
     }
 }
 

@@ -6,6 +6,7 @@
 //! quality evaluation aligns).
 
 use super::bundle::Pose;
+use crate::math::WorldToCamera;
 use nalgebra::{Matrix3, Vector3};
 
 /// s, R, t minimising Σ‖dst − (s R src + t)‖², or None for fewer than 3 points or a
@@ -39,7 +40,8 @@ pub fn similarity(src: &[Vector3<f64>], dst: &[Vector3<f64>]) -> Option<(f64, Ma
 
 /// Relative rotation errors (degrees) over every pair of images registered in `est` and
 /// known in `truth`.
-pub fn pairwise_rotation_errors(est: &[Option<Pose>], truth: &[Pose]) -> Vec<f64> {
+pub fn pairwise_rotation_errors(est: &[Option<Pose>], truth: &[WorldToCamera]) -> Vec<f64> {
+    let truth: Vec<Pose> = truth.iter().map(Pose::from).collect();
     let mut out = Vec::new();
     for i in 0..est.len() {
         for j in i + 1..est.len() {
@@ -56,13 +58,21 @@ pub fn pairwise_rotation_errors(est: &[Option<Pose>], truth: &[Pose]) -> Vec<f64
 
 /// Camera-centre errors after aligning the registered centres to the truth's by a
 /// similarity, in the truth's units; None when fewer than 3 are registered.
-pub fn centre_errors(est: &[Option<Pose>], truth: &[Pose]) -> Option<Vec<f64>> {
+pub fn centre_errors(est: &[Option<Pose>], truth: &[WorldToCamera]) -> Option<Vec<f64>> {
+    let truth: Vec<Pose> = truth.iter().map(Pose::from).collect();
     let pairs: Vec<(Vector3<f64>, Vector3<f64>)> =
         est.iter().zip(truth).filter_map(|(e, t)| e.map(|e| (e.centre(), t.centre()))).collect();
     let src: Vec<Vector3<f64>> = pairs.iter().map(|p| p.0).collect();
     let dst: Vec<Vector3<f64>> = pairs.iter().map(|p| p.1).collect();
     let (s, r, t) = similarity(&src, &dst)?;
     Some(src.iter().zip(&dst).map(|(a, b)| (s * r * a + t - b).norm()).collect())
+}
+
+/// The largest distance between two true camera centres: the scale centre errors are
+/// given relative to.
+pub fn centre_spread(truth: &[WorldToCamera]) -> f64 {
+    let truth: Vec<Pose> = truth.iter().map(Pose::from).collect();
+    truth.iter().flat_map(|a| truth.iter().map(move |b| (a.centre() - b.centre()).norm())).fold(0.0, f64::max)
 }
 
 #[cfg(test)]

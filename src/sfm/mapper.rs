@@ -859,7 +859,8 @@ mod tests {
             assert!(rec.rms_px < 0.42, "{}", rec.rms_px);
         }
         assert_eq!(local.points.len(), whole.points.len());
-        let whole_poses: Vec<Pose> = whole.poses.iter().flatten().copied().collect();
+        let whole_poses: Vec<crate::math::WorldToCamera> =
+            whole.poses.iter().flatten().map(Into::into).collect();
         let apart = crate::sfm::eval::pairwise_rotation_errors(&local.poses, &whole_poses);
         assert!(apart.iter().all(|&e| e < 1e-4), "{apart:?}");
         assert!(

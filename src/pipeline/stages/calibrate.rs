@@ -37,7 +37,7 @@ use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError, M
 use super::{run_case, CaseResult, Settings};
 use crate::calib::{self, detect::BoardSize};
 use crate::image::{filter::Grey, Image};
-use crate::math::{CameraModel, Pose};
+use crate::math::{CameraModel, Pose, WorldToCamera};
 use crate::pipeline::cache::scene_digest;
 use crate::pipeline::cache::Pass;
 use crate::pipeline::metric::{Better, Metric};
@@ -307,7 +307,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<calib::Input, T
             )));
         };
         // Camera from world: X_cam = R (X_world − origin) + t.
-        let cam_from_world = Pose { rotation: r, translation: t - r * origin };
+        let cam_from_world = WorldToCamera(Pose { rotation: r, translation: t - r * origin });
         scene.t_world_cam = cam_from_world.inverse();
         settings.seed = render::sampler::mix64(ctx.seed ^ (k as u64 + 1));
         let p = scene.t_world_cam;

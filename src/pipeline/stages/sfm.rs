@@ -33,13 +33,13 @@
 use super::Synthesis;
 use super::{apply_overrides, Context, Findings, SettingsKey, StageError, MAX_RENDERS};
 use super::{run_case, CaseResult, Settings};
-use crate::math::Pose as CameraPose;
+use crate::math::{CameraToWorld, WorldToCamera};
 use crate::pipeline::cache::{scene_digest, Pass};
 use crate::pipeline::metric::{Better, Metric};
 use crate::render;
-use crate::sfm::{self, bundle::Pose, eval};
+use crate::sfm::{self, eval};
 use glam::DVec3;
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::Matrix3;
 use serde::{Deserialize, Serialize};
 
 /// An `sfm` case on renders (module docs).
@@ -169,7 +169,7 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<Synthesis<sfm::Inpu
         let phi = (-90.0 + c.arc_deg * (f - 0.5)).to_radians();
         let r = c.radius - c.forward * f;
         let origin = DVec3::new(target.x + r * phi.cos(), target.y + r * phi.sin(), c.height);
-        let Some(world_from_cam) = CameraPose::look_at(origin, target, DVec3::Z) else {
+        let Some(world_from_cam) = CameraToWorld::look_at(origin, target, DVec3::Z) else {
             return Err(StageError::Config(format!(
                 "view {k}: the camera at {origin} cannot look at {target}"
             )));
@@ -212,11 +212,7 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<Synthesis<sfm::Inpu
         };
         images.push(photograph(name, rendered, &camera, given)?);
         recipes.push(recipe);
-        // World to camera: R = R_wcᵀ, t = −R C.
-        let r = world_from_cam.rotation.transpose();
-        let m = Matrix3::from_fn(|i, j| r.col(j)[i]);
-        let t = -(m * Vector3::new(origin.x, origin.y, origin.z));
-        poses.push(Pose { r: m, t });
+        poses.push(world_from_cam.inverse());
         bar.inc(1);
     }
     bar.finish_and_clear();
@@ -417,7 +413,7 @@ fn default_features() -> usize {
 /// The true world-to-camera pose of every image, in the input's order, and the true focal
 /// length (fx) and k1 where the solver starts from a guess (k1 of renders only).
 pub struct Truth {
-    poses: Vec<Pose>,
+    poses: Vec<WorldToCamera>,
     focal: Option<f64>,
     k1: Option<f64>,
 }
@@ -482,8 +478,11 @@ pub fn read(c: &Config, ctx: &Context) -> Result<(sfm::Input, Truth, Findings), 
         if camera.is_none() {
             focal = focal.or(Some(k[(0, 0)]));
         }
-        // World to camera: R_wc = Rᵀ, t = −Rᵀ C.
-        poses.push(Pose { r: r.transpose(), t: -(r.transpose() * centre) });
+        // Strecha's R holds the camera's axes in the world, C its centre.
+        let axis = |j: usize| DVec3::new(r[(0, j)], r[(1, j)], r[(2, j)]);
+        let rotation = glam::DMat3::from_cols(axis(0), axis(1), axis(2));
+        let translation = DVec3::new(centre.x, centre.y, centre.z);
+        poses.push(CameraToWorld(crate::math::Pose { rotation, translation }).inverse());
     }
     let camera_note = match &camera_path {
         Some(p) => format!("the camera {}", p.display()),
@@ -537,11 +536,7 @@ pub fn validate(out: &sfm::Output, truth: &Truth) -> Findings {
         none,
     ));
     m.push(Metric::maybe("rotation_err_max_deg", rot.last().copied(), "°", Better::Lower, none));
-    let extent = truth
-        .poses
-        .iter()
-        .flat_map(|a| truth.poses.iter().map(move |b| (a.centre() - b.centre()).norm()))
-        .fold(0.0, f64::max);
+    let extent = eval::centre_spread(&truth.poses);
     let centre = eval::centre_errors(&rec.poses, &truth.poses)
         .filter(|_| extent > 0.0)
         .map(|e| e.iter().cloned().fold(0.0, f64::max) / extent);

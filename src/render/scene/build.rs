@@ -7,7 +7,7 @@ use super::super::texture::{RoughnessSpec, Texture};
 use super::super::{bvh::Bvh, microfacet, obj, surfaces, Error};
 use super::file::*;
 use super::{bounding_sphere, light_cdf, light_of_prim, Light, Material, Scene, ThinLens};
-use crate::math::{CameraModel, Distortion, Intrinsics, Pose};
+use crate::math::{CameraModel, CameraToWorld, Distortion, Intrinsics, Pose};
 use glam::{DMat3, DVec3, Vec2, Vec3A};
 use std::path::Path;
 
@@ -464,7 +464,7 @@ fn build_lens(c: &CameraSpec, path: &Path) -> Result<Option<ThinLens>, Error> {
     }
 }
 
-fn build_camera(c: &CameraSpec, path: &Path) -> Result<(CameraModel, Pose), Error> {
+fn build_camera(c: &CameraSpec, path: &Path) -> Result<(CameraModel, CameraToWorld), Error> {
     let mut camera = match (c.fov_deg, c.fx, c.fy, c.cx, c.cy) {
         (Some(fov), None, None, None, None) => {
             if !(fov > 0.0 && fov < 180.0) {
@@ -496,7 +496,7 @@ fn build_camera(c: &CameraSpec, path: &Path) -> Result<(CameraModel, Pose), Erro
             let o = finite3(path, "camera.look_at.origin", l.origin)?;
             let t = finite3(path, "camera.look_at.target", l.target)?;
             let u = finite3(path, "camera.look_at.up", l.up)?;
-            Pose::look_at(o, t, u).ok_or_else(|| {
+            CameraToWorld::look_at(o, t, u).ok_or_else(|| {
                 field_err(
                     path,
                     "camera.look_at",
@@ -509,7 +509,7 @@ fn build_camera(c: &CameraSpec, path: &Path) -> Result<(CameraModel, Pose), Erro
                 return Err(field_err(path, "camera.t_world_cam.scale", "a camera pose is rigid: no scale"));
             }
             let (r, tr, _) = t.build(path, "camera.t_world_cam")?;
-            Pose { rotation: r, translation: tr }
+            CameraToWorld(Pose { rotation: r, translation: tr })
         }
         _ => return Err(field_err(path, "camera", "give exactly one of `look_at` or `t_world_cam`")),
     };

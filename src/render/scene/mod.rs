@@ -22,7 +22,7 @@ use super::bvh::Bvh;
 use super::geometry::{Prim, PrimInfo};
 use super::texture::Texture;
 use super::{bsdf::Bsdf, Error};
-use crate::math::{CameraModel, Pose};
+use crate::math::{CameraModel, CameraToWorld};
 use glam::{DVec2, DVec3, Vec3A};
 use std::path::Path;
 
@@ -82,7 +82,7 @@ pub enum Light {
 
 pub struct Scene {
     pub camera: CameraModel,
-    pub t_world_cam: Pose,
+    pub t_world_cam: CameraToWorld,
     /// Depth of field; `None` for a pinhole (truth images always come from the pinhole).
     pub lens: Option<ThinLens>,
     pub render: RenderSpec,
