@@ -7,7 +7,7 @@
 //! error-against-time plots and tables, then each case's metrics in full (as `report.md`).
 
 use super::names::file_stem;
-use super::report::{sweep_table, Report, StageReport};
+use super::report::{case_section, sweep_table, Report, StageReport};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -58,9 +58,10 @@ pub fn pages(reports: &[(PathBuf, Report)]) -> Vec<(PathBuf, String)> {
                 sweep_table(&mut s, &sweep);
                 plots.push((svg, super::report::plot_svg(group, &sweep)));
             }
+            let now_met = r.misses_now_met();
             for st in &mine {
                 let _ = writeln!(s, "### {}\n", st.case);
-                r.case_section(&mut s, st);
+                case_section(&mut s, st, &now_met);
                 let _ = writeln!(s);
             }
         }
@@ -89,11 +90,7 @@ fn summary(s: &mut String, cases: &[&StageReport]) {
         writeln!(s, "| case | outcome | error shown | value | bound | verdict | solve (s) | render (s) |");
     let _ = writeln!(s, "|---|---|---|---:|---:|---|---:|---:|");
     for st in cases {
-        let outcome = match &st.skipped {
-            Some(why) => format!("skipped ({why})"),
-            None if st.outcome.declared == st.outcome.actual => st.outcome.actual.clone(),
-            None => format!("**{}** (declared {})", st.outcome.actual, st.outcome.declared),
-        };
+        let outcome = st.outcome_text();
         let m = st.metrics.iter().find(|m| m.name == st.plot_metric);
         let (value, bound, verdict) = match m {
             Some(m) => (
@@ -130,7 +127,7 @@ pub fn write(report_paths: &[PathBuf], dir: &Path) -> Result<Vec<PathBuf>, super
     for p in report_paths {
         let bad = |message: String| super::Error::Report { path: p.clone(), message };
         let text = std::fs::read_to_string(p)
-            .map_err(|e| super::Error::Write { path: p.clone(), message: format!("cannot read: {e}") })?;
+            .map_err(|e| super::Error::ReadReport { path: p.clone(), message: e.to_string() })?;
         let r: Report =
             serde_json::from_str(&text).map_err(|e| bad(format!("not a lumen report.json: {e}")))?;
         if r.fragment.is_some() {

@@ -40,9 +40,12 @@ pub enum Error {
     Write { path: PathBuf, message: String },
     #[error("cannot merge: {path}: {message}")]
     Merge { path: PathBuf, message: String },
-    /// A report that cannot be read, or is not one `lumen report` can use.
+    /// A report that is not one `lumen report` can use.
     #[error("{path}: {message}")]
     Report { path: PathBuf, message: String },
+    /// A report that cannot be read.
+    #[error("cannot read {path}: {message}")]
+    ReadReport { path: PathBuf, message: String },
 }
 
 impl Error {
@@ -54,7 +57,7 @@ impl Error {
             Error::Bounds { .. } | Error::Threads(_) | Error::Merge { .. } | Error::Report { .. } => {
                 Fault::BadInput
             }
-            Error::Pool(..) | Error::Write { .. } => Fault::Io,
+            Error::Pool(..) | Error::Write { .. } | Error::ReadReport { .. } => Fault::Io,
         }
     }
 }

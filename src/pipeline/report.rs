@@ -79,6 +79,16 @@ pub struct StageReport {
 }
 
 impl StageReport {
+    /// The outcome as the report's tables show it: skipped (and why), the outcome when it is
+    /// the declared one, or the outcome in bold beside the declared one.
+    pub fn outcome_text(&self) -> String {
+        match &self.skipped {
+            Some(why) => format!("skipped ({why})"),
+            None if self.outcome.declared == self.outcome.actual => self.outcome.actual.clone(),
+            None => format!("**{}** (declared {})", self.outcome.actual, self.outcome.declared),
+        }
+    }
+
     /// Whether the case failed: an outcome other than declared, or a metric that missed its
     /// bound without a declared miss. (A declared miss now met is judged over its entry's
     /// cases: `Report::misses_now_met`.)
@@ -250,9 +260,7 @@ impl Report {
             "| stage | case | outcome | render (s) | solve (s) | renders | metrics met |\n|---|---|---|---:|---:|---|---|"
         );
         let now_met_all = self.misses_now_met();
-        let whole_entry_met = |st: &StageReport, name: &str| {
-            now_met_all.iter().any(|(a, b, c)| *a == st.stage && *b == st.group && c == name)
-        };
+        let whole_entry_met = |st: &StageReport, name: &str| entry_meets(&now_met_all, st, name);
         for st in &self.stages {
             let bounded = st.metrics.iter().filter(|m| m.bound.is_some() && m.skipped.is_none()).count();
             let met = st.metrics.iter().filter(|m| m.pass == Some(true)).count();
@@ -270,14 +278,10 @@ impl Report {
             if skipped > 0 {
                 met_text += &format!(", {skipped} skipped");
             }
-            let outcome = if let Some(why) = &st.skipped {
+            if st.skipped.is_some() {
                 met_text = "—".into();
-                format!("skipped ({why})")
-            } else if st.outcome.declared == st.outcome.actual {
-                st.outcome.actual.clone()
-            } else {
-                format!("**{}** (declared {})", st.outcome.actual, st.outcome.declared)
-            };
+            }
+            let outcome = st.outcome_text();
             let t = |k: &str| st.timings_s.get(k).copied().unwrap_or(0.0);
             let _ = writeln!(
                 s,
@@ -301,60 +305,12 @@ impl Report {
         }
         for st in &self.stages {
             let _ = writeln!(s, "\n## {} — {}\n", st.stage, st.case);
-            self.case_section(&mut s, st);
+            case_section(&mut s, st, &now_met_all);
         }
         for w in &self.warnings {
             let _ = writeln!(s, "\nWarning: {w}");
         }
         s
-    }
-
-    /// A case's error or skip, its metrics with bounds and verdicts, timings and notes.
-    pub fn case_section(&self, s: &mut String, st: &StageReport) {
-        let now_met_all = self.misses_now_met();
-        let whole_entry_met = |st: &StageReport, name: &str| {
-            now_met_all.iter().any(|(a, b, c)| *a == st.stage && *b == st.group && c == name)
-        };
-        if let Some(e) = &st.error {
-            let _ = writeln!(s, "Ended with a {} error: {}\n", e.kind, e.message);
-        }
-        if let Some(why) = &st.skipped {
-            let _ = writeln!(s, "Skipped: {why}.\n");
-        }
-        if !st.metrics.is_empty() {
-            let _ = writeln!(s, "| metric | value | unit | bound | verdict |\n|---|---:|---|---:|---|");
-        }
-        for m in &st.metrics {
-            let bound = m.bound.map_or("—".into(), |b| b.text());
-            let whole = whole_entry_met(st, &m.name);
-            let verdict = match (m.pass, &m.expected_miss, &m.skipped) {
-                (_, _, Some(why)) => format!("skipped: {why}"),
-                (Some(true), Some(why), _) if whole => {
-                    format!("**DECLARED MISS NOW MET** (declared: {why})")
-                }
-                (Some(true), Some(why), _) => {
-                    format!("pass (the entry declares a miss some case still has: {why})")
-                }
-                (Some(true), None, _) => "pass".to_string(),
-                (Some(false), Some(why), _) => format!("expected miss: {why}"),
-                (Some(false), None, _) => "**MISS**".to_string(),
-                (None, _, _) => "—".to_string(),
-            };
-            let _ = writeln!(s, "| {} | {} | {} | {bound} | {verdict} |", m.name, value_text(m), m.unit);
-        }
-        let times: Vec<String> = st.timings_s.iter().map(|(k, v)| format!("{k} {v:.3} s")).collect();
-        let _ = writeln!(
-            s,
-            "\nTimings: {}. Renders: {} rendered ({:.2} s), {} reused from the cache ({:.2} s).",
-            times.join(", "),
-            st.renders.rendered,
-            st.renders.rendered_s,
-            st.renders.reused,
-            st.renders.reused_s
-        );
-        for n in &st.notes {
-            let _ = writeln!(s, "\n- {n}");
-        }
     }
 
     /// Writes `report.json`, `report.md`, the sweeps' plots and the files cases asked to keep
@@ -408,6 +364,58 @@ pub struct Fragment {
     pub indices: Vec<usize>,
     /// Files the cases kept, relative to the fragment's folder.
     pub kept: Vec<PathBuf>,
+}
+
+/// A case's error or skip, its metrics with bounds and verdicts, timings and notes.
+/// `now_met` is `Report::misses_now_met`, computed once for the whole report.
+pub fn case_section(s: &mut String, st: &StageReport, now_met: &[(String, String, String)]) {
+    let whole_entry_met = |st: &StageReport, name: &str| entry_meets(now_met, st, name);
+    if let Some(e) = &st.error {
+        let _ = writeln!(s, "Ended with a {} error: {}\n", e.kind, e.message);
+    }
+    if let Some(why) = &st.skipped {
+        let _ = writeln!(s, "Skipped: {why}.\n");
+    }
+    if !st.metrics.is_empty() {
+        let _ = writeln!(s, "| metric | value | unit | bound | verdict |\n|---|---:|---|---:|---|");
+    }
+    for m in &st.metrics {
+        let bound = m.bound.map_or("—".into(), |b| b.text());
+        let whole = whole_entry_met(st, &m.name);
+        let verdict = match (m.pass, &m.expected_miss, &m.skipped) {
+            (_, _, Some(why)) => format!("skipped: {why}"),
+            (Some(true), Some(why), _) if whole => {
+                format!("**DECLARED MISS NOW MET** (declared: {why})")
+            }
+            (Some(true), Some(why), _) => {
+                format!("pass (the entry declares a miss some case still has: {why})")
+            }
+            (Some(true), None, _) => "pass".to_string(),
+            (Some(false), Some(why), _) => format!("expected miss: {why}"),
+            (Some(false), None, _) => "**MISS**".to_string(),
+            (None, _, _) => "—".to_string(),
+        };
+        let _ = writeln!(s, "| {} | {} | {} | {bound} | {verdict} |", m.name, value_text(m), m.unit);
+    }
+    let times: Vec<String> = st.timings_s.iter().map(|(k, v)| format!("{k} {v:.3} s")).collect();
+    let _ = writeln!(
+        s,
+        "\nTimings: {}. Renders: {} rendered ({:.2} s), {} reused from the cache ({:.2} s).",
+        times.join(", "),
+        st.renders.rendered,
+        st.renders.rendered_s,
+        st.renders.reused,
+        st.renders.reused_s
+    );
+    for n in &st.notes {
+        let _ = writeln!(s, "\n- {n}");
+    }
+}
+
+/// Whether the declared miss of `name` in `st`'s entry is met by every case of the entry
+/// (`now_met` as `Report::misses_now_met` gives it).
+fn entry_meets(now_met: &[(String, String, String)], st: &StageReport, name: &str) -> bool {
+    now_met.iter().any(|(a, b, c)| *a == st.stage && *b == st.group && c == name)
 }
 
 /// A sweep's table: each case's solve and render time, its plotted error, and whether it is
