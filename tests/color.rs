@@ -4,6 +4,7 @@
 mod common;
 
 use common::lumen;
+use common::run::read_json;
 
 use lumen::color::{self, spectra, Model};
 use std::path::Path;
@@ -124,8 +125,7 @@ fn cli_fit_on_the_rendered_chart_gives_the_pipelines_numbers() {
     let (code, err) =
         lumen(&["run", d.join("p.toml").to_str().unwrap(), "--out", out.to_str().unwrap(), "--no-cache"]);
     assert_eq!(code, 0, "{err}");
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let report: serde_json::Value = read_json(&out.join("report.json"));
     let stage = &report["stages"][0];
     let metric = |name: &str| {
         stage["metrics"].as_array().unwrap().iter().find(|m| m["name"] == name).unwrap()["value"]

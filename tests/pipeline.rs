@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::run::{case, numbers, run_with, small_pipeline};
+use common::run::{case, numbers, read_json, run_with, small_pipeline};
 use std::process::Command;
 
 fn run(pipeline: &str, out: &std::path::Path) -> (i32, String) {
@@ -37,8 +37,7 @@ fn report_shape_and_determinism() {
     let out = dir.path().join("out");
     let (code, err) = run(&furnace(0.2, ""), &out);
     assert_eq!(code, 0, "{err}");
-    let j: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let j: serde_json::Value = read_json(&out.join("report.json"));
     assert_eq!(j["pipeline"], "t");
     assert_eq!(j["seed"], 7);
     assert_eq!(j["passed"], true);
@@ -58,8 +57,7 @@ fn report_shape_and_determinism() {
     // The same file and seed give the same numbers.
     let (code, _) = run(&furnace(0.2, ""), &out);
     assert_eq!(code, 0);
-    let j2: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let j2: serde_json::Value = read_json(&out.join("report.json"));
     let m2 = j2["stages"][0]["metrics"]
         .as_array()
         .unwrap()
@@ -79,8 +77,7 @@ fn report_command_writes_results_pages() {
     let out = dir.path().join("out");
     let (code, err) = run(&furnace(0.2, ""), &out);
     assert_eq!(code, 0, "{err}");
-    let j: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let j: serde_json::Value = read_json(&out.join("report.json"));
     let docs = dir.path().join("docs");
     let report = out.join("report.json");
     let (code, err) = common::lumen(&["report", report.to_str().unwrap(), "--docs", docs.to_str().unwrap()]);
@@ -185,8 +182,7 @@ fn missing_reference_is_skipped_with_a_note() {
         md.contains("| mean_rel_err_r | — |  | ≤ 0.01 | skipped: /nonexistent/ref.exr not found |"),
         "{md}"
     );
-    let j: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let j: serde_json::Value = read_json(&out.join("report.json"));
     let m = j["stages"][0]["metrics"]
         .as_array()
         .unwrap()
@@ -215,8 +211,7 @@ fn absent_real_data_is_skipped_and_dataset_keys_are_checked() {
     {
         assert!(err.contains(&format!("skipped: {path} is absent")), "{path}: {err}");
     }
-    let j: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let j: serde_json::Value = read_json(&out.join("report.json"));
     assert_eq!(j["passed"], true, "{j}");
     for st in j["stages"].as_array().unwrap() {
         assert!(st["skipped"].as_str().is_some_and(|s| s.contains("is absent")), "{st}");
@@ -297,8 +292,7 @@ fn hdr_case_on_files_checks_the_stack_against_itself() {
     let out = d.join("out");
     let (code, err) = run(&text, &out);
     assert_eq!(code, 0, "{err}");
-    let j: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let j: serde_json::Value = read_json(&out.join("report.json"));
     let metric = |case: usize, name: &str| {
         j["stages"][case]["metrics"]
             .as_array()
@@ -429,8 +423,7 @@ fn photometric_stage() {
     let (code, err) =
         run(&stage("lights = 12\nbounds = { mean_angular_error_deg = 0.2, masked_pixels = 0 }\n"), &out);
     assert_eq!(code, 0, "{err}");
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let report: serde_json::Value = read_json(&out.join("report.json"));
     let metrics = report["stages"][0]["metrics"].as_array().unwrap();
     let err_deg =
         metrics.iter().find(|m| m["name"] == "mean_angular_error_deg").unwrap()["value"].as_f64().unwrap();
@@ -564,7 +557,7 @@ fn cli_on_the_pipelines_inputs_gives_its_numbers() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let cal: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&cam).unwrap()).unwrap();
+    let cal: serde_json::Value = read_json(&cam);
     assert_eq!(cal["views"].as_array().unwrap().len(), 5);
     let (cli, pipe) = (cal["rms_px"].as_f64().unwrap(), metric("board", "rms_px"));
     assert!(cli == pipe, "lumen calibrate RMS {cli} px, the pipeline's {pipe} px");
@@ -575,8 +568,7 @@ fn cli_on_the_pipelines_inputs_gives_its_numbers() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(ps.join("summary.json")).unwrap()).unwrap();
+    let s: serde_json::Value = read_json(&ps.join("summary.json"));
     let (cli, pipe) =
         (s["mean_angular_error_deg"].as_f64().unwrap(), metric("sphere", "mean_angular_error_deg"));
     // Light directions pass through text and are normalised again on reading: equal to

@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::run::{case, numbers, run_with, small_pipeline};
+use common::run::{case, numbers, read_json, run_with, small_pipeline};
 use std::process::Command;
 
 /// The small pipeline run as one process, and as 3 shards (each writing its fragment) joined by
@@ -51,8 +51,7 @@ fn shards_merge_into_the_one_process_report() {
     shard(3, &text);
     let (code, err) = merge();
     assert_eq!(code, 0, "{err}");
-    let merged: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let merged: serde_json::Value = read_json(&out.join("report.json"));
     assert_eq!(numbers(&one), numbers(&merged));
     let order = |r: &serde_json::Value| -> Vec<serde_json::Value> {
         r["stages"].as_array().unwrap().iter().map(|s| s["case"].clone()).collect()
@@ -143,8 +142,7 @@ fn slurm_scripts_run_the_shards_and_the_merge() {
     }
     let o = Command::new("bash").arg(out.join("slurm/merge.sbatch")).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let merged: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let merged: serde_json::Value = read_json(&out.join("report.json"));
     assert_eq!(numbers(&one), numbers(&merged));
     assert_eq!(merged["threads"], 1);
     assert_eq!(rendered(&merged), 0, "the render array made every render");
@@ -204,7 +202,7 @@ fn render_shares_split_the_renders_inside_cases() {
         assert_eq!(code, 0, "{err}");
         assert!(frag.is_null(), "a shard writes only its fragment");
         let frag = dir.path().join(format!("sharded/shards/{k}-of-3/report.json"));
-        let frag: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(frag).unwrap()).unwrap();
+        let frag: serde_json::Value = read_json(&frag);
         assert_eq!(rendered(&frag), 0, "shard {k}");
     }
     // --renders-only needs a shard and a cache.
@@ -277,9 +275,7 @@ fn shares_split_structure_from_motion_inside_a_case() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let merged: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("sharded/report.json")).unwrap())
-            .unwrap();
+    let merged: serde_json::Value = read_json(&dir.path().join("sharded/report.json"));
     assert_eq!(numbers(&one), numbers(&merged));
     assert_eq!(case(&merged, "courtyard")["metrics"][0]["value"], 10.0);
     let notes = case(&merged, "courtyard")["notes"].to_string();
@@ -344,9 +340,7 @@ fn shares_split_the_photographs_features_and_pairs() {
     }
     let (code, err) = common::lumen(&["merge", dir.path().join("sharded").to_str().unwrap()]);
     assert_eq!(code, 0, "{err}");
-    let merged: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("sharded/report.json")).unwrap())
-            .unwrap();
+    let merged: serde_json::Value = read_json(&dir.path().join("sharded/report.json"));
     assert_eq!(numbers(&one), numbers(&merged));
     let notes = case(&merged, "herz-jesu-4")["notes"].to_string();
     assert!(
@@ -390,8 +384,7 @@ fn live_slurm_runs_the_array_and_the_merge() {
             assert!(out.join(format!("slurm/{log}-{task}.log")).is_file(), "no {log} log of task {task}");
         }
     }
-    let merged: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let merged: serde_json::Value = read_json(&out.join("report.json"));
     assert_eq!(numbers(&one), numbers(&merged));
     assert_eq!(merged["threads"], 1);
     assert_eq!(rendered(&merged), 0, "the render array made every render");

@@ -25,6 +25,12 @@ pub fn run_with(
     (o.status.code().unwrap_or(-1), err, report)
 }
 
+/// The JSON file at PATH (a report, a shard's fragment, a summary), parsed.
+pub fn read_json(path: &std::path::Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
 /// Every case's metrics that do not depend on the machine's speed, by case and name.
 pub fn numbers(report: &serde_json::Value) -> Vec<(String, String, serde_json::Value)> {
     let mut v = Vec::new();
