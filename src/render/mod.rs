@@ -40,6 +40,12 @@ pub enum Error {
     Parse { path: PathBuf, message: String },
     #[error("{path}: `{field}` {message}")]
     Invalid { path: PathBuf, field: String, message: String },
+    /// A Mitsuba scene element that is malformed (`at` names the element, file and line).
+    #[error("{at}: {message}")]
+    Mitsuba { at: String, message: String },
+    /// A Mitsuba scene element lumen does not support; the message says what it supports.
+    #[error("{at}: {message}")]
+    MitsubaUnsupported { at: String, message: String },
     #[error(transparent)]
     Obj(#[from] obj::ObjError),
     #[error("{path}: the mesh has no faces")]
@@ -58,7 +64,9 @@ impl Error {
             Error::Io { .. } => Fault::Io,
             Error::Obj(e) => e.fault(),
             Error::Image(e) => e.fault(),
+            Error::MitsubaUnsupported { .. } => Fault::Unsupported,
             Error::Parse { .. }
+            | Error::Mitsuba { .. }
             | Error::Invalid { .. }
             | Error::EmptyMesh { .. }
             | Error::OutOfMemory { .. } => Fault::BadInput,

@@ -3,14 +3,14 @@
 
 use super::Error;
 use glam::{Vec2, Vec3A};
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// A colour: constant `[r, g, b]`, an image `{ texture = "file.png" }` (8-bit files are
 /// sRGB-decoded, 16-bit and EXR taken as linear), a procedural checkerboard
 /// `{ checker = { squares = [nu, nv], even = [..], odd = [..] } }` over texture coordinates,
 /// or coloured noise `{ noise = { seed = 1, low = [..], high = [..] } }` (`NoiseSpec`).
-#[derive(Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(untagged)]
 pub enum TextureSpec {
     Constant([f64; 3]),
@@ -25,7 +25,7 @@ pub enum TextureSpec {
 /// values between `low` and `high` per channel. Blobs of every size with no repeat: what
 /// feature detectors need, as a photographed wall or ground has it (a checkerboard's corners
 /// all look alike).
-#[derive(Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct NoiseSpec {
     pub seed: u64,
@@ -50,7 +50,7 @@ fn default_noise_size() -> u32 {
 /// as data: 8-bit values are v/255 with no sRGB decoding; values must lie in [0, 1], and those
 /// below 0.001 are raised to it), or a
 /// checkerboard `{ checker = { squares = [nu, nv], even = a, odd = b } }`.
-#[derive(Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(untagged)]
 pub enum RoughnessSpec {
     Constant(f64),
@@ -58,7 +58,7 @@ pub enum RoughnessSpec {
     Checker { checker: RoughnessCheckerSpec },
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct RoughnessCheckerSpec {
     pub squares: [u32; 2],
@@ -66,7 +66,7 @@ pub struct RoughnessCheckerSpec {
     pub odd: f64,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct CheckerSpec {
     /// Number of squares along u and v over the [0, 1]² texture domain.

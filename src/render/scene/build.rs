@@ -42,9 +42,77 @@ fn non_negative3(path: &Path, field: &str, v: [f64; 3]) -> Result<Vec3A, Error> 
     Ok(d.as_vec3().into())
 }
 
+/// A shape's transform as built: R·(s ⊙ p) + t, or a general affine matrix.
+struct Placement {
+    rotation: DMat3,
+    translation: DVec3,
+    scale: DVec3,
+    matrix: Option<glam::DAffine3>,
+}
+
+impl Placement {
+    fn apply(&self, p: DVec3) -> DVec3 {
+        match &self.matrix {
+            Some(m) => m.transform_point3(p),
+            None => self.rotation * (self.scale * p) + self.translation,
+        }
+    }
+
+    /// Whether the transform mirrors (and so flips a mesh's winding).
+    fn mirrors(&self) -> bool {
+        match &self.matrix {
+            Some(m) => m.matrix3.determinant() < 0.0,
+            None => self.scale.x * self.scale.y * self.scale.z < 0.0,
+        }
+    }
+}
+
 impl TransformSpec {
     /// Builds the transform, checking every number.
-    fn build(&self, path: &Path, field: &str) -> Result<(DMat3, DVec3, DVec3), Error> {
+    fn build(&self, path: &Path, field: &str) -> Result<Placement, Error> {
+        if let Some(rows) = &self.matrix {
+            if self.rotation.is_some()
+                || self.rvec.is_some()
+                || self.scale.is_some()
+                || self.translation != [0.0; 3]
+            {
+                return Err(field_err(
+                    path,
+                    field,
+                    "give either `matrix` or `rotation`/`rvec`/`scale`/`translation`, not both",
+                ));
+            }
+            if !rows.iter().flatten().all(|&v| representable(v)) {
+                return Err(field_err(
+                    path,
+                    &format!("{field}.matrix"),
+                    format!("must be finite numbers within ±{MAX_SCENE_VALUE:e}"),
+                ));
+            }
+            if rows[3] != [0.0, 0.0, 0.0, 1.0] {
+                return Err(field_err(
+                    path,
+                    &format!("{field}.matrix"),
+                    format!("last row {:?}: expected [0, 0, 0, 1] (an affine transform)", rows[3]),
+                ));
+            }
+            let m = glam::DMat4::from_cols_array_2d(rows).transpose();
+            let a = glam::DAffine3::from_mat4(m);
+            let det = a.matrix3.determinant();
+            if !(det.is_finite() && det.abs() > 1e-300) {
+                return Err(field_err(
+                    path,
+                    &format!("{field}.matrix"),
+                    "is singular: it flattens the shape",
+                ));
+            }
+            return Ok(Placement {
+                rotation: DMat3::IDENTITY,
+                translation: DVec3::ZERO,
+                scale: DVec3::ONE,
+                matrix: Some(a),
+            });
+        }
         let rotation = match (&self.rotation, &self.rvec) {
             (Some(_), Some(_)) => {
                 return Err(field_err(path, field, "give either `rotation` or `rvec`, not both"))
@@ -83,8 +151,21 @@ impl TransformSpec {
                 format!("{scale} must be finite, within ±{MAX_SCENE_VALUE:e}, and non-zero"),
             ));
         }
-        Ok((rotation, translation, scale))
+        Ok(Placement { rotation, translation, scale, matrix: None })
     }
+}
+
+/// The faces of the cube [−1, 1]³ as (corner, edge u, edge v), u × v pointing out.
+fn cube_faces() -> [[DVec3; 3]; 6] {
+    let d = |x: f64, y: f64, z: f64| DVec3::new(x, y, z);
+    [
+        [d(1.0, -1.0, -1.0), d(0.0, 2.0, 0.0), d(0.0, 0.0, 2.0)],
+        [d(-1.0, -1.0, -1.0), d(0.0, 0.0, 2.0), d(0.0, 2.0, 0.0)],
+        [d(-1.0, 1.0, -1.0), d(0.0, 0.0, 2.0), d(2.0, 0.0, 0.0)],
+        [d(-1.0, -1.0, -1.0), d(2.0, 0.0, 0.0), d(0.0, 0.0, 2.0)],
+        [d(-1.0, -1.0, 1.0), d(2.0, 0.0, 0.0), d(0.0, 2.0, 0.0)],
+        [d(-1.0, -1.0, -1.0), d(0.0, 2.0, 0.0), d(2.0, 0.0, 0.0)],
+    ]
 }
 
 /// Builds a scene from its parsed file; `path` resolves relative paths and names errors.
@@ -138,7 +219,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                 if mesh.triangles.is_empty() {
                     return Err(Error::EmptyMesh { path: mesh_path });
                 }
-                let (r, t, s) = transform.build(path, &format!("{field}.transform"))?;
+                let place = transform.build(path, &format!("{field}.transform"))?;
                 let default = material
                     .as_deref()
                     .map(|m| material_index(m, &format!("{field}.material")))
@@ -156,9 +237,9 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                 let first_id = object_names.len() as u32;
                 object_names.extend(mesh.objects.iter().cloned());
                 let positions: Vec<Vec3A> =
-                    mesh.positions.iter().map(|&p| (r * (s * p) + t).as_vec3().into()).collect();
+                    mesh.positions.iter().map(|&p| place.apply(p).as_vec3().into()).collect();
                 // A negative determinant mirrors the mesh and so flips its winding.
-                let mirrored = s.x * s.y * s.z < 0.0;
+                let mirrored = place.mirrors();
                 for tri in &mesh.triangles {
                     let obj_name = &mesh.objects[tri.object as usize];
                     let mtl = if let Some(m) = object_materials.get(obj_name) {
@@ -253,11 +334,35 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                     });
                 }
             }
+            ShapeSpec::Cube { material, transform, reverse_orientation } => {
+                let place = transform.build(path, &format!("{field}.transform"))?;
+                let mtl = material_index(material, &format!("{field}.material"))?;
+                object_names.push(format!("cube{i}"));
+                let id = object_names.len() as u32 - 1;
+                let reverse = *reverse_orientation ^ place.mirrors();
+                for [o, u, v] in cube_faces() {
+                    let [o, u, v] = [o, o + u, o + v].map(|p| Vec3A::from(place.apply(p).as_vec3()));
+                    let (u, v) = (u - o, v - o);
+                    for (a, e1, e2, uv) in [
+                        (o, u, u + v, [Vec2::ZERO, Vec2::X, Vec2::ONE]),
+                        (o, u + v, v, [Vec2::ZERO, Vec2::ONE, Vec2::Y]),
+                    ] {
+                        prims.push(Prim::Triangle { v0: a, e1, e2 });
+                        info.push(PrimInfo {
+                            material: mtl,
+                            object_id: id,
+                            reverse,
+                            uv,
+                            normal: Vec3A::ZERO,
+                        });
+                    }
+                }
+            }
             ShapeSpec::Torus { .. } | ShapeSpec::Blob { .. } | ShapeSpec::Relief { .. } => {
                 let Some((surface, material, transform)) = generated_surface(shape, path, &field)? else {
                     continue;
                 };
-                let (r, t, s) = transform.build(path, &format!("{field}.transform"))?;
+                let place = transform.build(path, &format!("{field}.transform"))?;
                 let mtl = material_index(material, &format!("{field}.material"))?;
                 let kind = match shape {
                     ShapeSpec::Torus { .. } => "torus",
@@ -267,8 +372,8 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                 object_names.push(format!("{kind}{i}"));
                 let id = object_names.len() as u32 - 1;
                 let positions: Vec<Vec3A> =
-                    surface.positions.iter().map(|&p| (r * (s * p) + t).as_vec3().into()).collect();
-                let mirrored = s.x * s.y * s.z < 0.0;
+                    surface.positions.iter().map(|&p| place.apply(p).as_vec3().into()).collect();
+                let mirrored = place.mirrors();
                 for tri in &surface.triangles {
                     let [a, b, c] = tri.map(|k| positions[k as usize]);
                     let (e1, e2) = (b - a, c - a);
@@ -505,11 +610,15 @@ fn build_camera(c: &CameraSpec, path: &Path) -> Result<(CameraModel, CameraToWor
             })?
         }
         (None, Some(t)) => {
-            if t.scale.is_some() {
-                return Err(field_err(path, "camera.t_world_cam.scale", "a camera pose is rigid: no scale"));
+            if t.scale.is_some() || t.matrix.is_some() {
+                return Err(field_err(
+                    path,
+                    "camera.t_world_cam",
+                    "a camera pose is rigid: `rotation` or `rvec` and `translation`, no `scale` or `matrix`",
+                ));
             }
-            let (r, tr, _) = t.build(path, "camera.t_world_cam")?;
-            CameraToWorld(Pose { rotation: r, translation: tr })
+            let p = t.build(path, "camera.t_world_cam")?;
+            CameraToWorld(Pose { rotation: p.rotation, translation: p.translation })
         }
         _ => return Err(field_err(path, "camera", "give exactly one of `look_at` or `t_world_cam`")),
     };
@@ -530,8 +639,10 @@ fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error>
     let complex_index = |eta: [f64; 3], k: [f64; 3]| {
         let eta = non_negative3(path, &format!("{field}.eta"), eta)?;
         let k = non_negative3(path, &format!("{field}.k"), k)?;
-        if eta.min_element() <= 0.0 {
-            return Err(field_err(path, &format!("{field}.eta"), "must be positive"));
+        // η = 0 with k > 0 is a perfect conductor (F = 1; Mitsuba's `material = "none"` is
+        // η = 0, k = 1); η = k = 0 has no meaning.
+        if (0..3).any(|c| eta[c] == 0.0 && k[c] == 0.0) {
+            return Err(field_err(path, &format!("{field}.eta"), "must be positive where k is 0"));
         }
         Ok((eta, k))
     };

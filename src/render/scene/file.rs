@@ -3,13 +3,13 @@
 //! `Scene`, checking every value.
 
 use super::super::texture::{RoughnessSpec, TextureSpec};
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 // ---------------------------------------------------------------------------------------------
 // File format
 // ---------------------------------------------------------------------------------------------
 
-#[derive(Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct SceneFile {
     pub camera: CameraSpec,
@@ -27,7 +27,7 @@ pub struct SceneFile {
 /// Camera: size, then either `fov_deg` (on the shorter side, centred principal point) or
 /// `fx, fy, cx, cy` (OpenCV pixels), optional `distortion = [k1, k2, p1, p2, k3]`, and a pose:
 /// `look_at = { origin, target, up }` or `t_world_cam = { rotation | rvec, translation }`.
-#[derive(Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct CameraSpec {
     pub width: u32,
@@ -47,7 +47,7 @@ pub struct CameraSpec {
     pub focus_distance: Option<f64>,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct LookAt {
     pub origin: [f64; 3],
@@ -56,10 +56,14 @@ pub struct LookAt {
 }
 
 /// A rigid (plus optional scale, for shapes) transform: p' = R·(s ⊙ p) + t. `rotation` is a
-/// 3×3 matrix given as rows; `rvec` a Rodrigues vector (radians), as OpenCV's.
-#[derive(Debug, Default, Deserialize)]
+/// 3×3 matrix given as rows; `rvec` a Rodrigues vector (radians), as OpenCV's. Shapes also
+/// take any affine `matrix` (4×4, rows, last row [0, 0, 0, 1]: p' = M·[p, 1]) instead, as
+/// Mitsuba's `to_world` holds it.
+#[derive(Clone, Debug, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct TransformSpec {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub matrix: Option<[[f64; 4]; 4]>,
     pub rotation: Option<[[f64; 3]; 3]>,
     pub rvec: Option<[f64; 3]>,
     #[serde(default)]
@@ -67,7 +71,7 @@ pub struct TransformSpec {
     pub scale: Option<Scale>,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(untagged)]
 pub enum Scale {
     Uniform(f64),
@@ -75,7 +79,7 @@ pub enum Scale {
 }
 
 /// Render settings a scene may carry; the CLI and pipeline files override them.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct RenderSpec {
     /// The light-transport algorithm by name (`render::integrators::REGISTRY`; default
@@ -123,7 +127,7 @@ impl Default for RenderSpec {
     }
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct MaterialSpec {
     pub name: String,
@@ -160,7 +164,7 @@ pub struct MaterialSpec {
     pub emission: Option<[f64; 3]>,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
 pub enum ShapeSpec {
     /// An OBJ file. `material` is used for faces whose `usemtl` names no scene material;
@@ -219,6 +223,15 @@ pub enum ShapeSpec {
         #[serde(default)]
         transform: TransformSpec,
     },
+    /// Mitsuba's `cube`: the box [−1, 1]³ through `transform`, each face two triangles with
+    /// texture coordinates [0, 1]², facing out.
+    Cube {
+        material: String,
+        #[serde(default)]
+        transform: TransformSpec,
+        #[serde(default)]
+        reverse_orientation: bool,
+    },
     /// A parallelogram `corner + s·edge_u + t·edge_v`, s, t ∈ [0, 1] (the texture coordinates),
     /// facing edge_u × edge_v.
     Quad {
@@ -241,7 +254,7 @@ fn relief_segments() -> u32 {
     256
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
 pub enum LightSpec {
     /// Isotropic point light: `intensity` (W/sr) or `power` (W, = 4π·intensity).

@@ -11,6 +11,7 @@
 
 mod build;
 pub mod file;
+pub mod mitsuba;
 mod query;
 
 pub use query::{epsilon, Surface};
@@ -108,13 +109,40 @@ pub struct Scene {
     pub bounds_radius: f32,
 }
 
-/// Reads a scene file.
+/// Reads a scene file: lumen's TOML, or Mitsuba 3's XML (by the extension `.xml`).
 pub fn load(path: &Path) -> Result<Scene, Error> {
+    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("xml")) {
+        return load_mitsuba(path, &[]);
+    }
     let text = std::fs::read_to_string(path)
         .map_err(|e| Error::Io { path: path.to_path_buf(), message: e.to_string() })?;
     let file: SceneFile = toml::from_str(&text)
         .map_err(|e| Error::Parse { path: path.to_path_buf(), message: e.to_string() })?;
     build(&file, path)
+}
+
+/// Reads and builds a Mitsuba 3 scene; `params` are its `$name` values (`-D name=value`).
+pub fn load_mitsuba(path: &Path, params: &[(String, String)]) -> Result<Scene, Error> {
+    let read = mitsuba::read(path, params)?;
+    let scene = build(&read.scene, path)?;
+    // lumen's camera rays do not clip: accept clip planes that would cut nothing.
+    let (near, far) = read.clip;
+    let eye = scene.t_world_cam.translation.as_vec3();
+    for prim in &scene.bvh.prims {
+        let (lo, hi) = prim.bounds();
+        let (lo, hi) = (glam::Vec3::from(lo), glam::Vec3::from(hi));
+        let nearest = eye.clamp(lo, hi).distance(eye) as f64;
+        let farthest = (eye - lo).abs().max((eye - hi).abs()).length() as f64;
+        if nearest < near || farthest > far {
+            return Err(Error::MitsubaUnsupported {
+                at: format!("the sensor of {}", path.display()),
+                message: format!(
+                    "near_clip {near} / far_clip {far} would cut geometry between {nearest:.4} and {farthest:.4} from the camera, and lumen does not clip: widen them or leave them out"
+                ),
+            });
+        }
+    }
+    Ok(scene)
 }
 
 pub(super) fn bounding_sphere(prims: &[Prim], camera: DVec3) -> (Vec3A, f32) {

@@ -1,0 +1,1028 @@
+//! Mitsuba 3 scenes (`.xml`, version 2.x/3.x) read as they are, into the same `SceneFile` a
+//! lumen TOML scene parses to, so both are checked and built by one `build` and
+//! `lumen scene convert` can show what was read.
+//!
+//! How each part maps (Mitsuba 3's plugin reference names the parameters):
+//! - `integrator`: `path`, `volpath`, `volpathmis` (a scene without media: the path tracer)
+//!   and `direct` (= `path` with `max_depth` 2), with `max_depth` (−1: unbounded) and
+//!   `rr_depth`; `moment` renders its inner integrator (lumen writes the variance beside the
+//!   mean anyway). lumen's roulette starts after 5 segments, Mitsuba's default `rr_depth`:
+//!   another `rr_depth` changes the noise, not the expected image, and is accepted.
+//! - `sensor`: `perspective` and `thinlens` (`fov` with `fov_axis` x, y, diagonal, smaller,
+//!   larger; `to_world` rigid up to a uniform scale; `near_clip` / `far_clip` accepted when they
+//!   cut no geometry, as lumen does not clip), Mitsuba's camera frame (x left, y up, z
+//!   forward) turned into OpenCV's (x right, y down); its pixel i spans [i, i + 1), so the
+//!   principal point is ((W − 1)/2, (H − 1)/2) in lumen's integer-centred pixels. `hdrfilm`
+//!   (width, height, `box` filter); `sampler`: `independent` → independent, `stratified`,
+//!   `multijitter`, `orthogonal`, `ldsampler` → lumen's Sobol sampler; `sample_count` → spp.
+//! - `bsdf`: `diffuse` → lambertian; `conductor` → mirror, `roughconductor` → conductor (named
+//!   `material`s in `named`, or `eta`/`k`; `specular_reflectance` tints); `dielectric` (named
+//!   or numeric `int_ior`/`ext_ior`); `twosided` around one BSDF (lumen's surfaces are
+//!   two-sided). Colours as `rgb`, a constant `spectrum` or `float`, or a `checkerboard` /
+//!   `bitmap` texture.
+//! - `shape`: `obj`, `sphere`, `rectangle`, `cube`, with `to_world`, `flip_normals`, a `bsdf`
+//!   and an `area` emitter (the shape's material then emits). `emitter`: `point`, `spot`,
+//!   `directional`, `constant`, `envmap`.
+//!
+//! Anything else, and any parameter a plugin does not read, is refused by name and line with
+//! what lumen supports instead: nothing is dropped silently.
+
+mod named;
+mod xml;
+
+use super::super::texture::{CheckerSpec, RoughnessSpec, TextureSpec};
+use super::super::Error;
+use super::file::*;
+use glam::{DAffine3, DMat3, DVec3};
+use std::cell::RefCell;
+use std::path::{Path, PathBuf};
+use xml::Elem;
+
+/// What a Mitsuba scene file holds, as a lumen scene, and the clip planes its sensor asked
+/// for (checked against the built scene: lumen does not clip).
+pub struct Read {
+    pub scene: SceneFile,
+    pub clip: (f64, f64),
+}
+
+/// Reads a Mitsuba 3 scene; `params` are `$name` values given by the caller.
+pub fn read(path: &Path, params: &[(String, String)]) -> Result<Read, Error> {
+    let (root, search) = xml::load(path, params)?;
+    let mut c = Converter {
+        main_dir: path.parent().map(Path::to_path_buf).unwrap_or_default(),
+        search,
+        materials: Vec::new(),
+        shapes: Vec::new(),
+        lights: Vec::new(),
+        media: false,
+    };
+    let mut camera = None;
+    let mut render = RenderSpec::default();
+    let mut integrator = None;
+    for e in &root.children {
+        match e.tag.as_str() {
+            "sensor" => {
+                if camera.is_some() {
+                    return Err(e.unsupported("a second sensor: lumen renders one camera per scene"));
+                }
+                camera = Some((c.sensor(e, &mut render)?, e));
+            }
+            "integrator" => integrator = Some(e),
+            "shape" => c.shape(e)?,
+            "emitter" => c.emitter(e)?,
+            // Declared for reference by id; converted where used.
+            "bsdf" | "texture" | "spectrum" | "rgb" => {}
+            "medium" => c.media = true,
+            _ => {
+                return Err(e.unsupported(format!(
+                    "<{}> in <scene>: lumen reads sensor, integrator, shape, emitter, bsdf and texture here",
+                    e.tag
+                )))
+            }
+        }
+    }
+    if let Some(e) = integrator {
+        c.integrator(e, &mut render)?;
+    } else {
+        // Mitsuba's default integrator: path, max_depth −1.
+        render.max_depth = u32::MAX;
+    }
+    let Some(((camera, clip), _)) = camera else {
+        return Err(root.error("has no <sensor>: lumen needs a camera to render"));
+    };
+    Ok(Read {
+        scene: SceneFile {
+            camera,
+            render,
+            sensor: None,
+            materials: c.materials,
+            shapes: c.shapes,
+            lights: c.lights,
+        },
+        clip,
+    })
+}
+
+/// Mitsuba's parameters as lumen reads them off one plugin element: each lookup marks its
+/// child used, and `finish` refuses the children no lookup asked for.
+struct Props<'a> {
+    e: &'a Elem,
+    used: RefCell<Vec<bool>>,
+}
+
+impl<'a> Props<'a> {
+    fn new(e: &'a Elem) -> Self {
+        Props { e, used: RefCell::new(vec![false; e.children.len()]) }
+    }
+
+    fn find(&self, name: &str) -> Option<&'a Elem> {
+        let i = self.e.children.iter().position(|c| c.attr("name") == Some(name))?;
+        self.used.borrow_mut()[i] = true;
+        Some(&self.e.children[i])
+    }
+
+    /// Nested plugins of a tag (named or not).
+    fn objects(&self, tag: &str) -> Vec<&'a Elem> {
+        let mut out = Vec::new();
+        for (i, c) in self.e.children.iter().enumerate() {
+            if c.tag == tag {
+                self.used.borrow_mut()[i] = true;
+                out.push(c);
+            }
+        }
+        out
+    }
+
+    /// Marks a parameter read whose value does not change what lumen renders.
+    fn accept(&self, names: &[&str]) {
+        for n in names {
+            self.find(n);
+        }
+    }
+
+    fn value(&self, c: &Elem) -> Result<String, Error> {
+        c.attr("value").map(str::to_string).ok_or_else(|| c.error("needs `value`"))
+    }
+
+    fn float(&self, name: &str) -> Result<Option<f64>, Error> {
+        let Some(c) = self.find(name) else { return Ok(None) };
+        if c.tag != "float" && c.tag != "integer" {
+            return Err(c.error(format!("`{name}` must be a <float>")));
+        }
+        number(c, &self.value(c)?).map(Some)
+    }
+
+    fn int(&self, name: &str) -> Result<Option<i64>, Error> {
+        let Some(c) = self.find(name) else { return Ok(None) };
+        let v = self.value(c)?;
+        if c.tag != "integer" {
+            return Err(c.error(format!("`{name}` must be an <integer>")));
+        }
+        v.trim().parse().map(Some).map_err(|_| c.error(format!("\"{v}\" is not an integer")))
+    }
+
+    fn string(&self, name: &str) -> Result<Option<String>, Error> {
+        let Some(c) = self.find(name) else { return Ok(None) };
+        if c.tag != "string" {
+            return Err(c.error(format!("`{name}` must be a <string>")));
+        }
+        self.value(c).map(Some)
+    }
+
+    fn boolean(&self, name: &str) -> Result<Option<bool>, Error> {
+        let Some(c) = self.find(name) else { return Ok(None) };
+        match (c.tag.as_str(), self.value(c)?.as_str()) {
+            ("boolean", "true") => Ok(Some(true)),
+            ("boolean", "false") => Ok(Some(false)),
+            (_, v) => Err(c.error(format!("`{name}` = \"{v}\": expected <boolean> true or false"))),
+        }
+    }
+
+    /// A `point` or `vector`: `value="x, y, z"` or `x`, `y`, `z` attributes (default 0).
+    fn point(&self, name: &str) -> Result<Option<DVec3>, Error> {
+        let Some(c) = self.find(name) else { return Ok(None) };
+        if c.tag != "point" && c.tag != "vector" {
+            return Err(c.error(format!("`{name}` must be a <point> or <vector>")));
+        }
+        triple(c, 0.0).map(Some)
+    }
+
+    /// A colour: `rgb`, a constant `spectrum`, a `float`, or a texture.
+    fn color(&self, name: &str) -> Result<Option<Color>, Error> {
+        let Some(c) = self.find(name) else { return Ok(None) };
+        color(c).map(Some)
+    }
+
+    fn transform(&self, name: &str) -> Result<Option<DAffine3>, Error> {
+        let Some(c) = self.find(name) else { return Ok(None) };
+        if c.tag != "transform" {
+            return Err(c.error(format!("`{name}` must be a <transform>")));
+        }
+        transform(c).map(Some)
+    }
+
+    /// Refuses every child no lookup asked for.
+    fn finish(self, supported: &str) -> Result<(), Error> {
+        let used = self.used.borrow();
+        match self.e.children.iter().zip(used.iter()).find(|(_, &u)| !u) {
+            None => Ok(()),
+            Some((c, _)) => Err(c.unsupported(format!(
+                "in {}: lumen does not read this parameter here (it reads {supported})",
+                self.e.describe()
+            ))),
+        }
+    }
+}
+
+enum Color {
+    Rgb([f64; 3]),
+    Texture(TextureSpec),
+}
+
+impl Color {
+    fn rgb(self, at: &Elem, what: &str) -> Result<[f64; 3], Error> {
+        match self {
+            Color::Rgb(v) => Ok(v),
+            Color::Texture(_) => {
+                Err(at.unsupported(format!("a texture for `{what}`: lumen takes a colour here")))
+            }
+        }
+    }
+
+    fn texture(self) -> TextureSpec {
+        match self {
+            Color::Rgb(v) => TextureSpec::Constant(v),
+            Color::Texture(t) => t,
+        }
+    }
+}
+
+fn number(at: &Elem, v: &str) -> Result<f64, Error> {
+    v.trim()
+        .parse::<f64>()
+        .ok()
+        .filter(|x| x.is_finite())
+        .ok_or_else(|| at.error(format!("\"{v}\" is not a finite number")))
+}
+
+/// Numbers separated by commas or spaces.
+fn numbers(at: &Elem, v: &str) -> Result<Vec<f64>, Error> {
+    v.split(|c: char| c == ',' || c.is_whitespace())
+        .filter(|s| !s.is_empty())
+        .map(|s| number(at, s))
+        .collect()
+}
+
+/// Three numbers from `value` (one number repeated, or three) or from `x`, `y`, `z`.
+fn triple(e: &Elem, default: f64) -> Result<DVec3, Error> {
+    if let Some(v) = e.attr("value") {
+        return match numbers(e, v)?.as_slice() {
+            [a] => Ok(DVec3::splat(*a)),
+            [a, b, c] => Ok(DVec3::new(*a, *b, *c)),
+            _ => Err(e.error(format!("`value` \"{v}\": expected one or three numbers"))),
+        };
+    }
+    let get = |k: &str| e.attr(k).map_or(Ok(default), |v| number(e, v));
+    Ok(DVec3::new(get("x")?, get("y")?, get("z")?))
+}
+
+fn color(c: &Elem) -> Result<Color, Error> {
+    match c.tag.as_str() {
+        "rgb" | "float" => {
+            let v = c.attr("value").ok_or_else(|| c.error("needs `value`"))?;
+            match numbers(c, v)?.as_slice() {
+                [a] => Ok(Color::Rgb([*a; 3])),
+                [r, g, b] if c.tag == "rgb" => Ok(Color::Rgb([*r, *g, *b])),
+                _ => Err(c.error(format!("`value` \"{v}\": expected one or three numbers"))),
+            }
+        }
+        "spectrum" => {
+            let v = c.attr("value").ok_or_else(|| c.error("needs `value` (or use <rgb>)"))?;
+            if v.contains(':') || c.attr("filename").is_some() {
+                return Err(c.unsupported(
+                    "a spectrum of wavelength:value pairs: lumen renders in RGB and reads a constant spectrum or <rgb> here",
+                ));
+            }
+            match numbers(c, v)?.as_slice() {
+                [a] => Ok(Color::Rgb([*a; 3])),
+                _ => Err(c.error(format!("`value` \"{v}\": expected one number"))),
+            }
+        }
+        "texture" => texture(c).map(Color::Texture),
+        t => Err(c.error(format!("<{t}> is not a colour: expected <rgb>, <spectrum>, <float> or <texture>"))),
+    }
+}
+
+fn texture(e: &Elem) -> Result<TextureSpec, Error> {
+    let p = Props::new(e);
+    let tex = match e.plugin() {
+        "checkerboard" => {
+            let even = p.color("color0")?.map(|c| c.rgb(e, "color0")).transpose()?.unwrap_or([0.4; 3]);
+            let odd = p.color("color1")?.map(|c| c.rgb(e, "color1")).transpose()?.unwrap_or([0.2; 3]);
+            // Mitsuba's checkerboard is 2 × 2 squares over [0, 1]², colour0 where u and v fall
+            // in the same half; `to_uv` may scale it by whole numbers.
+            let mut squares = [2u32, 2];
+            if let Some(m) = p.transform("to_uv")? {
+                let (sx, sy) = (m.matrix3.x_axis.x, m.matrix3.y_axis.y);
+                let whole = |s: f64| s > 0.0 && (s - s.round()).abs() < 1e-9 && s <= 1e4;
+                if m.matrix3.x_axis.y != 0.0
+                    || m.matrix3.y_axis.x != 0.0
+                    || m.translation != glam::DVec3::ZERO
+                    || !whole(sx)
+                    || !whole(sy)
+                {
+                    return Err(e.unsupported("a `to_uv` other than a scale by whole numbers: lumen's checkerboard has whole squares over [0, 1]²"));
+                }
+                squares = [2 * sx.round() as u32, 2 * sy.round() as u32];
+            }
+            TextureSpec::Checker { checker: CheckerSpec { squares, even, odd } }
+        }
+        "bitmap" => {
+            let f = p.string("filename")?.ok_or_else(|| e.error("needs `filename`"))?;
+            if p.boolean("raw")? == Some(true) {
+                return Err(e.unsupported(
+                    "`raw` = true: lumen decodes 8-bit colour images as sRGB, as Mitsuba does by default",
+                ));
+            }
+            match p.string("filter_type")?.as_deref() {
+                None | Some("bilinear") => {}
+                Some(o) => {
+                    return Err(
+                        e.unsupported(format!("filter_type \"{o}\": lumen filters bitmaps bilinearly"))
+                    )
+                }
+            }
+            match p.string("wrap_mode")?.as_deref() {
+                None | Some("repeat") => {}
+                Some(o) => return Err(e.unsupported(format!("wrap_mode \"{o}\": lumen repeats bitmaps"))),
+            }
+            TextureSpec::Image { texture: f }
+        }
+        other => {
+            return Err(e.unsupported(format!("texture \"{other}\": lumen reads bitmap and checkerboard")))
+        }
+    };
+    p.finish("color0, color1, to_uv (checkerboard); filename, filter_type, wrap_mode, raw (bitmap)")?;
+    Ok(tex)
+}
+
+/// Degrees about a unit axis, right-handed, as Mitsuba's `Transform4f::rotate`.
+fn rotation(axis: DVec3, degrees: f64) -> DMat3 {
+    DMat3::from_axis_angle(axis.normalize(), degrees.to_radians())
+}
+
+/// A `<transform>`: its children applied in order, each to the result of the ones before.
+fn transform(t: &Elem) -> Result<DAffine3, Error> {
+    let mut m = DAffine3::IDENTITY;
+    for c in &t.children {
+        let step = match c.tag.as_str() {
+            "translate" => DAffine3::from_translation(triple(c, 0.0)?),
+            "scale" => {
+                let s = triple(c, 1.0)?;
+                if s.x * s.y * s.z == 0.0 {
+                    return Err(c.error("a zero scale flattens the shape"));
+                }
+                DAffine3::from_scale(s)
+            }
+            "rotate" => {
+                let angle = c.attr("angle").ok_or_else(|| c.error("needs `angle` (degrees)"))?;
+                let axis = triple(c, 0.0)?;
+                if axis.length() == 0.0 {
+                    return Err(c.error("needs a non-zero axis (`value` or `x`, `y`, `z`)"));
+                }
+                DAffine3::from_mat3(rotation(axis, number(c, angle)?))
+            }
+            "matrix" => {
+                let v = c.attr("value").ok_or_else(|| c.error("needs `value`"))?;
+                let n = numbers(c, v)?;
+                let rows: [[f64; 4]; 4] = match n.len() {
+                    16 => [0, 1, 2, 3].map(|r| [0, 1, 2, 3].map(|k| n[4 * r + k])),
+                    9 => [
+                        [n[0], n[1], n[2], 0.0],
+                        [n[3], n[4], n[5], 0.0],
+                        [n[6], n[7], n[8], 0.0],
+                        [0.0, 0.0, 0.0, 1.0],
+                    ],
+                    k => return Err(c.error(format!("{k} numbers: expected 16 (or 9), row by row"))),
+                };
+                if rows[3] != [0.0, 0.0, 0.0, 1.0] {
+                    return Err(c.unsupported(
+                        "a projective matrix: lumen takes affine transforms (last row 0 0 0 1)",
+                    ));
+                }
+                DAffine3::from_mat4(glam::DMat4::from_cols_array_2d(&rows).transpose())
+            }
+            "lookat" | "look_at" => {
+                let get = |k: &str| -> Result<DVec3, Error> {
+                    let v = c.attr(k).ok_or_else(|| c.error(format!("needs `{k}`")))?;
+                    match numbers(c, v)?.as_slice() {
+                        [a, b, d] => Ok(DVec3::new(*a, *b, *d)),
+                        _ => Err(c.error(format!("`{k}` \"{v}\": expected three numbers"))),
+                    }
+                };
+                let origin = get("origin")?;
+                let up = if c.attr("up").is_some() { get("up")? } else { DVec3::Y };
+                let dir = (get("target")? - origin).normalize();
+                let left = up.cross(dir).normalize();
+                if !(dir.is_finite() && left.is_finite()) {
+                    return Err(c.error("origin equals target, or up is parallel to the view direction"));
+                }
+                let new_up = dir.cross(left);
+                DAffine3::from_mat3_translation(DMat3::from_cols(left, new_up, dir), origin)
+            }
+            t => {
+                return Err(c.unsupported(format!(
+                    "<{t}> in a transform: lumen reads translate, rotate, scale, matrix and lookat"
+                )))
+            }
+        };
+        m = step * m;
+    }
+    Ok(m)
+}
+
+/// Rows of an affine transform, for `TransformSpec::matrix`.
+fn rows(m: &DAffine3) -> [[f64; 4]; 4] {
+    let c = glam::DMat4::from(*m).transpose().to_cols_array_2d();
+    [c[0], c[1], c[2], c[3]]
+}
+
+struct Converter {
+    main_dir: PathBuf,
+    search: Vec<PathBuf>,
+    materials: Vec<MaterialSpec>,
+    shapes: Vec<ShapeSpec>,
+    lights: Vec<LightSpec>,
+    media: bool,
+}
+
+impl Converter {
+    /// A file a plugin names: beside the element's file, beside the scene, or in a `<path>`;
+    /// relative to the scene's folder where it lies below it.
+    fn file(&self, e: &Elem, name: &str) -> Result<String, Error> {
+        let found = [e.dir(), self.main_dir.clone()]
+            .into_iter()
+            .chain(self.search.iter().cloned())
+            .map(|d| d.join(name))
+            .find(|p| p.is_file())
+            .ok_or_else(|| e.error(format!("cannot find \"{name}\" beside the scene or in a <path>")))?;
+        let shown = found.strip_prefix(&self.main_dir).unwrap_or(&found);
+        Ok(shown.to_string_lossy().into_owned())
+    }
+
+    fn integrator(&mut self, e: &Elem, render: &mut RenderSpec) -> Result<(), Error> {
+        let p = Props::new(e);
+        match e.plugin() {
+            "moment" => {
+                let inner = p.objects("integrator");
+                p.finish("one nested integrator")?;
+                return match inner.as_slice() {
+                    [i] => self.integrator(i, render),
+                    _ => Err(e.error("needs exactly one nested <integrator>")),
+                };
+            }
+            "path" | "volpath" | "volpathmis" => {
+                if self.media && e.plugin() != "path" {
+                    return Err(e.unsupported("participating media: lumen's volume path tracer is not built yet; remove the <medium> elements to render the surfaces"));
+                }
+                let depth = p.int("max_depth")?.unwrap_or(-1);
+                render.max_depth = match depth {
+                    -1 => u32::MAX,
+                    d if d >= 1 && d <= u32::MAX as i64 => d as u32,
+                    d => return Err(e.error(format!("max_depth {d}: expected −1 (unbounded) or at least 1"))),
+                };
+                if let Some(rr) = p.int("rr_depth")? {
+                    if rr < 1 {
+                        return Err(e.error(format!("rr_depth {rr}: expected at least 1")));
+                    }
+                }
+            }
+            "direct" => {
+                p.accept(&["emitter_samples", "bsdf_samples", "shading_samples"]);
+                render.max_depth = 2;
+            }
+            other => {
+                return Err(e.unsupported(format!(
+                    "integrator \"{other}\": lumen has {} (Mitsuba's path, volpath, volpathmis, direct and moment map to path)",
+                    crate::render::integrators::names()
+                )))
+            }
+        }
+        if p.boolean("hide_emitters")? == Some(true) {
+            return Err(e.unsupported("hide_emitters = true: lumen shows emitters seen directly"));
+        }
+        p.finish("max_depth, rr_depth, hide_emitters")
+    }
+
+    /// The camera, and its clip planes.
+    fn sensor(&mut self, e: &Elem, render: &mut RenderSpec) -> Result<(CameraSpec, (f64, f64)), Error> {
+        let p = Props::new(e);
+        let thin = match e.plugin() {
+            "perspective" => false,
+            "thinlens" => true,
+            other => {
+                return Err(e.unsupported(format!("sensor \"{other}\": lumen reads perspective and thinlens")))
+            }
+        };
+        let films = p.objects("film");
+        let (width, height) = match films.as_slice() {
+            [] => (768, 576),
+            [f] => film(f)?,
+            _ => return Err(e.error("has more than one <film>")),
+        };
+        for s in p.objects("sampler") {
+            sampler(s, render)?;
+        }
+        if p.find("focal_length").is_some() {
+            return Err(e.unsupported("focal_length: give `fov` (degrees) and `fov_axis`"));
+        }
+        let fov = p.float("fov")?.ok_or_else(|| e.error("needs `fov` (degrees)"))?;
+        if !(fov > 0.0 && fov < 180.0) {
+            return Err(e.error(format!("fov {fov}: expected degrees in (0, 180)")));
+        }
+        let (w, h) = (width as f64, height as f64);
+        let span = match p.string("fov_axis")?.as_deref().unwrap_or("x") {
+            "x" => w,
+            "y" => h,
+            "diagonal" => w.hypot(h),
+            "smaller" => w.min(h),
+            "larger" => w.max(h),
+            o => return Err(e.error(format!("fov_axis \"{o}\": expected x, y, diagonal, smaller or larger"))),
+        };
+        let f = 0.5 * span / (0.5 * fov.to_radians()).tan();
+        for k in ["principal_point_offset_x", "principal_point_offset_y"] {
+            if p.float(k)?.is_some_and(|v| v != 0.0) {
+                return Err(
+                    e.unsupported(format!("{k}: lumen's Mitsuba reader takes a centred principal point"))
+                );
+            }
+        }
+        let near = p.float("near_clip")?.unwrap_or(1e-2);
+        let far = p.float("far_clip")?.unwrap_or(1e4);
+        if !(near > 0.0 && far > near) {
+            return Err(e.error(format!("near_clip {near}, far_clip {far}: expected 0 < near < far")));
+        }
+        let m = p.transform("to_world")?.unwrap_or(DAffine3::IDENTITY);
+        let l = m.matrix3;
+        let s = l.x_axis.length();
+        let (ux, uy, uz) = (l.x_axis / s, l.y_axis / s, l.z_axis / s);
+        let tol = 1e-6;
+        if (l.y_axis.length() - s).abs() > tol * s
+            || (l.z_axis.length() - s).abs() > tol * s
+            || ux.dot(uy).abs() > tol
+            || ux.dot(uz).abs() > tol
+            || uy.dot(uz).abs() > tol
+        {
+            return Err(
+                e.unsupported("a sensor to_world with shear or unequal scales: lumen's cameras are rigid")
+            );
+        }
+        if l.determinant() < 0.0 {
+            return Err(e.unsupported(
+                "a mirroring sensor to_world (negative determinant): lumen's cameras do not mirror the image",
+            ));
+        }
+        // Mitsuba's camera looks along +z with x left and y up; OpenCV's x is right, y down.
+        let r = DMat3::from_cols(-ux, -uy, uz);
+        let (aperture_radius, focus_distance) = if thin {
+            let a =
+                p.float("aperture_radius")?.ok_or_else(|| e.error("a thinlens needs `aperture_radius`"))?;
+            let d = p.float("focus_distance")?.ok_or_else(|| e.error("a thinlens needs `focus_distance`"))?;
+            (Some(a), Some(d))
+        } else {
+            // A pinhole has no plane of focus; Mitsuba's perspective ignores it.
+            p.accept(&["focus_distance"]);
+            (None, None)
+        };
+        p.accept(&["shutter_open", "shutter_close", "srf"]);
+        p.finish(
+            "fov, fov_axis, near_clip, far_clip, to_world, film, sampler, aperture_radius, focus_distance",
+        )?;
+        let rows = r.transpose().to_cols_array_2d();
+        Ok((
+            CameraSpec {
+                width,
+                height,
+                fov_deg: None,
+                fx: Some(f),
+                fy: Some(f),
+                cx: Some(0.5 * (w - 1.0)),
+                cy: Some(0.5 * (h - 1.0)),
+                distortion: None,
+                look_at: None,
+                t_world_cam: Some(TransformSpec {
+                    matrix: None,
+                    rotation: Some(rows),
+                    rvec: None,
+                    translation: m.translation.to_array(),
+                    scale: None,
+                }),
+                aperture_radius,
+                focus_distance,
+            },
+            (near, far),
+        ))
+    }
+
+    fn shape(&mut self, e: &Elem) -> Result<(), Error> {
+        let p = Props::new(e);
+        let index = self.shapes.len();
+        let name = e.attr("id").map_or_else(|| format!("shape{index}"), str::to_string);
+        let bsdfs = p.objects("bsdf");
+        let emitters = p.objects("emitter");
+        for m in ["interior", "exterior"] {
+            if p.find(m).is_some() {
+                return Err(
+                    e.unsupported(format!("`{m}` medium: lumen's volume path tracer is not built yet"))
+                );
+            }
+        }
+        if !p.objects("medium").is_empty() {
+            return Err(e.unsupported("a medium: lumen's volume path tracer is not built yet"));
+        }
+        let mut material = match bsdfs.as_slice() {
+            [] => None,
+            [b] => Some(self.material(b)?),
+            _ => return Err(e.error("has more than one <bsdf>")),
+        };
+        let emission = match emitters.as_slice() {
+            [] => None,
+            [em] => {
+                let q = Props::new(em);
+                if em.plugin() != "area" {
+                    return Err(em.unsupported("only an `area` emitter belongs in a shape"));
+                }
+                let le =
+                    q.color("radiance")?.ok_or_else(|| em.error("needs `radiance`"))?.rgb(em, "radiance")?;
+                q.finish("radiance")?;
+                Some(le)
+            }
+            _ => return Err(e.error("has more than one <emitter>")),
+        };
+        let default_name = "mitsuba-default-diffuse";
+        if material.is_none() && !self.materials.iter().any(|m| m.name == default_name) {
+            // A shape without a BSDF is Mitsuba's default diffuse, reflectance 0.5.
+            self.materials.push(lambertian(default_name, TextureSpec::Constant([0.5; 3])));
+        }
+        if let Some(le) = emission {
+            // The material is shared by name: an emitting shape gets its own copy.
+            let base = material.clone().unwrap_or_else(|| default_name.to_string());
+            let i = self.materials.iter().position(|m| m.name == base).expect("material just added");
+            let copy = copy_material(&self.materials[i], format!("{name}-emitter"), le);
+            material = Some(copy.name.clone());
+            self.materials.push(copy);
+        }
+        let material = material.unwrap_or_else(|| default_name.to_string());
+        let flip = p.boolean("flip_normals")?.unwrap_or(false);
+        let m = p.transform("to_world")?.unwrap_or(DAffine3::IDENTITY);
+        let mirrored = m.matrix3.determinant() < 0.0;
+        if m.matrix3.determinant() == 0.0 {
+            return Err(e.error("to_world is singular: it flattens the shape"));
+        }
+        let shape = match e.plugin() {
+            "obj" => {
+                let f = p.string("filename")?.ok_or_else(|| e.error("needs `filename`"))?;
+                let file = self.file(e, &f)?;
+                let face_normals = p.boolean("face_normals")?.unwrap_or(false);
+                if !face_normals && has_vertex_normals(&self.main_dir.join(&file)) {
+                    return Err(e.unsupported(format!(
+                        "\"{f}\" has vertex normals (vn), which Mitsuba interpolates: lumen shades with face normals; add <boolean name=\"face_normals\" value=\"true\"/>"
+                    )));
+                }
+                p.accept(&["flip_tex_coords"]);
+                ShapeSpec::Mesh {
+                    file,
+                    material: Some(material),
+                    object_materials: Default::default(),
+                    transform: TransformSpec { matrix: Some(rows(&m)), ..Default::default() },
+                    reverse_orientation: flip,
+                }
+            }
+            "sphere" => {
+                let c = p.point("center")?.unwrap_or(DVec3::ZERO);
+                let r = p.float("radius")?.unwrap_or(1.0);
+                let l = m.matrix3;
+                let s = l.x_axis.length();
+                let similar = (l.transpose() * l - DMat3::from_diagonal(DVec3::splat(s * s)))
+                    .to_cols_array()
+                    .iter()
+                    .all(|v| v.abs() <= 1e-6 * s * s);
+                if !similar {
+                    return Err(e.unsupported("a sphere to_world with shear or unequal scales: lumen's spheres stay round (use an obj mesh)"));
+                }
+                ShapeSpec::Sphere {
+                    center: m.transform_point3(c).to_array(),
+                    radius: r * s,
+                    material,
+                    // Mitsuba's sphere faces out, mirrored or not.
+                    reverse_orientation: flip,
+                }
+            }
+            "rectangle" => {
+                let corner = m.transform_point3(DVec3::new(-1.0, -1.0, 0.0));
+                ShapeSpec::Quad {
+                    corner: corner.to_array(),
+                    edge_u: m.transform_vector3(DVec3::new(2.0, 0.0, 0.0)).to_array(),
+                    edge_v: m.transform_vector3(DVec3::new(0.0, 2.0, 0.0)).to_array(),
+                    material,
+                    // Mitsuba's rectangle faces its normal transformed as a normal; edge_u ×
+                    // edge_v points the other way under a mirroring transform.
+                    reverse_orientation: flip ^ mirrored,
+                }
+            }
+            "cube" => ShapeSpec::Cube {
+                material,
+                transform: TransformSpec { matrix: Some(rows(&m)), ..Default::default() },
+                reverse_orientation: flip,
+            },
+            other => {
+                return Err(
+                    e.unsupported(format!("shape \"{other}\": lumen reads obj, sphere, rectangle and cube"))
+                )
+            }
+        };
+        p.finish("filename, face_normals, flip_tex_coords (obj); center, radius (sphere); to_world, flip_normals, bsdf, emitter")?;
+        self.shapes.push(shape);
+        Ok(())
+    }
+
+    /// The name of the material a `bsdf` element converts to, added once per id.
+    fn material(&mut self, b: &Elem) -> Result<String, Error> {
+        let name = b.attr("id").map_or_else(|| format!("bsdf{}", self.materials.len()), str::to_string);
+        if self.materials.iter().any(|m| m.name == name) {
+            return Ok(name);
+        }
+        let spec = bsdf(b, name.clone())?;
+        self.materials.push(spec);
+        Ok(name)
+    }
+
+    fn emitter(&mut self, e: &Elem) -> Result<(), Error> {
+        let p = Props::new(e);
+        let rgb = |k: &str| -> Result<[f64; 3], Error> {
+            p.color(k)?.ok_or_else(|| e.error(format!("needs `{k}`")))?.rgb(e, k)
+        };
+        let m = p.transform("to_world")?;
+        let light = match e.plugin() {
+            "point" => {
+                let at = match (p.point("position")?, m) {
+                    (Some(_), Some(_)) => return Err(e.error("give `position` or `to_world`, not both")),
+                    (Some(x), None) => x,
+                    (None, m) => m.unwrap_or(DAffine3::IDENTITY).translation,
+                };
+                LightSpec::Point { position: at.to_array(), intensity: Some(rgb("intensity")?), power: None }
+            }
+            "spot" => {
+                let m = m.unwrap_or(DAffine3::IDENTITY);
+                let at = m.translation;
+                let axis = m.transform_vector3(DVec3::Z).normalize();
+                let cutoff = p.float("cutoff_angle")?.unwrap_or(20.0);
+                let beam = p.float("beam_width")?.unwrap_or(0.75 * cutoff);
+                LightSpec::Spot {
+                    position: at.to_array(),
+                    target: (at + axis).to_array(),
+                    intensity: rgb("intensity")?,
+                    cutoff_deg: Some(cutoff),
+                    beam_width_deg: Some(beam),
+                }
+            }
+            "directional" => {
+                let d = match (p.point("direction")?, m) {
+                    (Some(_), Some(_)) => return Err(e.error("give `direction` or `to_world`, not both")),
+                    (Some(d), None) => d,
+                    (None, m) => m.unwrap_or(DAffine3::IDENTITY).transform_vector3(DVec3::Z),
+                };
+                if d.length() == 0.0 {
+                    return Err(e.error("needs a non-zero `direction`"));
+                }
+                LightSpec::Directional {
+                    to_light: (-d.normalize()).to_array(),
+                    irradiance: rgb("irradiance")?,
+                }
+            }
+            // A uniform environment looks the same under any to_world.
+            "constant" => LightSpec::Environment { radiance: Some(rgb("radiance")?), map: None, scale: None },
+            "envmap" => {
+                if m.is_some_and(|m| !m.matrix3.abs_diff_eq(DMat3::IDENTITY, 1e-9)) {
+                    return Err(e.unsupported(
+                        "an envmap to_world with a rotation: lumen's environment map is fixed, y up",
+                    ));
+                }
+                let f = p.string("filename")?.ok_or_else(|| e.error("needs `filename`"))?;
+                LightSpec::Environment {
+                    radiance: None,
+                    map: Some(self.file(e, &f)?),
+                    scale: p.float("scale")?,
+                }
+            }
+            "area" => return Err(e.error("an `area` emitter belongs inside a <shape>")),
+            other => {
+                return Err(e.unsupported(format!(
+                    "emitter \"{other}\": lumen reads area, point, spot, directional, constant and envmap"
+                )))
+            }
+        };
+        p.finish("intensity, position (point); intensity, cutoff_angle, beam_width (spot); irradiance, direction (directional); radiance (constant); filename, scale (envmap); to_world")?;
+        self.lights.push(light);
+        Ok(())
+    }
+}
+
+fn film(f: &Elem) -> Result<(u32, u32), Error> {
+    let p = Props::new(f);
+    if f.plugin() != "hdrfilm" {
+        return Err(f.unsupported(format!("film \"{}\": lumen reads hdrfilm", f.plugin())));
+    }
+    let size = |k: &str, d: i64| -> Result<u32, Error> {
+        let v = p.int(k)?.unwrap_or(d);
+        if !(1..=1 << 16).contains(&v) {
+            return Err(f.error(format!("{k} {v}: expected 1 to 65536 pixels")));
+        }
+        Ok(v as u32)
+    };
+    let (w, h) = (size("width", 768)?, size("height", 576)?);
+    for r in p.objects("rfilter") {
+        if r.plugin() != "box" {
+            return Err(r.unsupported(format!(
+                "rfilter \"{}\": lumen integrates each pixel over its box (use <rfilter type=\"box\"/>)",
+                r.plugin()
+            )));
+        }
+        Props::new(r).finish("nothing (box)")?;
+    }
+    for k in ["crop_offset_x", "crop_offset_y", "crop_width", "crop_height"] {
+        if p.find(k).is_some() {
+            return Err(
+                f.unsupported(format!("{k}: lumen renders the whole film (lumen render --crop crops)"))
+            );
+        }
+    }
+    if p.boolean("sample_border")? == Some(true) {
+        return Err(f.unsupported("sample_border = true: lumen's pixels take only their own samples"));
+    }
+    // How the image is stored, not what it holds: lumen writes linear RGB float EXR.
+    p.accept(&["file_format", "pixel_format", "component_format", "compensate", "banner"]);
+    p.finish("width, height, rfilter, file_format, pixel_format, component_format")?;
+    Ok((w, h))
+}
+
+fn sampler(s: &Elem, render: &mut RenderSpec) -> Result<(), Error> {
+    let p = Props::new(s);
+    render.sampler = match s.plugin() {
+        "independent" => super::super::sampler::SamplerKind::Independent,
+        "stratified" | "multijitter" | "orthogonal" | "ldsampler" => {
+            super::super::sampler::SamplerKind::Sobol
+        }
+        other => return Err(s.unsupported(format!(
+            "sampler \"{other}\": lumen reads independent, stratified, multijitter, orthogonal and ldsampler"
+        ))),
+    };
+    if let Some(n) = p.int("sample_count")? {
+        if !(1..=u32::MAX as i64).contains(&n) {
+            return Err(s.error(format!("sample_count {n}: expected at least 1")));
+        }
+        render.spp = n as u32;
+    } else {
+        render.spp = 4;
+    }
+    if let Some(seed) = p.int("seed")? {
+        render.seed = u64::try_from(seed)
+            .map_err(|_| s.error(format!("seed {seed}: expected a non-negative integer")))?;
+    }
+    // The strata's jitter and the shuffling are how the points are made, not what they estimate.
+    p.accept(&["jitter", "strength"]);
+    p.finish("sample_count, seed")
+}
+
+fn lambertian(name: &str, albedo: TextureSpec) -> MaterialSpec {
+    MaterialSpec {
+        name: name.to_string(),
+        kind: "lambertian".into(),
+        albedo,
+        specular: None,
+        exponent: None,
+        distribution: None,
+        alpha: None,
+        eta: None,
+        k: None,
+        ior: None,
+        emission: None,
+    }
+}
+
+fn copy_material(m: &MaterialSpec, name: String, emission: [f64; 3]) -> MaterialSpec {
+    MaterialSpec { name, emission: Some(emission), ..m.clone() }
+}
+
+/// An index of refraction: a number or one of Mitsuba's names.
+fn ior(p: &Props, name: &str, default: &str) -> Result<f64, Error> {
+    let Some(c) = p.find(name) else {
+        return Ok(named::IORS.iter().find(|(n, _)| *n == default).map(|x| x.1).unwrap_or(1.0));
+    };
+    let v = c.attr("value").ok_or_else(|| c.error("needs `value`"))?;
+    match c.tag.as_str() {
+        "float" => number(c, v),
+        "string" => named::IORS.iter().find(|(n, _)| *n == v).map(|x| x.1).ok_or_else(|| {
+            let names: Vec<&str> = named::IORS.iter().map(|x| x.0).collect();
+            c.error(format!("\"{v}\" is not a named index of refraction (known: {})", names.join(", ")))
+        }),
+        t => Err(c.error(format!("<{t}>: expected a <float> or a <string> name"))),
+    }
+}
+
+/// A conductor's η and k: `material` (default "none", a perfect mirror) or `eta` and `k`.
+fn complex_index(b: &Elem, p: &Props) -> Result<([f64; 3], [f64; 3]), Error> {
+    let material = p.string("material")?;
+    let eta = p.color("eta")?.map(|c| c.rgb(b, "eta")).transpose()?;
+    let k = p.color("k")?.map(|c| c.rgb(b, "k")).transpose()?;
+    match (material, eta, k) {
+        (Some(_), Some(_), _) | (Some(_), _, Some(_)) => {
+            Err(b.error("give `material` or `eta` and `k`, not both"))
+        }
+        (None, Some(eta), Some(k)) => Ok((eta, k)),
+        (None, Some(_), None) | (None, None, Some(_)) => Err(b.error("give both `eta` and `k`")),
+        (m, None, None) => {
+            let m = m.unwrap_or_else(|| "none".into());
+            if m == "none" {
+                return Ok(([0.0; 3], [1.0; 3]));
+            }
+            named::CONDUCTORS.iter().find(|c| c.0 == m).map(|c| (c.1, c.2)).ok_or_else(|| {
+                let names: Vec<&str> = named::CONDUCTORS.iter().map(|c| c.0).collect();
+                b.error(format!(
+                    "material \"{m}\" is not a named conductor (known: none, {})",
+                    names.join(", ")
+                ))
+            })
+        }
+    }
+}
+
+fn bsdf(b: &Elem, name: String) -> Result<MaterialSpec, Error> {
+    let p = Props::new(b);
+    let mut m = lambertian(&name, TextureSpec::Constant([0.5; 3]));
+    match b.plugin() {
+        "diffuse" => {
+            m.albedo = p.color("reflectance")?.map_or(TextureSpec::Constant([0.5; 3]), Color::texture);
+        }
+        "twosided" => {
+            let inner = p.objects("bsdf");
+            p.finish("one nested bsdf")?;
+            return match inner.as_slice() {
+                // lumen's surfaces are two-sided already.
+                [i] => bsdf(i, name),
+                [_, _] => Err(b.unsupported(
+                    "a twosided with two different BSDFs: lumen's surfaces have one material on both sides",
+                )),
+                _ => Err(b.error("needs one nested <bsdf>")),
+            };
+        }
+        "conductor" | "roughconductor" => {
+            let (eta, k) = complex_index(b, &p)?;
+            m.eta = Some(eta);
+            m.k = Some(k);
+            m.albedo = TextureSpec::Constant(
+                p.color("specular_reflectance")?
+                    .map(|c| c.rgb(b, "specular_reflectance"))
+                    .transpose()?
+                    .unwrap_or([1.0; 3]),
+            );
+            if b.plugin() == "conductor" {
+                m.kind = "mirror".into();
+            } else {
+                m.kind = "conductor".into();
+                let dist = p.string("distribution")?.unwrap_or_else(|| "beckmann".into());
+                if dist != "ggx" && dist != "beckmann" {
+                    return Err(b.error(format!("distribution \"{dist}\": expected ggx or beckmann")));
+                }
+                m.distribution = Some(dist);
+                let alpha = match (p.float("alpha")?, p.float("alpha_u")?, p.float("alpha_v")?) {
+                    (Some(a), None, None) => a,
+                    (None, Some(u), Some(v)) if u == v => u,
+                    (None, Some(_), Some(_)) => {
+                        return Err(b.unsupported("alpha_u ≠ alpha_v: lumen's rough conductor is isotropic"))
+                    }
+                    (None, None, None) => 0.1,
+                    _ => return Err(b.error("give `alpha`, or both `alpha_u` and `alpha_v`")),
+                };
+                m.alpha = Some(RoughnessSpec::Constant(alpha));
+                // Visible-normal sampling changes the noise, not the image.
+                p.accept(&["sample_visible"]);
+            }
+        }
+        "dielectric" => {
+            let int = ior(&p, "int_ior", "bk7")?;
+            let ext = ior(&p, "ext_ior", "air")?;
+            if !(int > 0.0 && ext > 0.0) {
+                return Err(b.error(format!("int_ior {int}, ext_ior {ext}: expected positive indices")));
+            }
+            let r = p.color("specular_reflectance")?.map(|c| c.rgb(b, "specular_reflectance")).transpose()?;
+            let t =
+                p.color("specular_transmittance")?.map(|c| c.rgb(b, "specular_transmittance")).transpose()?;
+            let tint = match (r, t) {
+                (None, None) => [1.0; 3],
+                (Some(a), None) | (None, Some(a)) if a == [1.0; 3] => a,
+                (Some(a), Some(c)) if a == c => a,
+                _ => {
+                    return Err(b.unsupported(
+                        "different specular_reflectance and specular_transmittance: lumen's dielectric tints both alike",
+                    ))
+                }
+            };
+            m.kind = "dielectric".into();
+            m.ior = Some(int / ext);
+            m.albedo = TextureSpec::Constant(tint);
+        }
+        other => {
+            return Err(b.unsupported(format!(
+                "bsdf \"{other}\": lumen reads diffuse, conductor, roughconductor, dielectric and twosided"
+            )))
+        }
+    }
+    p.finish("reflectance (diffuse); material, eta, k, specular_reflectance, distribution, alpha (conductors); int_ior, ext_ior, specular_reflectance, specular_transmittance (dielectric)")?;
+    Ok(m)
+}
+
+/// Whether an OBJ file has `vn` lines (an unreadable file is left to the mesh reader to report).
+fn has_vertex_normals(path: &Path) -> bool {
+    std::fs::read_to_string(path).is_ok_and(|t| t.lines().any(|l| l.trim_start().starts_with("vn ")))
+}
