@@ -1,21 +1,38 @@
 //! lumen against an independent renderer: Mitsuba 3's 8192-spp Cornell box (in ../shared)
 //! and the references in tests/data/mitsuba, rendered by tools/mitsuba_reference.py from the
-//! same scenes written in Mitsuba's terms (the script says how each part was matched).
+//! Mitsuba XML files beside them. Each scene is rendered twice: from lumen's own scene file
+//! (pipelines/scenes/NAME.toml) and from the Mitsuba XML as it is.
 
 mod common;
 
 use lumen::image::{io, metrics};
 use lumen::render;
 
-/// Renders `pipelines/scenes/SCENE.toml` at `spp` (max depth `depth`) and compares it with
+/// Renders `pipelines/scenes/SCENE.toml` and `tests/data/mitsuba/SCENE.xml` at `spp` (max
+/// depth `depth`) and compares each with
 /// Mitsuba's reference `REFERENCE.exr` / `REFERENCE_variance.exr` in `dir`: per-channel means
 /// within 1 %, and a per-pixel z-test (lumen's variance + the reference's, Šidák-corrected at
 /// α = 0.01) accepting at least `min_pass` of the pixel channels.
 fn matches_mitsuba(dir: &std::path::Path, reference: &str, scene: &str, spp: u32, depth: u32, min_pass: f64) {
+    let toml = common::root().join(format!("pipelines/scenes/{scene}.toml"));
+    let xml = references().join(format!("{scene}.xml"));
+    for file in [toml, xml] {
+        file_matches_mitsuba(dir, reference, &file, spp, depth, min_pass);
+    }
+}
+
+fn file_matches_mitsuba(
+    dir: &std::path::Path,
+    reference: &str,
+    scene_file: &std::path::Path,
+    spp: u32,
+    depth: u32,
+    min_pass: f64,
+) {
     let ref_mean = io::read_exr(&dir.join(format!("{reference}.exr"))).unwrap();
     let ref_var = io::read_exr(&dir.join(format!("{reference}_variance.exr"))).unwrap();
-    let scene_file = common::root().join(format!("pipelines/scenes/{scene}.toml"));
-    let scene_data = render::load(&scene_file).unwrap();
+    let scene = scene_file.display();
+    let scene_data = render::load(scene_file).unwrap_or_else(|e| panic!("{scene}: {e}"));
     let film = render::render(&scene_data, &common::settings(&scene_data, spp, depth));
     assert!(!film.mean.has_non_finite() && film.dropped_samples == 0);
     let a = metrics::agreement(&film.mean, &film.variance, &ref_mean, &ref_var, 0.01).unwrap();

@@ -5,6 +5,7 @@ mod bench;
 mod color;
 mod hdr;
 mod pipeline_cmd;
+mod scene;
 mod sfm;
 
 use bench::{bench_calibrate, bench_convergence, bench_hdr, bench_render, BenchRender};
@@ -116,6 +117,12 @@ enum Command {
     /// Render a scene file to an image: .exr (linear float) or .png (sRGB, or raw sensor values
     /// when the scene has a [sensor]).
     Render(RenderArgs),
+    /// Scene files: `lumen scene convert scene.xml --out scene.toml` writes the lumen scene a
+    /// Mitsuba 3 scene reads as.
+    Scene {
+        #[command(subcommand)]
+        what: scene::SceneCmd,
+    },
     /// PNG previews of EXR images, written beside each as NAME.png: radiance tone-mapped,
     /// normals as (n + 1)/2, depth and scalars in colour with a labelled scale bar, ids in
     /// distinct colours.
@@ -218,7 +225,7 @@ enum Command {
 /// `lumen render`'s flags.
 #[derive(clap::Args)]
 pub struct RenderArgs {
-    /// Scene file (TOML), e.g. pipelines/scenes/cornell-box.toml.
+    /// Scene file: lumen's TOML (e.g. pipelines/scenes/cornell-box.toml) or Mitsuba 3's XML.
     pub scene: PathBuf,
     /// Output image: .exr or .png; truth images and the variance go beside it as
     /// NAME.<aov>.exr.
@@ -246,6 +253,9 @@ pub struct RenderArgs {
     /// Also write a PNG preview of every EXR written (as `lumen preview` does).
     #[arg(long)]
     pub preview: bool,
+    /// A value for a `$NAME` parameter of a Mitsuba scene (repeatable), as Mitsuba's -D.
+    #[arg(short = 'D', long = "define", value_name = "NAME=VALUE", value_parser = scene::parse_define)]
+    pub define: Vec<(String, String)>,
 }
 
 #[derive(Subcommand)]
@@ -365,6 +375,7 @@ pub fn main() -> i32 {
             slurm_cmd(&pipeline, opts)
         }
         Command::Render(args) => render_cmd(&args).map(|_| 0),
+        Command::Scene { what } => scene::run(what).map(|_| 0),
         Command::Preview { files, kind } => preview_cmd(&files, kind.as_deref()).map(|_| 0),
         Command::Calibrate {
             images,
@@ -457,7 +468,18 @@ fn integrator_parser() -> impl clap::builder::TypedValueParser<Value = &'static 
 }
 
 fn render_cmd(a: &RenderArgs) -> Result<()> {
-    let RenderArgs { scene: scene_path, out, integrator, spp, max_depth, seed, threads, aov, preview } = a;
+    let RenderArgs {
+        scene: scene_path,
+        out,
+        integrator,
+        spp,
+        max_depth,
+        seed,
+        threads,
+        aov,
+        preview,
+        define,
+    } = a;
     let (spp, max_depth, seed, threads) = (*spp, *max_depth, *seed, *threads);
     let ext = out.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     if ext != "exr" && ext != "png" {
@@ -468,7 +490,7 @@ fn render_cmd(a: &RenderArgs) -> Result<()> {
             bail!("--aov {a}: expected one of variance, {}", render::truth::AOV_NAMES.join(", "));
         }
     }
-    let scene = render::load(scene_path)?;
+    let scene = scene::load(scene_path, define)?;
     if scene.lights.is_empty() {
         eprintln!(
             "warning: {} has no light (or only black emitters): the image is black",

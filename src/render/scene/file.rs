@@ -16,17 +16,47 @@ pub struct SceneFile {
     #[serde(default)]
     pub render: RenderSpec,
     pub sensor: Option<super::super::sensor::Sensor>,
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub materials: Vec<MaterialSpec>,
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub shapes: Vec<ShapeSpec>,
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub lights: Vec<LightSpec>,
 }
 
 /// Camera: size, then either `fov_deg` (on the shorter side, centred principal point) or
 /// `fx, fy, cx, cy` (OpenCV pixels), optional `distortion = [k1, k2, p1, p2, k3]`, and a pose:
 /// `look_at = { origin, target, up }` or `t_world_cam = { rotation | rvec, translation }`.
+impl SceneFile {
+    /// Makes every relative file name (meshes, textures, environment maps) absolute, joined
+    /// to `dir`: the scene can then be written to another folder.
+    pub fn rebase(&mut self, dir: &std::path::Path) {
+        let fix = |f: &mut String| {
+            if std::path::Path::new(f.as_str()).is_relative() {
+                *f = dir.join(&*f).to_string_lossy().into_owned();
+            }
+        };
+        for m in &mut self.materials {
+            if let TextureSpec::Image { texture } = &mut m.albedo {
+                fix(texture);
+            }
+            if let Some(RoughnessSpec::Image { texture }) = &mut m.alpha {
+                fix(texture);
+            }
+        }
+        for s in &mut self.shapes {
+            if let ShapeSpec::Mesh { file, .. } = s {
+                fix(file);
+            }
+        }
+        for l in &mut self.lights {
+            if let LightSpec::Environment { map: Some(m), .. } = l {
+                fix(m);
+            }
+        }
+    }
+}
+
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct CameraSpec {

@@ -111,7 +111,7 @@ pub struct Scene {
 
 /// Reads a scene file: lumen's TOML, or Mitsuba 3's XML (by the extension `.xml`).
 pub fn load(path: &Path) -> Result<Scene, Error> {
-    if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("xml")) {
+    if mitsuba::is_mitsuba(path) {
         return load_mitsuba(path, &[]);
     }
     let text = std::fs::read_to_string(path)

@@ -38,6 +38,11 @@ use std::cell::RefCell;
 use std::path::{Path, PathBuf};
 use xml::Elem;
 
+/// Whether a scene file is Mitsuba's (by its extension, `.xml`).
+pub fn is_mitsuba(path: &Path) -> bool {
+    path.extension().is_some_and(|e| e.eq_ignore_ascii_case("xml"))
+}
+
 /// What a Mitsuba scene file holds, as a lumen scene, and the clip planes its sensor asked
 /// for (checked against the built scene: lumen does not clip).
 pub struct Read {
@@ -622,7 +627,7 @@ impl Converter {
         }
         let mut material = match bsdfs.as_slice() {
             [] => None,
-            [b] => Some(self.material(b)?),
+            [b] => Some(self.material(b, &name)?),
             _ => return Err(e.error("has more than one <bsdf>")),
         };
         let emission = match emitters.as_slice() {
@@ -726,9 +731,10 @@ impl Converter {
         Ok(())
     }
 
-    /// The name of the material a `bsdf` element converts to, added once per id.
-    fn material(&mut self, b: &Elem) -> Result<String, Error> {
-        let name = b.attr("id").map_or_else(|| format!("bsdf{}", self.materials.len()), str::to_string);
+    /// The name of the material a `bsdf` element converts to (its id, or its shape's name),
+    /// added once per id.
+    fn material(&mut self, b: &Elem, shape: &str) -> Result<String, Error> {
+        let name = b.attr("id").map_or_else(|| shape.to_string(), str::to_string);
         if self.materials.iter().any(|m| m.name == name) {
             return Ok(name);
         }
@@ -853,9 +859,11 @@ fn sampler(s: &Elem, render: &mut RenderSpec) -> Result<(), Error> {
         "stratified" | "multijitter" | "orthogonal" | "ldsampler" => {
             super::super::sampler::SamplerKind::Sobol
         }
-        other => return Err(s.unsupported(format!(
+        other => {
+            return Err(s.unsupported(format!(
             "sampler \"{other}\": lumen reads independent, stratified, multijitter, orthogonal and ldsampler"
-        ))),
+        )))
+        }
     };
     if let Some(n) = p.int("sample_count")? {
         if !(1..=u32::MAX as i64).contains(&n) {

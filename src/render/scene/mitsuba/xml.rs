@@ -100,7 +100,11 @@ impl Reader {
         }
         let text = std::fs::read_to_string(path)
             .map_err(|e| Error::Io { path: path.to_path_buf(), message: e.to_string() })?;
-        let options = roxmltree::ParsingOptions { allow_dtd: false, nodes_limit: MAX_ELEMENTS as u32, ..Default::default() };
+        let options = roxmltree::ParsingOptions {
+            allow_dtd: false,
+            nodes_limit: MAX_ELEMENTS as u32,
+            ..Default::default()
+        };
         let doc = roxmltree::Document::parse_with_options(&text, options).map_err(|e| Error::Parse {
             path: path.to_path_buf(),
             message: format!("not well-formed XML: {e}"),
@@ -252,9 +256,9 @@ fn resolve_refs(
                 return Err(c.error(format!("refs form a cycle: {} → {id}", resolving.join(" → "))));
             }
             let name = c.attr("name").map(str::to_string);
-            *budget = budget.checked_sub(size(target)).ok_or_else(|| {
-                c.error(format!("refs expand the scene past {MAX_ELEMENTS} elements"))
-            })?;
+            *budget = budget
+                .checked_sub(size(target))
+                .ok_or_else(|| c.error(format!("refs expand the scene past {MAX_ELEMENTS} elements")))?;
             let mut t = target.clone();
             if let Some(n) = name {
                 t.attrs.retain(|(k, _)| k != "name");
