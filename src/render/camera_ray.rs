@@ -6,10 +6,12 @@ use super::geometry::Ray;
 use super::scene::Scene;
 use glam::{DVec2, Vec3A};
 
-/// The pinhole direction (camera frame) through pixel (x, y) at the offset `jitter` ∈ [0, 1)²
-/// within it; `None` beyond the fold of the distortion.
+/// The pinhole direction (camera frame) through pixel (x, y) at the point the pixel filter
+/// draws with `jitter` ∈ [0, 1)² (`render::filter`); `None` beyond the fold of the distortion.
 pub fn camera_direction(scene: &Scene, x: u32, y: u32, jitter: (f32, f32)) -> Option<glam::DVec3> {
-    let px = DVec2::new(x as f64 + jitter.0 as f64 - 0.5, y as f64 + jitter.1 as f64 - 0.5);
+    let f = scene.render.filter;
+    let px =
+        DVec2::new(f.position(x, scene.camera.width, jitter.0), f.position(y, scene.camera.height, jitter.1));
     scene.camera.pixel_ray(px)
 }
 

@@ -10,6 +10,7 @@ pub mod bvh;
 pub mod camera_ray;
 pub mod envmap;
 pub mod film;
+pub mod filter;
 pub mod geometry;
 pub mod integrators;
 pub mod lanes;

@@ -130,6 +130,10 @@ pub struct RenderSpec {
     /// `render::sampler`; converges faster on pixel edges and soft shadows).
     #[serde(default)]
     pub sampler: super::super::sampler::SamplerKind,
+    /// The pixel filter: `"box"` (default; each pixel averages its own square) or
+    /// `"gaussian"` (Mitsuba's default rfilter, σ = 0.5 px; `render::filter`).
+    #[serde(default)]
+    pub filter: super::super::filter::PixelFilter,
 }
 
 fn default_integrator() -> &'static crate::render::integrators::Kind {
@@ -153,6 +157,7 @@ impl Default for RenderSpec {
             max_depth: default_depth(),
             seed: default_seed(),
             sampler: Default::default(),
+            filter: Default::default(),
         }
     }
 }

@@ -13,7 +13,7 @@
 //!   cut no geometry, as lumen does not clip), Mitsuba's camera frame (x left, y up, z
 //!   forward) turned into OpenCV's (x right, y down); its pixel i spans [i, i + 1), so the
 //!   principal point is ((W − 1)/2, (H − 1)/2) in lumen's integer-centred pixels. `hdrfilm`
-//!   (width, height, `box` filter); `sampler`: `independent` → independent, `stratified`,
+//!   (width, height, `box` or `gaussian` rfilter, gaussian by default as in Mitsuba); `sampler`: `independent` → independent, `stratified`,
 //!   `multijitter`, `orthogonal`, `ldsampler` → lumen's Sobol sampler; `sample_count` → spp.
 //! - `bsdf`: `diffuse` → lambertian; `conductor` → mirror, `roughconductor` → conductor (named
 //!   `material`s in `named`, or `eta`/`k`; `specular_reflectance` tints); `dielectric` (named
@@ -30,6 +30,7 @@
 mod named;
 mod xml;
 
+use super::super::filter::{PixelFilter, GAUSSIAN_STDDEV};
 use super::super::texture::{CheckerSpec, RoughnessSpec, TextureSpec};
 use super::super::Error;
 use super::file::*;
@@ -510,11 +511,12 @@ impl Converter {
             }
         };
         let films = p.objects("film");
-        let (width, height) = match films.as_slice() {
-            [] => (768, 576),
+        let (width, height, filter) = match films.as_slice() {
+            [] => (768, 576, PixelFilter::Gaussian),
             [f] => film(f)?,
             _ => return Err(e.error("has more than one <film>")),
         };
+        render.filter = filter;
         for s in p.objects("sampler") {
             sampler(s, render)?;
         }
@@ -814,7 +816,7 @@ impl Converter {
     }
 }
 
-fn film(f: &Elem) -> Result<(u32, u32), Error> {
+fn film(f: &Elem) -> Result<(u32, u32, PixelFilter), Error> {
     let p = Props::new(f);
     if f.plugin() != "hdrfilm" {
         return Err(f.unsupported(format!("film \"{}\": lumen reads hdrfilm", f.plugin())));
@@ -827,14 +829,23 @@ fn film(f: &Elem) -> Result<(u32, u32), Error> {
         Ok(v as u32)
     };
     let (w, h) = (size("width", 768)?, size("height", 576)?);
+    // Mitsuba's default reconstruction filter is its gaussian.
+    let mut filter = PixelFilter::Gaussian;
     for r in p.objects("rfilter") {
-        if r.plugin() != "box" {
-            return Err(r.unsupported(format!(
-                "rfilter \"{}\": lumen integrates each pixel over its box (use <rfilter type=\"box\"/>)",
-                r.plugin()
-            )));
-        }
-        Props::new(r).finish("nothing (box)")?;
+        let q = Props::new(r);
+        filter = match r.plugin() {
+            "box" => PixelFilter::Box,
+            "gaussian" => {
+                if let Some(s) = q.float("stddev")?.filter(|&s| s != GAUSSIAN_STDDEV) {
+                    return Err(r.unsupported(format!(
+                        "stddev {s}: lumen's gaussian filter has Mitsuba's default, 0.5"
+                    )));
+                }
+                PixelFilter::Gaussian
+            }
+            other => return Err(r.unsupported(format!("rfilter \"{other}\": lumen has box and gaussian"))),
+        };
+        q.finish("stddev (gaussian)")?;
     }
     for k in ["crop_offset_x", "crop_offset_y", "crop_width", "crop_height"] {
         if p.find(k).is_some() {
@@ -849,7 +860,7 @@ fn film(f: &Elem) -> Result<(u32, u32), Error> {
     // How the image is stored, not what it holds: lumen writes linear RGB float EXR.
     p.accept(&["file_format", "pixel_format", "component_format", "compensate", "banner"]);
     p.finish("width, height, rfilter, file_format, pixel_format, component_format")?;
-    Ok((w, h))
+    Ok((w, h, filter))
 }
 
 fn sampler(s: &Elem, render: &mut RenderSpec) -> Result<(), Error> {
