@@ -211,14 +211,49 @@ fn ref_expansion_is_bounded() {
 fn cli_names_the_fault() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("scene.xml");
-    std::fs::write(
-        &path,
-        scene_with("<shape type=\"ply\"><string name=\"filename\" value=\"a.ply\"/></shape>"),
-    )
-    .unwrap();
+    std::fs::write(&path, scene_with("<shape type=\"disk\"/>")).unwrap();
     let (code, err) =
         lumen(&["render", path.to_str().unwrap(), "--out", dir.path().join("o.exr").to_str().unwrap()]);
-    assert!(code != 0 && err.contains("shape \"ply\"") && err.contains("scene.xml:7"), "{err}");
+    assert!(code != 0 && err.contains("shape \"disk\"") && err.contains("scene.xml:7"), "{err}");
     assert_eq!(fault_in(&err), "unsupported", "{err}");
     assert!(!dir.path().join("o.exr").exists());
+}
+
+/// A box from a PLY file (binary, quads) renders as Mitsuba's `cube` with the same transform.
+#[test]
+fn ply_mesh_renders_as_the_cube_it_describes() {
+    let dir = tempfile::tempdir().unwrap();
+    let corners: Vec<[f32; 3]> = (0..8)
+        .map(|i| [(i & 1) as f32 * 2.0 - 1.0, (i >> 1 & 1) as f32 * 2.0 - 1.0, (i >> 2) as f32 * 2.0 - 1.0])
+        .collect();
+    // Each face's corners counter-clockwise seen from outside.
+    let faces = [[0u32, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
+    let mut ply = b"ply\nformat binary_little_endian 1.0\nelement vertex 8\nproperty float x\nproperty float y\nproperty float z\nelement face 6\nproperty list uchar int vertex_indices\nend_header\n".to_vec();
+    for c in &corners {
+        c.iter().for_each(|v| ply.extend(v.to_le_bytes()));
+    }
+    for f in &faces {
+        ply.push(4);
+        f.iter().for_each(|v| ply.extend((*v as i32).to_le_bytes()));
+    }
+    std::fs::write(dir.path().join("box.ply"), ply).unwrap();
+    let scene = |shape: &str| {
+        scene_with(&format!(
+            "<shape type=\"{shape}\"><transform name=\"to_world\"><scale value=\"0.5, 0.8, 0.6\"/><rotate y=\"1\" angle=\"30\"/></transform><bsdf type=\"diffuse\"/></shape>\n<emitter type=\"constant\"><rgb name=\"radiance\" value=\"1\"/></emitter>"
+        ))
+        .replace("<shape type=\"ply\">", "<shape type=\"ply\"><string name=\"filename\" value=\"box.ply\"/>")
+    };
+    let mut films = Vec::new();
+    for shape in ["cube", "ply"] {
+        let path = dir.path().join(format!("{shape}.xml"));
+        std::fs::write(&path, scene(shape)).unwrap();
+        films.push(film(&path));
+    }
+    let (a, b) = (&films[0].mean, &films[1].mean);
+    let differ =
+        a.data.iter().zip(&b.data).filter(|(x, y)| (*x - *y).abs() > 1e-4 * x.abs().max(1.0)).count();
+    // The same box, split into triangles along other diagonals: equal but for rounding.
+    assert!(differ <= a.data.len() / 100, "{differ} of {} values differ", a.data.len());
+    let lit = a.data.iter().filter(|v| **v > 0.0 && **v < 0.99).count();
+    assert!(lit > 10, "the box is not in view");
 }

@@ -16,6 +16,7 @@ pub mod integrators;
 pub mod lanes;
 pub mod microfacet;
 pub mod obj;
+pub mod ply;
 pub mod sampler;
 pub mod scene;
 pub mod sensor;
@@ -49,6 +50,8 @@ pub enum Error {
     MitsubaUnsupported { at: String, message: String },
     #[error(transparent)]
     Obj(#[from] obj::ObjError),
+    #[error(transparent)]
+    Ply(#[from] ply::PlyError),
     #[error("{path}: the mesh has no faces")]
     EmptyMesh { path: PathBuf },
     #[error(transparent)]
@@ -64,6 +67,7 @@ impl Error {
         match self {
             Error::Io { .. } => Fault::Io,
             Error::Obj(e) => e.fault(),
+            Error::Ply(e) => e.fault(),
             Error::Image(e) => e.fault(),
             Error::MitsubaUnsupported { .. } => Fault::Unsupported,
             Error::Parse { .. }

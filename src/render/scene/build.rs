@@ -4,7 +4,7 @@
 use super::super::bsdf::Bsdf;
 use super::super::geometry::{Prim, PrimInfo};
 use super::super::texture::{RoughnessSpec, Texture};
-use super::super::{bvh::Bvh, microfacet, obj, surfaces, Error};
+use super::super::{bvh::Bvh, microfacet, obj, ply, surfaces, Error};
 use super::file::*;
 use super::{bounding_sphere, light_cdf, light_of_prim, Light, Material, Scene, ThinLens};
 use crate::math::{CameraModel, CameraToWorld, Distortion, Intrinsics, Pose};
@@ -215,7 +215,11 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
         match shape {
             ShapeSpec::Mesh { file: f, material, object_materials, transform, reverse_orientation } => {
                 let mesh_path = dir.join(f);
-                let mesh = obj::read(&mesh_path)?;
+                let mesh = if mesh_path.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply")) {
+                    ply::read(&mesh_path)?
+                } else {
+                    obj::read(&mesh_path)?
+                };
                 if mesh.triangles.is_empty() {
                     return Err(Error::EmptyMesh { path: mesh_path });
                 }

@@ -202,7 +202,7 @@ pub struct MaterialSpec {
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
 pub enum ShapeSpec {
-    /// An OBJ file. `material` is used for faces whose `usemtl` names no scene material;
+    /// An OBJ or PLY file (by extension; `render::obj`, `render::ply`). `material` is used for faces whose `usemtl` names no scene material;
     /// `object_materials` maps OBJ object names (`o`) to scene materials, overriding both.
     Mesh {
         file: String,

@@ -20,7 +20,7 @@
 //!   or numeric `int_ior`/`ext_ior`); `twosided` around one BSDF (lumen's surfaces are
 //!   two-sided). Colours as `rgb`, a constant `spectrum` or `float`, or a `checkerboard` /
 //!   `bitmap` texture.
-//! - `shape`: `obj`, `sphere`, `rectangle`, `cube`, with `to_world`, `flip_normals`, a `bsdf`
+//! - `shape`: `obj`, `ply`, `sphere`, `rectangle`, `cube`, with `to_world`, `flip_normals`, a `bsdf`
 //!   and an `area` emitter (the shape's material then emits). `emitter`: `point`, `spot`,
 //!   `directional`, `constant`, `envmap`.
 //!
@@ -667,13 +667,19 @@ impl Converter {
             return Err(e.error("to_world is singular: it flattens the shape"));
         }
         let shape = match e.plugin() {
-            "obj" => {
+            "obj" | "ply" => {
                 let f = p.string("filename")?.ok_or_else(|| e.error("needs `filename`"))?;
                 let file = self.file(e, &f)?;
                 let face_normals = p.boolean("face_normals")?.unwrap_or(false);
-                if !face_normals && has_vertex_normals(&self.main_dir.join(&file)) {
+                let full = self.main_dir.join(&file);
+                let normals = if e.plugin() == "obj" {
+                    has_vertex_normals(&full)
+                } else {
+                    super::super::ply::has_normals(&full)
+                };
+                if !face_normals && normals {
                     return Err(e.unsupported(format!(
-                        "\"{f}\" has vertex normals (vn), which Mitsuba interpolates: lumen shades with face normals; add <boolean name=\"face_normals\" value=\"true\"/>"
+                        "\"{f}\" has vertex normals, which Mitsuba interpolates: lumen shades with face normals; add <boolean name=\"face_normals\" value=\"true\"/>"
                     )));
                 }
                 p.accept(&["flip_tex_coords"]);
@@ -723,12 +729,12 @@ impl Converter {
                 reverse_orientation: flip,
             },
             other => {
-                return Err(
-                    e.unsupported(format!("shape \"{other}\": lumen reads obj, sphere, rectangle and cube"))
-                )
+                return Err(e.unsupported(format!(
+                    "shape \"{other}\": lumen reads obj, ply, sphere, rectangle and cube"
+                )))
             }
         };
-        p.finish("filename, face_normals, flip_tex_coords (obj); center, radius (sphere); to_world, flip_normals, bsdf, emitter")?;
+        p.finish("filename, face_normals, flip_tex_coords (obj, ply); center, radius (sphere); to_world, flip_normals, bsdf, emitter")?;
         self.shapes.push(shape);
         Ok(())
     }
