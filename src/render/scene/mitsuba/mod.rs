@@ -18,7 +18,8 @@
 //! - `bsdf`: `diffuse` → lambertian; `conductor` → mirror, `roughconductor` → conductor (named
 //!   `material`s in `named`, or `eta`/`k`; `specular_reflectance` tints); `dielectric` (named
 //!   or numeric `int_ior`/`ext_ior`); `twosided` around one BSDF (lumen's surfaces are
-//!   two-sided). Colours as `rgb`, a constant `spectrum` or `float`, or a `checkerboard` /
+//!   two-sided). Colours as `rgb`, `float`, `spectrum` (a constant or wavelength:value
+//!   pairs, turned into RGB as Mitsuba's RGB variants do: `spectrum`), or a `checkerboard` /
 //!   `bitmap` texture.
 //! - `shape`: `obj`, `ply`, `sphere`, `rectangle`, `cube`, with `to_world`, `flip_normals`, a `bsdf`
 //!   and an `area` emitter (the shape's material then emits). `emitter`: `point`, `spot`,
@@ -28,6 +29,7 @@
 //! what lumen supports instead: nothing is dropped silently.
 
 mod named;
+mod spectrum;
 mod xml;
 
 use super::super::filter::{PixelFilter, GAUSSIAN_STDDEV};
@@ -283,16 +285,40 @@ fn color(c: &Elem) -> Result<Color, Error> {
             }
         }
         "spectrum" => {
-            let v = c.attr("value").ok_or_else(|| c.error("needs `value` (or use <rgb>)"))?;
-            if v.contains(':') || c.attr("filename").is_some() {
+            if c.attr("type").is_some() || c.attr("filename").is_some() {
                 return Err(c.unsupported(
-                    "a spectrum of wavelength:value pairs: lumen renders in RGB and reads a constant spectrum or <rgb> here",
+                    "a spectrum plugin or file: lumen reads a constant spectrum or wavelength:value pairs here",
                 ));
             }
-            match numbers(c, v)?.as_slice() {
-                [a] => Ok(Color::Rgb([*a; 3])),
-                _ => Err(c.error(format!("`value` \"{v}\": expected one number"))),
+            let v = c.attr("value").ok_or_else(|| c.error("needs `value`"))?;
+            // How Mitsuba turns it into RGB depends on what it is for.
+            let usage = match c.attr("name").unwrap_or("") {
+                "radiance" | "intensity" | "irradiance" => spectrum::Use::Emission,
+                "eta" | "k" => spectrum::Use::Unbounded,
+                _ => spectrum::Use::Reflectance,
+            };
+            if !v.contains(':') {
+                return match numbers(c, v)?.as_slice() {
+                    [a] => Ok(Color::Rgb(spectrum::uniform(*a, usage))),
+                    _ => {
+                        Err(c
+                            .error(format!("`value` \"{v}\": expected one number or wavelength:value pairs")))
+                    }
+                };
             }
+            let mut w = Vec::new();
+            let mut vals = Vec::new();
+            for pair in v.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+                let Some((a, b)) = pair.split_once(':') else {
+                    return Err(c.error(format!("\"{pair}\": expected wavelength:value")));
+                };
+                w.push(number(c, a)?);
+                vals.push(number(c, b)?);
+            }
+            if w.len() < 2 || w.windows(2).any(|p| p[1] <= p[0]) {
+                return Err(c.error("needs at least two wavelength:value pairs, wavelengths increasing"));
+            }
+            Ok(Color::Rgb(spectrum::to_rgb(&w, &vals, usage)))
         }
         "texture" => texture(c).map(Color::Texture),
         t => Err(c.error(format!("<{t}> is not a colour: expected <rgb>, <spectrum>, <float> or <texture>"))),
