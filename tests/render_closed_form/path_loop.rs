@@ -103,6 +103,12 @@ fn eight_lanes_match_the_scalar_loop_bit_for_bit() {
     assert!(lens.lens.is_some());
     let cornell = render::load(&root.join("pipelines/scenes/cornell-box.toml")).unwrap();
     let board = render::load(&root.join("pipelines/scenes/calib-board.toml")).unwrap();
+    // Mitsuba's Cornell box read from XML: one-sided walls (the light's back is hit from the
+    // ceiling's side) and the gaussian pixel filter.
+    let xml = root.join("tests/data/mitsuba/cornell-box.xml");
+    let params = [("rfilter".to_string(), "gaussian".to_string()), ("res".to_string(), "48".to_string())];
+    let one_sided = render::scene::load_mitsuba(&xml, &params).unwrap();
+    assert!(one_sided.materials.iter().all(|m| m.one_sided));
     let cases = [
         ("mixed lights", &mixed, render::sampler::SamplerKind::Independent, None),
         ("mixed lights, Sobol", &mixed, render::sampler::SamplerKind::Sobol, None),
@@ -110,6 +116,12 @@ fn eight_lanes_match_the_scalar_loop_bit_for_bit() {
         ("Cornell box", &cornell, render::sampler::SamplerKind::Independent, Some([100, 20, 140, 200])),
         ("Cornell box, Sobol", &cornell, render::sampler::SamplerKind::Sobol, Some([100, 20, 140, 200])),
         ("calibration board", &board, render::sampler::SamplerKind::Independent, Some([200, 150, 260, 190])),
+        (
+            "one-sided Cornell box, gaussian filter",
+            &one_sided,
+            render::sampler::SamplerKind::Independent,
+            None,
+        ),
     ];
     for (name, scene, sampler, crop) in cases {
         let mut s = common::settings(scene, 8, 8);

@@ -16,7 +16,8 @@
 //! camera ray, or after a glossy vertex with its MIS weight. Scenes without glossy materials
 //! do none of this bookkeeping. At a mirror or smooth dielectric (delta) vertex there is no
 //! light sample (it could not land on the one direction the vertex scatters into), and the
-//! emitter or environment the scattered ray reaches counts in full. Surfaces are two-sided;
+//! emitter or environment the scattered ray reaches counts in full. Surfaces are two-sided
+//! unless their material is one-sided (black from behind, as Mitsuba's BSDFs without `twosided`);
 //! emitters emit on their front side only; a dielectric's inside is the side its normal
 //! points away from. A thin lens, when the camera has one, moves each camera ray's origin
 //! over the aperture (`lens_ray`).
@@ -99,8 +100,12 @@ pub fn trace(scene: &Scene, mut ray: Ray, max_depth: u32, s: &mut Sampler) -> Ve
         if depth == max_depth {
             break;
         }
-        // Two-sided surfaces: shade with the normal on the side the path arrived from.
+        // Two-sided surfaces: shade with the normal on the side the path arrived from; a
+        // one-sided one is black from behind, and the path ends there.
         let front = surf.n.dot(wo) >= 0.0;
+        if !front && mat.one_sided {
+            break;
+        }
         let n = if front { surf.n } else { -surf.n };
         let albedo = scene.albedo(surf.material, &hit, surf.p);
         let eps = epsilon(surf.p);

@@ -199,7 +199,15 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
             }
             _ => None,
         };
-        materials.push(Material { name: m.name.clone(), albedo, emission, bsdf, roughness });
+        let one_sided = m.two_sided == Some(false);
+        if one_sided && matches!(bsdf, Bsdf::Dielectric { .. }) {
+            return Err(field_err(
+                path,
+                &format!("{field}.two_sided"),
+                "a dielectric has two sides by nature (light passes through): leave two_sided out",
+            ));
+        }
+        materials.push(Material { name: m.name.clone(), albedo, emission, bsdf, roughness, one_sided });
     }
     let material_index = |name: &str, field: &str| -> Result<u32, Error> {
         materials.iter().position(|m| m.name == name).map(|i| i as u32).ok_or_else(|| {

@@ -197,6 +197,12 @@ pub struct MaterialSpec {
     /// Emitted radiance (linear RGB), one-sided along the surface normal: makes every shape
     /// with this material an area light.
     pub emission: Option<[f64; 3]>,
+    /// `false`: the surface is black seen from behind (the side its normal points away from):
+    /// it neither reflects nor lets a path go on there, as Mitsuba's diffuse and conductor
+    /// BSDFs without `twosided`. Default `true` (both sides reflect alike). Not for a
+    /// dielectric, which has two sides by nature.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub two_sided: Option<bool>,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]

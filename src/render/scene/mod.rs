@@ -47,6 +47,9 @@ pub struct Material {
     pub bsdf: Bsdf,
     /// A textured conductor roughness α (in the x channel), replacing the model's per hit.
     pub roughness: Option<Texture>,
+    /// Black from the side its normal points away from, as Mitsuba's BSDFs without
+    /// `twosided` are; lumen's surfaces are two-sided otherwise.
+    pub one_sided: bool,
 }
 
 #[derive(Clone, Copy, Debug)]

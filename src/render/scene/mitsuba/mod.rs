@@ -17,8 +17,9 @@
 //!   `multijitter`, `orthogonal`, `ldsampler` → lumen's Sobol sampler; `sample_count` → spp.
 //! - `bsdf`: `diffuse` → lambertian; `conductor` → mirror, `roughconductor` → conductor (named
 //!   `material`s in `named`, or `eta`/`k`; `specular_reflectance` tints); `dielectric` (named
-//!   or numeric `int_ior`/`ext_ior`); `twosided` around one BSDF (lumen's surfaces are
-//!   two-sided). Colours as `rgb`, `float`, `spectrum` (a constant or wavelength:value
+//!   or numeric `int_ior`/`ext_ior`); `twosided` around one BSDF. As in Mitsuba, a diffuse or
+//!   conductor material is one-sided (`two_sided = false`: black from behind) unless wrapped
+//!   in `twosided`. Colours as `rgb`, `float`, `spectrum` (a constant or wavelength:value
 //!   pairs, turned into RGB as Mitsuba's RGB variants do: `spectrum`), or a `checkerboard` /
 //!   `bitmap` texture.
 //! - `shape`: `obj`, `ply`, `sphere`, `rectangle`, `cube`, with `to_world`, `flip_normals`, a `bsdf`
@@ -938,6 +939,8 @@ fn lambertian(name: &str, albedo: TextureSpec) -> MaterialSpec {
         k: None,
         ior: None,
         emission: None,
+        // Mitsuba's diffuse and conductors are black from behind unless wrapped in `twosided`.
+        two_sided: Some(false),
     }
 }
 
@@ -999,8 +1002,11 @@ fn bsdf(b: &Elem, name: String) -> Result<MaterialSpec, Error> {
             let inner = p.objects("bsdf");
             p.finish("one nested bsdf")?;
             return match inner.as_slice() {
-                // lumen's surfaces are two-sided already.
-                [i] => bsdf(i, name),
+                [i] => {
+                    let mut m = bsdf(i, name)?;
+                    m.two_sided = None;
+                    Ok(m)
+                }
                 [_, _] => Err(b.unsupported(
                     "a twosided with two different BSDFs: lumen's surfaces have one material on both sides",
                 )),
@@ -1060,6 +1066,7 @@ fn bsdf(b: &Elem, name: String) -> Result<MaterialSpec, Error> {
                 }
             };
             m.kind = "dielectric".into();
+            m.two_sided = None;
             m.ior = Some(int / ext);
             m.albedo = TextureSpec::Constant(tint);
         }

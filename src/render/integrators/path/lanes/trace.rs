@@ -153,7 +153,8 @@ pub unsafe fn trace_group(
                     put(&mut lanes.l, lane, l);
                 }
             }
-            if depth == max_depth {
+            // As the one-path loop: the last vertex, or the back of a one-sided surface.
+            if depth == max_depth || (mat.one_sided && !(surf.n.dot(-ray.dir) >= 0.0)) {
                 radiance[lanes.slot[lane]] = get(&lanes.l, lane);
                 lanes.active &= !(1 << lane);
                 continue;
