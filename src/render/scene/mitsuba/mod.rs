@@ -61,6 +61,7 @@ pub fn read(path: &Path, params: &[(String, String)]) -> Result<Read, Error> {
         main_dir: path.parent().map(Path::to_path_buf).unwrap_or_default(),
         search,
         materials: Vec::new(),
+        bsdf_ids: Default::default(),
         shapes: Vec::new(),
         lights: Vec::new(),
         media: false,
@@ -464,6 +465,8 @@ struct Converter {
     main_dir: PathBuf,
     search: Vec<PathBuf>,
     materials: Vec<MaterialSpec>,
+    /// The material each BSDF id became.
+    bsdf_ids: std::collections::HashMap<String, String>,
     shapes: Vec<ShapeSpec>,
     lights: Vec<LightSpec>,
     media: bool,
@@ -682,7 +685,7 @@ impl Converter {
             // The material is shared by name: an emitting shape gets its own copy.
             let base = material.clone().unwrap_or_else(|| default_name.to_string());
             let i = self.materials.iter().position(|m| m.name == base).expect("material just added");
-            let copy = copy_material(&self.materials[i], format!("{name}-emitter"), le);
+            let copy = copy_material(&self.materials[i], self.unused_name(&format!("{name}-emitter")), le);
             material = Some(copy.name.clone());
             self.materials.push(copy);
         }
@@ -766,16 +769,29 @@ impl Converter {
         Ok(())
     }
 
-    /// The name of the material a `bsdf` element converts to (its id, or its shape's name),
-    /// added once per id.
+    /// The name of the material a `bsdf` element converts to, added once per id.
     fn material(&mut self, b: &Elem, shape: &str) -> Result<String, Error> {
-        let name = b.attr("id").map_or_else(|| shape.to_string(), str::to_string);
-        if self.materials.iter().any(|m| m.name == name) {
-            return Ok(name);
+        if let Some(name) = b.attr("id").and_then(|id| self.bsdf_ids.get(id)) {
+            return Ok(name.clone());
         }
+        // Named by its id, or after its shape when written inside it; apart from every
+        // material made before.
+        let name = self.unused_name(b.attr("id").unwrap_or(shape));
         let spec = bsdf(b, name.clone())?;
         self.materials.push(spec);
+        if let Some(id) = b.attr("id") {
+            self.bsdf_ids.insert(id.to_string(), name.clone());
+        }
         Ok(name)
+    }
+
+    /// `base`, or `base-2`, `base-3` … whichever no material has yet.
+    fn unused_name(&self, base: &str) -> String {
+        let taken = |n: &str| self.materials.iter().any(|m| m.name == n);
+        if !taken(base) {
+            return base.to_string();
+        }
+        (2..).map(|k| format!("{base}-{k}")).find(|n| !taken(n)).unwrap_or_default()
     }
 
     fn emitter(&mut self, e: &Elem) -> Result<(), Error> {
