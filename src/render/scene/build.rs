@@ -155,6 +155,24 @@ impl TransformSpec {
     }
 }
 
+/// The parallelogram o + s·u + t·v (s, t ∈ [0, 1], the texture coordinates) as two triangles,
+/// each with the `PrimInfo` `info_of` makes of its texture coordinates.
+fn push_parallelogram(
+    prims: &mut Vec<Prim>,
+    info: &mut Vec<PrimInfo>,
+    o: Vec3A,
+    u: Vec3A,
+    v: Vec3A,
+    info_of: impl Fn([Vec2; 3]) -> PrimInfo,
+) {
+    for (e1, e2, uv) in
+        [(u, u + v, [Vec2::ZERO, Vec2::X, Vec2::ONE]), (u + v, v, [Vec2::ZERO, Vec2::ONE, Vec2::Y])]
+    {
+        prims.push(Prim::Triangle { v0: o, e1, e2 });
+        info.push(info_of(uv));
+    }
+}
+
 /// The faces of the cube [−1, 1]³ as (corner, edge u, edge v), u × v pointing out.
 fn cube_faces() -> [[DVec3; 3]; 6] {
     let d = |x: f64, y: f64, z: f64| DVec3::new(x, y, z);
@@ -332,19 +350,14 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                 object_names.push(format!("quad{i}"));
                 let id = object_names.len() as u32 - 1;
                 let [o, u, v] = [o, u, v].map(|x| Vec3A::from(x.as_vec3()));
-                for (a, e1, e2, uv) in [
-                    (o, u, u + v, [Vec2::ZERO, Vec2::X, Vec2::ONE]),
-                    (o, u + v, v, [Vec2::ZERO, Vec2::ONE, Vec2::Y]),
-                ] {
-                    prims.push(Prim::Triangle { v0: a, e1, e2 });
-                    info.push(PrimInfo {
-                        material: mtl,
-                        object_id: id,
-                        reverse: *reverse_orientation,
-                        uv,
-                        normal: Vec3A::ZERO,
-                    });
-                }
+                let info_of = |uv| PrimInfo {
+                    material: mtl,
+                    object_id: id,
+                    reverse: *reverse_orientation,
+                    uv,
+                    normal: Vec3A::ZERO,
+                };
+                push_parallelogram(&mut prims, &mut info, o, u, v, info_of);
             }
             ShapeSpec::Cube { material, transform, reverse_orientation } => {
                 let place = transform.build(path, &format!("{field}.transform"))?;
@@ -354,20 +367,9 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                 let reverse = *reverse_orientation ^ place.mirrors();
                 for [o, u, v] in cube_faces() {
                     let [o, u, v] = [o, o + u, o + v].map(|p| Vec3A::from(place.apply(p).as_vec3()));
-                    let (u, v) = (u - o, v - o);
-                    for (a, e1, e2, uv) in [
-                        (o, u, u + v, [Vec2::ZERO, Vec2::X, Vec2::ONE]),
-                        (o, u + v, v, [Vec2::ZERO, Vec2::ONE, Vec2::Y]),
-                    ] {
-                        prims.push(Prim::Triangle { v0: a, e1, e2 });
-                        info.push(PrimInfo {
-                            material: mtl,
-                            object_id: id,
-                            reverse,
-                            uv,
-                            normal: Vec3A::ZERO,
-                        });
-                    }
+                    let info_of =
+                        |uv| PrimInfo { material: mtl, object_id: id, reverse, uv, normal: Vec3A::ZERO };
+                    push_parallelogram(&mut prims, &mut info, o, u - o, v - o, info_of);
                 }
             }
             ShapeSpec::Torus { .. } | ShapeSpec::Blob { .. } | ShapeSpec::Relief { .. } => {

@@ -152,7 +152,7 @@ impl Reader {
                 line: line(c),
             };
             for a in c.attributes() {
-                let v = self.substitute(a.value()).map_err(|m| e.error(m))?;
+                let v = self.substitute(a.value(), &e)?;
                 e.attrs.push((a.name().to_string(), v));
             }
             let top = node.tag_name().name() == "scene" && node.parent().is_some_and(|p| p.is_root());
@@ -193,7 +193,7 @@ impl Reader {
     }
 
     /// `$name` replaced by its parameter's value; `$` followed by no name is kept.
-    fn substitute(&self, v: &str) -> Result<String, String> {
+    fn substitute(&self, v: &str, at: &Elem) -> Result<String, Error> {
         if !v.contains('$') {
             return Ok(v.to_string());
         }
@@ -208,7 +208,9 @@ impl Reader {
             } else {
                 let name = &after[..n];
                 let value = self.params.get(name).ok_or_else(|| {
-                    format!("uses ${name}, which no <default name=\"{name}\"> or -D {name}=… defines")
+                    at.error(format!(
+                        "uses ${name}, which no <default name=\"{name}\"> or -D {name}=… defines"
+                    ))
                 })?;
                 out.push_str(value);
             }
