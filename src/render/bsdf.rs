@@ -52,6 +52,9 @@ pub enum Bsdf {
     Dielectric {
         eta: f32,
     },
+    /// No surface at all, only where a medium begins or ends (Mitsuba's `null`): the path goes
+    /// on straight through, unweighted.
+    Null,
 }
 
 /// Rec. 709 luminance of linear RGB.
@@ -63,7 +66,7 @@ impl Bsdf {
     /// Whether the model scatters into single directions (f and pdf are Dirac deltas).
     #[inline]
     pub fn is_delta(&self) -> bool {
-        matches!(self, Bsdf::Mirror { .. } | Bsdf::Dielectric { .. })
+        matches!(self, Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Null)
     }
 
     /// The model with roughness α (conductors only; others are returned as they are).
@@ -91,7 +94,7 @@ impl Bsdf {
     fn specular_probability(&self, kd: Vec3A) -> f32 {
         match *self {
             Bsdf::Lambertian => 0.0,
-            Bsdf::Conductor { .. } | Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } => 1.0,
+            Bsdf::Conductor { .. } | Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Null => 1.0,
             Bsdf::BlinnPhong { specular, .. } => {
                 let (d, s) = (luminance(kd), luminance(specular));
                 if s <= 0.0 {
@@ -122,7 +125,7 @@ impl Bsdf {
             return Vec3A::ZERO;
         }
         match *self {
-            Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } => Vec3A::ZERO,
+            Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Null => Vec3A::ZERO,
             Bsdf::Lambertian => kd * FRAC_1_PI,
             Bsdf::BlinnPhong { specular, exponent } => {
                 let h = (wo + wi).normalize();
@@ -157,7 +160,7 @@ impl Bsdf {
         let ps = self.specular_probability(kd);
         let diffuse = ci / PI;
         match *self {
-            Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } => 0.0,
+            Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Null => 0.0,
             Bsdf::Lambertian => diffuse,
             Bsdf::Conductor { distribution, alpha, .. } => {
                 let h = (wo + wi).normalize();
@@ -201,6 +204,7 @@ impl Bsdf {
                 };
                 (c > 0.0).then(|| (specular::reflect(wo, n), kd * f))
             }
+            Bsdf::Null => Some((-wo, Vec3A::ONE)),
             Bsdf::Dielectric { eta } => {
                 if n.dot(wo) <= 0.0 {
                     return None;

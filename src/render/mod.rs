@@ -14,6 +14,7 @@ pub mod filter;
 pub mod geometry;
 pub mod integrators;
 pub mod lanes;
+pub mod media;
 pub mod microfacet;
 pub mod obj;
 pub mod ply;

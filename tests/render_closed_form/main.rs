@@ -9,6 +9,7 @@ mod camera;
 mod environment;
 mod lights;
 mod materials;
+mod media;
 mod path_loop;
 
 use lumen::math::{CameraModel, Distortion, Intrinsics};

@@ -12,6 +12,7 @@
 //! heuristic.
 
 pub mod path;
+pub mod volpath;
 
 use super::camera_ray::{camera_direction, camera_ray, needs_lens_sample};
 use super::film::Film;
@@ -34,11 +35,18 @@ pub struct Kind {
 }
 
 /// Every integrator lumen has, by name.
-pub const REGISTRY: &[Kind] = &[Kind {
-    name: "path",
-    about: "unidirectional path tracing with next-event estimation and MIS",
-    render: path::render,
-}];
+pub const REGISTRY: &[Kind] = &[
+    Kind {
+        name: "path",
+        about: "unidirectional path tracing with next-event estimation and MIS",
+        render: path::render,
+    },
+    Kind {
+        name: "volpath",
+        about: "path tracing through participating media (delta tracking, light sampling through media)",
+        render: volpath::render,
+    },
+];
 
 /// The integrator scenes use unless they name one.
 pub const DEFAULT: &Kind = &REGISTRY[0];

@@ -3,6 +3,7 @@
 
 use super::super::bsdf::Bsdf;
 use super::super::geometry::{Prim, PrimInfo};
+use super::super::media::{Medium, Phase};
 use super::super::texture::{RoughnessSpec, Texture};
 use super::super::{bvh::Bvh, microfacet, obj, ply, surfaces, Error};
 use super::file::*;
@@ -208,7 +209,24 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
         if materials.iter().any(|x: &Material| x.name == m.name) {
             return Err(field_err(path, &format!("{field}.name"), "is used by an earlier material"));
         }
-        let albedo = Texture::build(&m.albedo, &dir, path, &format!("{field}.albedo"))?;
+        let albedo = match (&m.albedo, bsdf) {
+            (None, Bsdf::Null) => Texture::Constant(Vec3A::ONE),
+            (Some(_), Bsdf::Null) => {
+                return Err(field_err(
+                    path,
+                    &format!("{field}.albedo"),
+                    "a null material has no colour: leave it out",
+                ))
+            }
+            (Some(a), _) => Texture::build(a, &dir, path, &format!("{field}.albedo"))?,
+            (None, _) => {
+                return Err(field_err(
+                    path,
+                    &format!("{field}.albedo"),
+                    "is missing: give [r, g, b] or a texture",
+                ))
+            }
+        };
         let emission =
             m.emission.map(|e| non_negative3(path, &format!("{field}.emission"), e)).transpose()?;
         let roughness = match &m.alpha {
@@ -218,11 +236,11 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
             _ => None,
         };
         let one_sided = m.two_sided == Some(false);
-        if one_sided && matches!(bsdf, Bsdf::Dielectric { .. }) {
+        if one_sided && matches!(bsdf, Bsdf::Dielectric { .. } | Bsdf::Null) {
             return Err(field_err(
                 path,
                 &format!("{field}.two_sided"),
-                "a dielectric has two sides by nature (light passes through): leave two_sided out",
+                "a dielectric or null surface has two sides by nature (light passes through): leave two_sided out",
             ));
         }
         materials.push(Material { name: m.name.clone(), albedo, emission, bsdf, roughness, one_sided });
@@ -236,10 +254,35 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
     let mut prims = Vec::new();
     let mut info = Vec::new();
     let mut object_names = vec!["background".to_string()];
+    let media = build_media(&file.media, path)?;
+    let medium_index = |name: Option<&str>, field: &str| -> Result<Option<u32>, Error> {
+        name.map(|name| {
+            media.iter().position(|m| m.name == name).map(|i| i as u32).ok_or_else(|| {
+                field_err(
+                    path,
+                    field,
+                    format!("names medium '{name}', which the scene's [[media]] do not define"),
+                )
+            })
+        })
+        .transpose()
+    };
+    let camera_medium = medium_index(file.camera.medium.as_deref(), "camera.medium")?;
+    // Per primitive (file order), the media it bounds: `None` where its shape bounds none.
+    let mut boundaries: Vec<Option<[Option<u32>; 2]>> = Vec::new();
     for (i, shape) in file.shapes.iter().enumerate() {
         let field = format!("shapes[{i}]");
+        let boundary = match shape.media() {
+            (None, None) => None,
+            (inside, outside) => Some([
+                medium_index(inside, &format!("{field}.interior"))?,
+                medium_index(outside, &format!("{field}.exterior"))?,
+            ]),
+        };
         match shape {
-            ShapeSpec::Mesh { file: f, material, object_materials, transform, reverse_orientation } => {
+            ShapeSpec::Mesh {
+                file: f, material, object_materials, transform, reverse_orientation, ..
+            } => {
                 let mesh_path = dir.join(f);
                 let mesh = if mesh_path.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply")) {
                     ply::read(&mesh_path)?
@@ -315,7 +358,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                     });
                 }
             }
-            ShapeSpec::Sphere { center, radius, material, reverse_orientation } => {
+            ShapeSpec::Sphere { center, radius, material, reverse_orientation, .. } => {
                 let c = finite3(path, &format!("{field}.center"), *center)?;
                 if !(representable(*radius) && *radius > 0.0) {
                     return Err(field_err(
@@ -335,7 +378,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                     normal: Vec3A::ZERO,
                 });
             }
-            ShapeSpec::Quad { corner, edge_u, edge_v, material, reverse_orientation } => {
+            ShapeSpec::Quad { corner, edge_u, edge_v, material, reverse_orientation, .. } => {
                 let o = finite3(path, &format!("{field}.corner"), *corner)?;
                 let u = finite3(path, &format!("{field}.edge_u"), *edge_u)?;
                 let v = finite3(path, &format!("{field}.edge_v"), *edge_v)?;
@@ -359,7 +402,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                 };
                 push_parallelogram(&mut prims, &mut info, o, u, v, info_of);
             }
-            ShapeSpec::Cube { material, transform, reverse_orientation } => {
+            ShapeSpec::Cube { material, transform, reverse_orientation, .. } => {
                 let place = transform.build(path, &format!("{field}.transform"))?;
                 let mtl = material_index(material, &format!("{field}.material"))?;
                 object_names.push(format!("cube{i}"));
@@ -405,9 +448,23 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                 }
             }
         }
+        boundaries.resize(prims.len(), boundary);
     }
 
     let bvh = Bvh::build(&prims);
+    // In the BVH's order, and none at all where no shape bounds a medium.
+    let boundaries: Vec<Option<[Option<u32>; 2]>> = if boundaries.iter().all(Option::is_none) {
+        Vec::new()
+    } else {
+        bvh.order.iter().map(|&i| boundaries[i as usize]).collect()
+    };
+    if !media.is_empty() && file.render.integrator.name == "path" {
+        return Err(field_err(
+            path,
+            "render.integrator",
+            "is \"path\", which renders media as vacuum: a scene with media takes the volpath integrator ([render] integrator = \"volpath\"; in Mitsuba XML, <integrator type=\"volpath\">)",
+        ));
+    }
     let info: Vec<PrimInfo> = bvh
         .order
         .iter()
@@ -557,6 +614,9 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
         environment_light,
         environment_map,
         object_names,
+        media,
+        boundaries,
+        camera_medium,
         bounds_center,
         bounds_radius,
     })
@@ -745,14 +805,73 @@ fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error>
             }
             Ok(Bsdf::Dielectric { eta: ior as f32 })
         }
+        "null" if blinn_phong || conductor => Err(foreign("null", "blinn-phong or conductor")),
+        "null" => Ok(Bsdf::Null),
         other => Err(field_err(
             path,
             &format!("{field}.type"),
             format!(
-                "'{other}' is not a known material (expected \"lambertian\", \"blinn-phong\", \"conductor\", \"mirror\" or \"dielectric\")"
+                "'{other}' is not a known material (expected \"lambertian\", \"blinn-phong\", \"conductor\", \"mirror\", \"dielectric\" or \"null\")"
             ),
         )),
     }
+}
+
+/// The `[[media]]`, each value checked: names unique, coefficients finite and ≥ 0, albedo in
+/// [0, 1], g in (−1, 1).
+fn build_media(specs: &[MediumSpec], path: &Path) -> Result<Vec<Medium>, Error> {
+    let mut media: Vec<Medium> = Vec::new();
+    for (i, m) in specs.iter().enumerate() {
+        let field = format!("media[{i}] ({})", m.name);
+        if media.iter().any(|x| x.name == m.name) {
+            return Err(field_err(path, &format!("{field}.name"), "is used by an earlier medium"));
+        }
+        let scale = m.scale.unwrap_or(1.0);
+        if !(representable(scale) && scale >= 0.0) {
+            return Err(field_err(
+                path,
+                &format!("{field}.scale"),
+                format!("{scale}: expected a finite number ≥ 0"),
+            ));
+        }
+        let (sigma_t, albedo) =
+            match (m.sigma_t, m.albedo, m.sigma_a, m.sigma_s) {
+                (Some(t), a, None, None) => {
+                    let t = non_negative3(path, &format!("{field}.sigma_t"), t)?;
+                    let a = a.map(|a| non_negative3(path, &format!("{field}.albedo"), a)).transpose()?;
+                    let a = a.unwrap_or(Vec3A::ONE);
+                    if a.max_element() > 1.0 {
+                        return Err(field_err(
+                            path,
+                            &format!("{field}.albedo"),
+                            format!("{a}: each value must be in [0, 1] (the share of σt that scatters)"),
+                        ));
+                    }
+                    (t, a)
+                }
+                (None, None, Some(a), Some(s)) => {
+                    let a = non_negative3(path, &format!("{field}.sigma_a"), a)?;
+                    let s = non_negative3(path, &format!("{field}.sigma_s"), s)?;
+                    let t = a + s;
+                    (t, Vec3A::select(t.cmpgt(Vec3A::ZERO), s / t, Vec3A::ZERO))
+                }
+                _ => return Err(field_err(
+                    path,
+                    &field,
+                    "give `sigma_t` (with an optional `albedo`, default 1) or both `sigma_a` and `sigma_s`",
+                )),
+            };
+        let g = m.g.unwrap_or(0.0);
+        if !(g.is_finite() && g > -1.0 && g < 1.0) {
+            return Err(field_err(path, &format!("{field}.g"), format!("{g}: expected a number in (−1, 1)")));
+        }
+        let sigma_t = sigma_t * scale as f32;
+        if !sigma_t.is_finite() {
+            return Err(field_err(path, &field, "σt times scale overflows single precision"));
+        }
+        media.push(Medium { name: m.name.clone(), sigma_t, albedo, phase: Phase { g: g as f32 } });
+    }
+    Ok(media)
 }
 
 /// The generated surface a `torus`, `blob` or `relief` shape describes, with its material and
@@ -789,13 +908,13 @@ fn generated_surface<'a>(
         }
     };
     Ok(Some(match shape {
-        ShapeSpec::Torus { radius, tube, segments, material, transform } => {
+        ShapeSpec::Torus { radius, tube, segments, material, transform, .. } => {
             positive("radius", *radius)?;
             positive("tube", *tube)?;
             counts(segments, segments[0] as u64 * segments[1] as u64)?;
             (surfaces::torus(*radius, *tube, *segments), material, transform)
         }
-        ShapeSpec::Blob { radius, amplitude, lobes, segments, material, transform } => {
+        ShapeSpec::Blob { radius, amplitude, lobes, segments, material, transform, .. } => {
             positive("radius", *radius)?;
             positive("lobes", *lobes)?;
             if !(0.0..1.0).contains(amplitude) {
@@ -808,7 +927,7 @@ fn generated_surface<'a>(
             counts(segments, segments[0] as u64 * segments[1] as u64)?;
             (surfaces::blob(*radius, *amplitude, *lobes, *segments), material, transform)
         }
-        ShapeSpec::Relief { size, height, segments, material, transform } => {
+        ShapeSpec::Relief { size, height, segments, material, transform, .. } => {
             positive("size", *size)?;
             positive("height", *height)?;
             counts(&[*segments], *segments as u64 * *segments as u64)?;

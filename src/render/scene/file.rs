@@ -22,6 +22,8 @@ pub struct SceneFile {
     pub shapes: Vec<ShapeSpec>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub lights: Vec<LightSpec>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub media: Vec<MediumSpec>,
 }
 
 /// Camera: size, then either `fov_deg` (on the shorter side, centred principal point) or
@@ -37,7 +39,7 @@ impl SceneFile {
             }
         };
         for m in &mut self.materials {
-            if let TextureSpec::Image { texture } = &mut m.albedo {
+            if let Some(TextureSpec::Image { texture }) = &mut m.albedo {
                 fix(texture);
             }
             if let Some(RoughnessSpec::Image { texture }) = &mut m.alpha {
@@ -75,6 +77,10 @@ pub struct CameraSpec {
     /// the plane in focus, which a lens needs.
     pub aperture_radius: Option<f64>,
     pub focus_distance: Option<f64>,
+    /// The medium (`[[media]]` by name) the camera sits in: it fills space up to the first
+    /// shape that bounds another (as Mitsuba's sensor `medium`). Default none (vacuum).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub medium: Option<String>,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -172,10 +178,13 @@ pub struct MaterialSpec {
     /// conductor, Mitsuba's `conductor`: a perfect mirror tinted by `albedo`, or with the
     /// Fresnel reflectance of `eta` and `k` when both are given) or `"dielectric"` (smooth
     /// glass or water, Mitsuba's `dielectric`; `albedo` tints reflection and transmission,
-    /// [1, 1, 1] for clear glass; see `render::specular`).
+    /// [1, 1, 1] for clear glass; see `render::specular`) or `"null"` (no surface, only the
+    /// boundary of a medium: paths go straight through; it takes no `albedo`).
     #[serde(rename = "type")]
     pub kind: String,
-    pub albedo: TextureSpec,
+    /// The diffuse colour (kd), or a tint for the other types; every type but `"null"` needs it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub albedo: Option<TextureSpec>,
     /// Blinn-Phong only: specular colour ks (kd + ks ≤ 1 conserves energy).
     pub specular: Option<[f64; 3]>,
     /// Blinn-Phong only: the exponent e (shininess), > 0.
@@ -219,6 +228,13 @@ pub enum ShapeSpec {
         transform: TransformSpec,
         #[serde(default)]
         reverse_orientation: bool,
+        /// The media (`[[media]]` by name) inside (behind the surface normal) and outside the
+        /// shape, as Mitsuba's `interior` / `exterior`: crossing the surface changes medium.
+        /// A shape with neither leaves the medium a path is in as it is.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        interior: Option<String>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        exterior: Option<String>,
     },
     Sphere {
         center: [f64; 3],
@@ -226,6 +242,10 @@ pub enum ShapeSpec {
         material: String,
         #[serde(default)]
         reverse_orientation: bool,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        interior: Option<String>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        exterior: Option<String>,
     },
     /// A torus round its local z axis (`render::surfaces`): `radius` to the tube's centre
     /// line, `tube` the tube's radius, `segments` [round the axis, round the tube]
@@ -238,6 +258,10 @@ pub enum ShapeSpec {
         material: String,
         #[serde(default)]
         transform: TransformSpec,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        interior: Option<String>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        exterior: Option<String>,
     },
     /// A sphere displaced along its normal, r = radius·(1 + amplitude·sin(k·x)·sin(k·y)·sin(k·z))
     /// on unit directions (`render::surfaces`); `lobes` is k; `segments` [θ, φ] (default
@@ -251,6 +275,10 @@ pub enum ShapeSpec {
         material: String,
         #[serde(default)]
         transform: TransformSpec,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        interior: Option<String>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        exterior: Option<String>,
     },
     /// A height field of bumps and dimples over the square of side `size` in the local z = 0
     /// plane, the tallest `height` high (`render::surfaces`); `segments` cells per side
@@ -263,6 +291,10 @@ pub enum ShapeSpec {
         material: String,
         #[serde(default)]
         transform: TransformSpec,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        interior: Option<String>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        exterior: Option<String>,
     },
     /// Mitsuba's `cube`: the box [−1, 1]³ through `transform`, each face two triangles with
     /// texture coordinates [0, 1]², facing out.
@@ -272,6 +304,10 @@ pub enum ShapeSpec {
         transform: TransformSpec,
         #[serde(default)]
         reverse_orientation: bool,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        interior: Option<String>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        exterior: Option<String>,
     },
     /// A parallelogram `corner + s·edge_u + t·edge_v`, s, t ∈ [0, 1] (the texture coordinates),
     /// facing edge_u × edge_v.
@@ -282,6 +318,10 @@ pub enum ShapeSpec {
         material: String,
         #[serde(default)]
         reverse_orientation: bool,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        interior: Option<String>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        exterior: Option<String>,
     },
 }
 
@@ -293,6 +333,44 @@ fn blob_segments() -> [u32; 2] {
 }
 fn relief_segments() -> u32 {
     256
+}
+
+impl ShapeSpec {
+    /// The shape's `interior` and `exterior` media, by name.
+    pub fn media(&self) -> (Option<&str>, Option<&str>) {
+        match self {
+            ShapeSpec::Mesh { interior, exterior, .. }
+            | ShapeSpec::Sphere { interior, exterior, .. }
+            | ShapeSpec::Torus { interior, exterior, .. }
+            | ShapeSpec::Blob { interior, exterior, .. }
+            | ShapeSpec::Relief { interior, exterior, .. }
+            | ShapeSpec::Cube { interior, exterior, .. }
+            | ShapeSpec::Quad { interior, exterior, .. } => (interior.as_deref(), exterior.as_deref()),
+        }
+    }
+}
+
+/// A homogeneous participating medium (`render::media`): extinction `sigma_t` and single-
+/// scattering `albedo`, or absorption `sigma_a` and scattering `sigma_s` (σt = σa + σs,
+/// α = σs/σt), each per channel in inverse scene units and multiplied by `scale` (default 1),
+/// as Mitsuba's `homogeneous`; `g` is the Henyey–Greenstein asymmetry in (−1, 1) (default 0,
+/// isotropic; > 0 scatters forward).
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct MediumSpec {
+    pub name: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma_t: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub albedo: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma_a: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma_s: Option<[f64; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub g: Option<f64>,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]

@@ -107,6 +107,13 @@ pub struct Scene {
     pub environment_map: Option<super::envmap::EnvMap>,
     /// Object names by id (index 0 is the background).
     pub object_names: Vec<String>,
+    /// The participating media (`render::media`), by index.
+    pub media: Vec<super::media::Medium>,
+    /// Per primitive (BVH order), the media inside and outside it (`None`: vacuum) where its
+    /// shape bounds media, `None` where it does not; empty when no shape does.
+    pub boundaries: Vec<Option<[Option<u32>; 2]>>,
+    /// The medium the camera sits in.
+    pub camera_medium: Option<u32>,
     /// Centre and radius of a sphere bounding the geometry.
     pub bounds_center: Vec3A,
     pub bounds_radius: f32,

@@ -38,6 +38,23 @@ impl Scene {
         Surface { p, n, material: info.material, object_id: info.object_id }
     }
 
+    /// The medium a path is in after crossing or leaving primitive `prim` (normal `n`) along
+    /// `dir`, having been in `current`: the shape's exterior where `dir` goes the way its
+    /// normal points, its interior otherwise, and `current` where the shape bounds no medium.
+    #[inline]
+    pub fn medium_after(&self, prim: u32, n: Vec3A, dir: Vec3A, current: Option<u32>) -> Option<u32> {
+        match self.boundaries.get(prim as usize) {
+            Some(Some([inside, outside])) => {
+                if n.dot(dir) > 0.0 {
+                    *outside
+                } else {
+                    *inside
+                }
+            }
+            _ => current,
+        }
+    }
+
     /// Texture coordinates at a hit: interpolated for triangles, (longitude, colatitude) / (2π,
     /// π) for spheres.
     pub fn uv(&self, hit: &Hit, p: Vec3A) -> Vec2 {

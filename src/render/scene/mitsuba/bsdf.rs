@@ -12,7 +12,7 @@ pub(super) fn lambertian(name: &str, albedo: TextureSpec) -> MaterialSpec {
     MaterialSpec {
         name: name.to_string(),
         kind: "lambertian".into(),
-        albedo,
+        albedo: Some(albedo),
         specular: None,
         exponent: None,
         distribution: None,
@@ -23,6 +23,16 @@ pub(super) fn lambertian(name: &str, albedo: TextureSpec) -> MaterialSpec {
         emission: None,
         // Mitsuba's diffuse and conductors are black from behind unless wrapped in `twosided`.
         two_sided: Some(false),
+    }
+}
+
+/// Mitsuba's `null`: no surface, only a medium's boundary.
+pub(super) fn null(name: &str) -> MaterialSpec {
+    MaterialSpec {
+        kind: "null".into(),
+        albedo: None,
+        two_sided: None,
+        ..lambertian(name, TextureSpec::Constant([1.0; 3]))
     }
 }
 
@@ -78,7 +88,7 @@ pub(super) fn bsdf(b: &Elem, name: String) -> Result<MaterialSpec, Error> {
     let mut m = lambertian(&name, TextureSpec::Constant([0.5; 3]));
     match b.plugin() {
         "diffuse" => {
-            m.albedo = p.color("reflectance")?.map_or(TextureSpec::Constant([0.5; 3]), Color::texture);
+            m.albedo = Some(p.color("reflectance")?.map_or(TextureSpec::Constant([0.5; 3]), Color::texture));
         }
         "twosided" => {
             let inner = p.objects("bsdf");
@@ -99,12 +109,12 @@ pub(super) fn bsdf(b: &Elem, name: String) -> Result<MaterialSpec, Error> {
             let (eta, k) = complex_index(b, &p)?;
             m.eta = Some(eta);
             m.k = Some(k);
-            m.albedo = TextureSpec::Constant(
+            m.albedo = Some(TextureSpec::Constant(
                 p.color("specular_reflectance")?
                     .map(|c| c.rgb(b, "specular_reflectance"))
                     .transpose()?
                     .unwrap_or([1.0; 3]),
-            );
+            ));
             if b.plugin() == "conductor" {
                 m.kind = "mirror".into();
             } else {
@@ -128,6 +138,10 @@ pub(super) fn bsdf(b: &Elem, name: String) -> Result<MaterialSpec, Error> {
                 p.accept(&["sample_visible"]);
             }
         }
+        "null" => {
+            p.finish("nothing")?;
+            return Ok(null(&name));
+        }
         "dielectric" => {
             let int = ior(&p, "int_ior", "bk7")?;
             let ext = ior(&p, "ext_ior", "air")?;
@@ -150,13 +164,11 @@ pub(super) fn bsdf(b: &Elem, name: String) -> Result<MaterialSpec, Error> {
             m.kind = "dielectric".into();
             m.two_sided = None;
             m.ior = Some(int / ext);
-            m.albedo = TextureSpec::Constant(tint);
+            m.albedo = Some(TextureSpec::Constant(tint));
         }
-        other => {
-            return Err(b.unsupported(format!(
-                "bsdf \"{other}\": lumen reads diffuse, conductor, roughconductor, dielectric and twosided"
-            )))
-        }
+        other => return Err(b.unsupported(format!(
+            "bsdf \"{other}\": lumen reads diffuse, conductor, roughconductor, dielectric, null and twosided"
+        ))),
     }
     p.finish("reflectance (diffuse); material, eta, k, specular_reflectance, distribution, alpha (conductors); int_ior, ext_ior, specular_reflectance, specular_transmittance (dielectric)")?;
     Ok(m)

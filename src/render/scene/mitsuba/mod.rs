@@ -30,6 +30,7 @@
 //! what lumen supports instead: nothing is dropped silently.
 
 mod bsdf;
+mod medium;
 mod named;
 mod props;
 mod spectrum;
@@ -67,7 +68,8 @@ pub fn read(path: &Path, params: &[(String, String)]) -> Result<Read, Error> {
         bsdf_ids: Default::default(),
         shapes: Vec::new(),
         lights: Vec::new(),
-        media: false,
+        media: Vec::new(),
+        medium_ids: Default::default(),
     };
     let mut camera = None;
     let mut render = RenderSpec::default();
@@ -84,11 +86,12 @@ pub fn read(path: &Path, params: &[(String, String)]) -> Result<Read, Error> {
             "shape" => c.shape(e)?,
             "emitter" => c.emitter(e)?,
             // Declared for reference by id; converted where used.
-            "bsdf" | "texture" | "spectrum" | "rgb" => {}
-            "medium" => c.media = true,
+            "bsdf" | "texture" | "spectrum" | "rgb" | "volume" | "phase" => {}
+            // Declared for reference by id; converted where used.
+            "medium" => {}
             _ => {
                 return Err(e.unsupported(format!(
-                    "<{}> in <scene>: lumen reads sensor, integrator, shape, emitter, bsdf and texture here",
+                    "<{}> in <scene>: lumen reads sensor, integrator, shape, emitter, bsdf, texture and medium here",
                     e.tag
                 )))
             }
@@ -111,6 +114,7 @@ pub fn read(path: &Path, params: &[(String, String)]) -> Result<Read, Error> {
             materials: c.materials,
             shapes: c.shapes,
             lights: c.lights,
+            media: c.media,
         },
         clip,
     })
@@ -124,7 +128,9 @@ struct Converter {
     bsdf_ids: std::collections::HashMap<String, String>,
     shapes: Vec<ShapeSpec>,
     lights: Vec<LightSpec>,
-    media: bool,
+    media: Vec<MediumSpec>,
+    /// The medium each medium id became.
+    medium_ids: std::collections::HashMap<String, String>,
 }
 
 impl Converter {
@@ -153,8 +159,11 @@ impl Converter {
                 };
             }
             "path" | "volpath" | "volpathmis" => {
-                if self.media && e.plugin() != "path" {
-                    return Err(e.unsupported("participating media: lumen's volume path tracer is not built yet; remove the <medium> elements to render the surfaces"));
+                // Without media the volume path tracers' image is the path tracer's, which
+                // lumen renders faster; with media, lumen's volpath.
+                if e.plugin() != "path" && !self.media.is_empty() {
+                    render.integrator = crate::render::integrators::find("volpath")
+                        .map_err(|err| e.unsupported(err.to_string()))?;
                 }
                 let depth = p.int("max_depth")?.unwrap_or(-1);
                 render.max_depth = match depth {
@@ -174,7 +183,7 @@ impl Converter {
             }
             other => {
                 return Err(e.unsupported(format!(
-                    "integrator \"{other}\": lumen has {} (Mitsuba's path, volpath, volpathmis, direct and moment map to path)",
+                    "integrator \"{other}\": lumen has {} (Mitsuba's path, direct and moment map to path, volpath and volpathmis to volpath)",
                     crate::render::integrators::names()
                 )))
             }
@@ -266,9 +275,14 @@ impl Converter {
             p.accept(&["focus_distance"]);
             (None, None)
         };
+        let medium = match p.objects("medium").as_slice() {
+            [] => None,
+            [m] => Some(self.medium(m, "camera")?),
+            _ => return Err(e.error("has more than one <medium>")),
+        };
         p.accept(&["shutter_open", "shutter_close", "srf"]);
         p.finish(
-            "fov, fov_axis, near_clip, far_clip, to_world, film, sampler, aperture_radius, focus_distance",
+            "fov, fov_axis, near_clip, far_clip, to_world, film, sampler, medium, aperture_radius, focus_distance",
         )?;
         let rows = r.transpose().to_cols_array_2d();
         Ok((
@@ -291,6 +305,7 @@ impl Converter {
                 }),
                 aperture_radius,
                 focus_distance,
+                medium,
             },
             (near, far),
         ))
@@ -302,17 +317,22 @@ impl Converter {
         let name = e.attr("id").map_or_else(|| format!("shape{index}"), str::to_string);
         let bsdfs = p.objects("bsdf");
         let emitters = p.objects("emitter");
-        for m in ["interior", "exterior"] {
-            if p.find(m).is_some() {
-                return Err(
-                    e.unsupported(format!("`{m}` medium: lumen's volume path tracer is not built yet"))
-                );
+        let mut side = |which: &str| -> Result<Option<String>, Error> {
+            match p.find(which) {
+                Some(m) if m.tag == "medium" => self.medium(m, &format!("{name}-{which}")).map(Some),
+                Some(m) => Err(m.error(format!("`{which}` must be a <medium>"))),
+                None => Ok(None),
             }
-        }
-        if !p.objects("medium").is_empty() {
-            return Err(e.unsupported("a medium: lumen's volume path tracer is not built yet"));
+        };
+        let (interior, exterior) = (side("interior")?, side("exterior")?);
+        if let Some(m) =
+            p.objects("medium").iter().find(|m| !matches!(m.attr("name"), Some("interior" | "exterior")))
+        {
+            return Err(m.error("a shape's <medium> needs name=\"interior\" or name=\"exterior\""));
         }
         let mut material = match bsdfs.as_slice() {
+            // Mitsuba gives a shape without a BSDF that bounds a medium the null BSDF.
+            [] if interior.is_some() => Some(self.null_material()),
             [] => None,
             [b] => Some(self.material(b, &name)?),
             _ => return Err(e.error("has more than one <bsdf>")),
@@ -374,6 +394,8 @@ impl Converter {
                     object_materials: Default::default(),
                     transform: TransformSpec { matrix: Some(rows(&m)), ..Default::default() },
                     reverse_orientation: flip,
+                    interior: interior.clone(),
+                    exterior: exterior.clone(),
                 }
             }
             "sphere" => {
@@ -394,6 +416,8 @@ impl Converter {
                     material,
                     // Mitsuba's sphere faces out, mirrored or not.
                     reverse_orientation: flip,
+                    interior: interior.clone(),
+                    exterior: exterior.clone(),
                 }
             }
             "rectangle" => {
@@ -406,12 +430,16 @@ impl Converter {
                     // Mitsuba's rectangle faces its normal transformed as a normal; edge_u ×
                     // edge_v points the other way under a mirroring transform.
                     reverse_orientation: flip ^ mirrored,
+                    interior: interior.clone(),
+                    exterior: exterior.clone(),
                 }
             }
             "cube" => ShapeSpec::Cube {
                 material,
                 transform: TransformSpec { matrix: Some(rows(&m)), ..Default::default() },
                 reverse_orientation: flip,
+                interior: interior.clone(),
+                exterior: exterior.clone(),
             },
             other => {
                 return Err(e.unsupported(format!(
@@ -419,7 +447,7 @@ impl Converter {
                 )))
             }
         };
-        p.finish("filename, face_normals, flip_tex_coords (obj, ply); center, radius (sphere); to_world, flip_normals, bsdf, emitter")?;
+        p.finish("filename, face_normals, flip_tex_coords (obj, ply); center, radius (sphere); to_world, flip_normals, bsdf, emitter, interior, exterior")?;
         self.shapes.push(shape);
         Ok(())
     }
@@ -438,6 +466,34 @@ impl Converter {
             self.bsdf_ids.insert(id.to_string(), name.clone());
         }
         Ok(name)
+    }
+
+    /// The name of the medium a `medium` element converts to, added once per id; `owner`
+    /// names it when it has no id.
+    fn medium(&mut self, m: &Elem, owner: &str) -> Result<String, Error> {
+        if let Some(name) = m.attr("id").and_then(|id| self.medium_ids.get(id)) {
+            return Ok(name.clone());
+        }
+        let base = m.attr("id").unwrap_or(owner);
+        let taken = |n: &str| self.media.iter().any(|x| x.name == n);
+        let name = std::iter::once(base.to_string())
+            .chain((2..).map(|k| format!("{base}-{k}")))
+            .find(|n| !taken(n))
+            .unwrap_or_default();
+        self.media.push(medium::medium(m, name.clone())?);
+        if let Some(id) = m.attr("id") {
+            self.medium_ids.insert(id.to_string(), name.clone());
+        }
+        Ok(name)
+    }
+
+    /// Mitsuba's `null` BSDF, made once.
+    fn null_material(&mut self) -> String {
+        let name = "mitsuba-null";
+        if !self.materials.iter().any(|m| m.name == name) {
+            self.materials.push(bsdf::null(name));
+        }
+        name.to_string()
     }
 
     /// `base`, or `base-2`, `base-3` … whichever no material has yet.
