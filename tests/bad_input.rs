@@ -534,3 +534,49 @@ fn a_film_beyond_memory_is_refused() {
     );
     assert!(!out.exists());
 }
+
+/// Media: coefficients negative, NaN or mixed in the wrong pairs, an albedo above 1, an HG g
+/// outside (−1, 1), a name no medium has (on a shape or the camera), a medium nothing bounds,
+/// a missing grid file, a scene with media left to the surface path tracer, and a null
+/// material given a colour. (Lying `.vol` headers: `render::media::grid`'s tests.)
+#[test]
+fn bad_media() {
+    let medium =
+        |body: &str| format!("[render]\nintegrator = \"volpath\"\n[[media]]\nname = \"fog\"\n{body}");
+    let cases = [
+        (medium("sigma_t = [-1.0, 0.0, 0.0]\n"), "media[0] (fog).sigma_t"),
+        (medium("sigma_t = [nan, 0.0, 0.0]\n"), "media[0] (fog).sigma_t"),
+        (medium("sigma_t = [1.0, 1.0, 1.0]\nalbedo = [1.2, 0.5, 0.5]\n"), "media[0] (fog).albedo"),
+        (medium("sigma_t = [1.0, 1.0, 1.0]\nsigma_s = [1.0, 1.0, 1.0]\n"), "`sigma_t`"),
+        (medium("sigma_a = [1.0, 1.0, 1.0]\n"), "`sigma_a` and `sigma_s`"),
+        (medium("sigma_t = [1.0, 1.0, 1.0]\ng = 1.0\n"), "media[0] (fog).g"),
+        (medium("sigma_t = [1.0, 1.0, 1.0]\ng = -1.5\n"), "media[0] (fog).g"),
+        (medium("sigma_t = [1.0, 1.0, 1.0]\nscale = -1.0\n"), "media[0] (fog).scale"),
+        (medium("sigma_t = [1e30, 1.0, 1.0]\nscale = 1e30\n"), "overflows"),
+        (
+            format!("{}[[shapes]]\ntype = \"sphere\"\ncenter = [0.0, 0.0, 0.0]\nradius = 1.0\nmaterial = \"white\"\ninterior = \"smoke\"\n", medium("sigma_t = [1.0, 1.0, 1.0]\n")),
+            "shapes[0].interior",
+        ),
+        (
+            "[[media]]\nname = \"fog\"\nsigma_t = [1.0, 1.0, 1.0]\n[[shapes]]\ntype = \"sphere\"\ncenter = [0.0, 0.0, 0.0]\nradius = 1.0\nmaterial = \"white\"\ninterior = \"fog\"\n".to_string(),
+            "render.integrator",
+        ),
+        (medium("sigma_t = [1.0, 1.0, 1.0]\n"), "nothing could enter it"),
+        (medium("sigma_t = [1.0, 1.0, 1.0]\ngrid = \"missing.vol\"\n"), "missing.vol"),
+        (
+            "[[materials]]\nname = \"edge\"\ntype = \"null\"\nalbedo = [1.0, 1.0, 1.0]\n".to_string(),
+            "materials[1] (edge).albedo",
+        ),
+        ("[[materials]]\nname = \"grey\"\ntype = \"lambertian\"\n".to_string(), "materials[1] (grey).albedo"),
+    ];
+    for (text, expected) in cases {
+        let (fault, e) = scene_fault(&text, &[]);
+        let whose = if expected == "missing.vol" { lumen::Fault::Io } else { lumen::Fault::BadInput };
+        assert_eq!(fault, whose, "{e}");
+        assert!(e.contains(expected), "expected `{expected}` in: {e}");
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let text = "[camera]\nwidth = 8\nheight = 8\nfov_deg = 40.0\nmedium = \"fog\"\nlook_at = { origin = [0.0, 0.0, 3.0], target = [0.0, 0.0, 0.0], up = [0.0, 1.0, 0.0] }\n[render]\nintegrator = \"volpath\"\n";
+    let e = common::scene(text, dir.path()).err().expect("an unknown camera medium is refused");
+    assert!(e.to_string().contains("camera.medium") && e.to_string().contains("'fog'"), "{e}");
+}

@@ -26,6 +26,8 @@ fn converted_scene_renders_the_same_image() {
     for (name, out) in [
         ("cornell-box.xml", dir.path().join("cornell.toml")),
         ("envmap-spheres.xml", dir.path().join("envmap.toml")),
+        ("media-smoke-grid.xml", dir.path().join("smoke.toml")),
+        ("media-haze.xml", dir.path().join("haze.toml")),
     ] {
         let (code, err) =
             lumen(&["scene", "convert", xml(name).to_str().unwrap(), "--out", out.to_str().unwrap()]);
@@ -148,7 +150,8 @@ fn malformed_scenes_are_refused_by_element_and_line() {
             "not a named index of refraction",
             BadInput,
         ),
-        (vec![("scene.xml", scene_with("<shape type=\"sphere\"><ref name=\"interior\" id=\"fog\"/></shape><medium type=\"heterogeneous\" id=\"fog\"/>"))], "medium \"heterogeneous\"", Unsupported),
+        (vec![("scene.xml", scene_with("<shape type=\"sphere\"><ref name=\"interior\" id=\"fog\"/></shape><medium type=\"heterogeneous\" id=\"fog\"/>"))], "needs `sigma_t` as a <volume type=\"gridvolume\">", BadInput),
+        (vec![("scene.xml", scene_with("<shape type=\"sphere\"><medium type=\"rayleigh\" name=\"interior\"/></shape>"))], "medium \"rayleigh\"", Unsupported),
         (vec![("scene.xml", scene_with("<shape type=\"sphere\"><medium type=\"homogeneous\" name=\"interior\"><float name=\"sigma_t\" value=\"-1\"/></medium></shape>"))], "must not be negative", BadInput),
         (vec![("scene.xml", scene_with("<shape type=\"sphere\"><medium type=\"homogeneous\" name=\"interior\"><phase type=\"hg\"><float name=\"g\" value=\"1\"/></phase></medium></shape>"))], "expected a number in (−1, 1)", BadInput),
         (vec![("scene.xml", scene_with("<shape type=\"sphere\"><medium type=\"homogeneous\"/></shape>"))], "needs name=\"interior\" or name=\"exterior\"", BadInput),

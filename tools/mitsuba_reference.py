@@ -30,7 +30,25 @@ def write_sky(path):
     mi.Bitmap(img.astype(np.float32)).write(path)
 
 
-SCENES = ['glossy-spheres', 'sphere-light', 'glass-environment', 'envmap-spheres', 'depth-of-field']
+def write_smoke(path):
+    """tests/data/mitsuba/smoke.vol: a 24 × 16 × 24 one-channel grid over [0, 1]³, three soft
+    blobs of density (peak 1) in Mitsuba's .vol format (x fastest)."""
+    nx, ny, nz = 24, 16, 24
+    z, y, x = np.meshgrid((np.arange(nz) + 0.5) / nz, (np.arange(ny) + 0.5) / ny,
+                          (np.arange(nx) + 0.5) / nx, indexing='ij')
+    d = np.zeros_like(x)
+    for (cx, cy, cz, r) in [(0.35, 0.4, 0.4, 0.22), (0.65, 0.55, 0.6, 0.18), (0.5, 0.3, 0.7, 0.12)]:
+        d += np.exp(-((x - cx) ** 2 + (y - cy) ** 2 + (z - cz) ** 2) / (2 * r * r))
+    d = np.clip(d, 0, 1).astype('<f4')
+    header = b'VOL' + bytes([3]) + np.array([1, nx, ny, nz, 1], '<i4').tobytes() \
+        + np.array([0, 0, 0, 1, 1, 1], '<f4').tobytes()
+    with open(path, 'wb') as f:
+        f.write(header + d.tobytes())
+
+
+SCENES = ['glossy-spheres', 'sphere-light', 'glass-environment', 'envmap-spheres', 'depth-of-field',
+          'media-fog-box', 'media-haze', 'media-glass', 'media-lamp-in-fog', 'media-smoke-sky',
+          'media-smoke-grid']
 
 a = argparse.ArgumentParser()
 a.add_argument('scene', choices=SCENES)
@@ -38,10 +56,13 @@ a.add_argument('--passes', type=int, default=32)
 a.add_argument('--spp', type=int, default=512)
 a.add_argument('--out', default='tests/data/mitsuba')
 a.add_argument('--write-sky', action='store_true', help='first write data/envmaps/sky.exr')
+a.add_argument('--write-smoke', action='store_true', help='first write tests/data/mitsuba/smoke.vol')
 o = a.parse_args()
 if o.write_sky:
     os.makedirs('data/envmaps', exist_ok=True)
     write_sky('data/envmaps/sky.exr')
+if o.write_smoke:
+    write_smoke('tests/data/mitsuba/smoke.vol')
 scene = mi.load_file(os.path.join('tests/data/mitsuba', f'{o.scene}.xml'))
 imgs = np.stack([np.array(mi.render(scene, spp=o.spp, seed=k + 1)) for k in range(o.passes)])
 mean, var = imgs.mean(axis=0), imgs.var(axis=0, ddof=1) / o.passes

@@ -53,6 +53,8 @@ pub enum Error {
     Obj(#[from] obj::ObjError),
     #[error(transparent)]
     Ply(#[from] ply::PlyError),
+    #[error(transparent)]
+    Grid(#[from] media::grid::GridError),
     #[error("{path}: the mesh has no faces")]
     EmptyMesh { path: PathBuf },
     #[error(transparent)]
@@ -69,6 +71,7 @@ impl Error {
             Error::Io { .. } => Fault::Io,
             Error::Obj(e) => e.fault(),
             Error::Ply(e) => e.fault(),
+            Error::Grid(e) => e.fault(),
             Error::Image(e) => e.fault(),
             Error::MitsubaUnsupported { .. } => Fault::Unsupported,
             Error::Parse { .. }

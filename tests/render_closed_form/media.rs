@@ -160,3 +160,40 @@ fn volpath_without_media_is_path() {
     assert!(worst_p >= alpha, "a pixel channel differs by p = {worst_p:.2e} < {alpha:.2e}");
     assert!((diff / var.sqrt()).abs() <= 4.0, "the crop's sums differ by {:.2}σ", diff / var.sqrt());
 }
+
+/// A heterogeneous absorbing slab from a voxel grid, 1 thick (z from 0.5 to 1.5) and 6 wide
+/// (x from −3 to 3), over a Lambertian floor lit straight down by a directional light. The grid
+/// is 2 × 1 × 1 cells of three channels, a then b along x: trilinear between the cell centres,
+/// so where the camera sees (grid x in (0.25, 0.75)) the density is linear in x, and a ray's
+/// optical depth through the slab is σt·ρ(x at the slab's middle)/cos θ. The floor then shows
+/// ρ/π·E·e^(−τ_light)·e^(−τ_view): the light's way down through ratio tracking, the camera's
+/// way through delta tracking, and the grid's placement and orientation with them.
+#[test]
+fn heterogeneous_slab_over_a_lit_floor() {
+    let (a, b) = ([0.2f64, 0.5, 1.0], [1.0f64, 0.6, 0.0]);
+    let dir = tempfile::tempdir().unwrap();
+    let values: Vec<f32> = a.iter().chain(&b).map(|&v| v as f32).collect();
+    render::media::grid::write(&dir.path().join("ramp.vol"), [2, 1, 1], 3, ([0.0; 3], [1.0; 3]), &values)
+        .unwrap();
+    let sigma = 1.2;
+    let text = format!(
+        "{CAMERA_DOWN}look_at = {{ origin = [0.0, 0.0, 3.0], target = [0.0, 0.0, 0.0], up = [0.0, 1.0, 0.0] }}\n[render]\nintegrator = \"volpath\"\n[[materials]]\nname = \"floor\"\ntype = \"lambertian\"\nalbedo = [0.8, 0.8, 0.8]\n[[materials]]\nname = \"boundary\"\ntype = \"null\"\n[[shapes]]\ntype = \"quad\"\ncorner = [-4.0, -4.0, 0.0]\nedge_u = [8.0, 0.0, 0.0]\nedge_v = [0.0, 8.0, 0.0]\nmaterial = \"floor\"\n[[shapes]]\ntype = \"cube\"\nmaterial = \"boundary\"\ninterior = \"ramp\"\ntransform = {{ scale = [3.0, 3.0, 0.5], translation = [0.0, 0.0, 1.0] }}\n[[lights]]\ntype = \"directional\"\nto_light = [0.0, 0.0, 1.0]\nirradiance = [3.0, 3.0, 3.0]\n[[media]]\nname = \"ramp\"\nsigma_t = [{sigma}, {sigma}, {sigma}]\nalbedo = [0.0, 0.0, 0.0]\ngrid = \"ramp.vol\"\ngrid_transform = {{ scale = [6.0, 6.0, 1.0], translation = [-3.0, -3.0, 0.5] }}\n"
+    );
+    let scene = common::scene(&text, dir.path()).unwrap();
+    let film = render::render(&scene, &common::settings(&scene, 256, 8));
+    // The density at scene x, in the linear part of the grid (x within ±1.5).
+    let rho = |c: usize, x: f64| {
+        let u = (x + 3.0) / 6.0;
+        assert!((0.25..=0.75).contains(&u), "x {x} is outside the grid's linear part");
+        a[c] + (b[c] - a[c]) * (u - 0.25) / 0.5
+    };
+    compare(&film, 24, 24, |px| {
+        let (o, d) = scene.camera_ray(px).unwrap();
+        let at = |z: f64| o.x + d.x * (z - o.z) / d.z;
+        [0, 1, 2].map(|c| {
+            let view = sigma * rho(c, at(1.0)) / -d.z;
+            let light = sigma * rho(c, at(0.0));
+            0.8 / std::f64::consts::PI * 3.0 * (-light).exp() * (-view).exp()
+        })
+    });
+}

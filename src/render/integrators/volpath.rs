@@ -59,6 +59,7 @@ fn is_null(scene: &Scene, prim: u32) -> bool {
 /// media's transmittances over the way, 0 where a surface other than a null one is in it.
 fn transmittance(
     scene: &Scene,
+    s: &mut Sampler,
     mut origin: Vec3A,
     p: Vec3A,
     wi: Vec3A,
@@ -79,7 +80,7 @@ fn transmittance(
         let ray = Ray { origin, dir };
         let hit = scene.bvh.intersect(&ray, 0.0, t_max);
         if let Some(m) = medium {
-            tr *= scene.media[m as usize].transmittance(hit.map_or(t_max, |h| h.t));
+            tr *= scene.media[m as usize].transmittance(&ray, hit.map_or(t_max, |h| h.t), s);
         }
         let Some(hit) = hit else { return tr };
         if !is_null(scene, hit.prim) || tr == Vec3A::ZERO {
@@ -115,7 +116,7 @@ pub fn trace(scene: &Scene, mut ray: Ray, max_depth: u32, s: &mut Sampler) -> Ve
         let t_max = hit.map_or(f32::INFINITY, |h| h.t);
         if let Some(m) = medium {
             let m = &scene.media[m as usize];
-            match m.sample_flight(t_max, hero, s.next(), &mut beta, &mut r) {
+            match m.sample_flight(&ray, t_max, hero, s, &mut beta, &mut r) {
                 Flight::Absorbed => break,
                 Flight::Through => {}
                 Flight::Scatter(t) => {
@@ -126,7 +127,7 @@ pub fn trace(scene: &Scene, mut ray: Ray, max_depth: u32, s: &mut Sampler) -> Ve
                     let p = ray.origin + ray.dir * t;
                     let u_light = s.next2();
                     if let Some((li, wi, dist, p_light)) = scene.sample_light(u_light, p) {
-                        let tr = transmittance(scene, p, p, wi, dist, medium);
+                        let tr = transmittance(scene, s, p, p, wi, dist, medium);
                         if tr != Vec3A::ZERO {
                             let f = m.phase.eval(ray.dir, wi);
                             let w = p_light.map_or(1.0, |pl| power_heuristic(pl, f));
@@ -199,7 +200,7 @@ pub fn trace(scene: &Scene, mut ray: Ray, max_depth: u32, s: &mut Sampler) -> Ve
                 let cos = n.dot(wi);
                 if cos > 0.0 {
                     let towards = scene.medium_after(hit.prim, surf.n, wi, medium);
-                    let tr = transmittance(scene, surf.p + n * eps, surf.p, wi, dist, towards);
+                    let tr = transmittance(scene, s, surf.p + n * eps, surf.p, wi, dist, towards);
                     if tr != Vec3A::ZERO {
                         let w = match p_light {
                             Some(p) if glossy => power_heuristic(p, bsdf.pdf(albedo, n, wo, wi)),

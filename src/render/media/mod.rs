@@ -21,23 +21,50 @@
 //! alone, as Mitsuba's `volpath`, weights the others by transmittance ratios, without bound),
 //! and is exactly α per collision in a grey medium. Transmittance along a shadow ray is
 //! Beer–Lambert's closed form.
+//!
+//! A heterogeneous medium's σt is scaled point by point by a density grid (`grid`, Mitsuba's
+//! `.vol`). There the flight is delta tracking (Woodcock et al. 1965) with the majorant μ̄ =
+//! max σt · max density: tentative collisions at rate μ̄, each real with the hero's
+//! probability σt_h(x)/μ̄ (f = σs(x), p = σt(x) per channel) or null (f = p = μ̄ − σt(x)),
+//! weighed by the same spectral MIS; shadow rays take ratio tracking's transmittance,
+//! Π(1 − σt(xᵢ)/μ̄) over the tentative collisions (Novák et al. 2014). Both only walk the part
+//! of the ray inside the grid's cube. One majorant for the whole grid: a sparse grid pays for
+//! null collisions where it is thin (a majorant per brick would spare them).
 
+pub mod grid;
 pub mod phase;
 
+pub use grid::Grid;
 pub use phase::Phase;
+
+use super::geometry::Ray;
+use super::sampler::Sampler;
 
 use glam::Vec3A;
 
-/// A homogeneous medium.
+/// A medium: homogeneous, or heterogeneous where a density grid scales σt point by point.
 #[derive(Clone, Debug)]
 pub struct Medium {
     pub name: String,
-    /// σt per unit of scene length, per channel, ≥ 0.
+    /// σt per unit of scene length, per channel, ≥ 0 (times the density, where there is one).
     pub sigma_t: Vec3A,
     /// The single-scattering albedo α = σs/σt per channel, in [0, 1].
     pub albedo: Vec3A,
     pub phase: Phase,
+    pub density: Option<Density>,
 }
+
+/// A heterogeneous medium's density: σt(x) = σt · grid(to_grid(x)).
+#[derive(Clone, Debug)]
+pub struct Density {
+    pub grid: Grid,
+    /// From the scene to the grid's [0, 1]³.
+    pub to_grid: glam::Affine3A,
+}
+
+/// Tentative collisions one flight or shadow ray may take through a grid before it is cut
+/// short (a majorant times a length beyond any scene lumen renders in reasonable time).
+const MAX_STEPS: u32 = 1 << 20;
 
 /// Where a ray's flight through a medium ends.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -61,37 +88,126 @@ impl Medium {
     }
 
     /// Samples where a ray first collides within [0, t_max) by the transmittance of channel
-    /// `hero` (the path's, module docs), with the uniform number `u`; updates the path's
-    /// throughput `beta` and its channels' relative densities `r` (mean 1).
-    pub fn sample_flight(&self, t_max: f32, hero: usize, u: f32, beta: &mut Vec3A, r: &mut Vec3A) -> Flight {
+    /// `hero` (the path's, module docs); updates the path's throughput `beta` and its channels'
+    /// relative densities `r` (mean 1).
+    pub fn sample_flight(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        hero: usize,
+        s: &mut Sampler,
+        beta: &mut Vec3A,
+        r: &mut Vec3A,
+    ) -> Flight {
+        if let Some(d) = &self.density {
+            return self.track(d, ray, t_max, hero, s, beta, r);
+        }
         let sigma_t = self.sigma_t;
         if sigma_t.max_element() <= 0.0 {
             return Flight::Through;
         }
         // 1 − u lies in (0, 1]: the logarithm is finite; a channel with σt = 0 never collides.
         let h = sigma_t[hero];
+        let u = s.next();
         let t = if h > 0.0 { -(1.0 - u).ln() / h } else { f32::INFINITY };
         let (flight, f, p) = if t < t_max {
-            let tr = self.transmittance(t);
+            let tr = self.transmittance_over(t);
             (Flight::Scatter(t), self.sigma_s() * tr, sigma_t * tr)
         } else {
-            let tr = self.transmittance(t_max);
+            let tr = self.transmittance_over(t_max);
             (Flight::Through, tr, tr)
         };
-        let k = mean(*r * p);
-        if !(k > 0.0) || f == Vec3A::ZERO {
-            return Flight::Absorbed;
-        }
-        *beta *= f / k;
-        *r *= p / k;
-        flight
+        weigh(flight, f, p, beta, r)
     }
 
-    /// The fraction of light a length `d` of the medium lets through, per channel:
-    /// exp(−σt·d), 1 where σt = 0 (also for an infinite d).
-    pub fn transmittance(&self, d: f32) -> Vec3A {
+    /// Delta tracking through a grid (module docs): tentative collisions at the majorant's
+    /// rate, each real with the hero's probability σt/μ̄, null otherwise.
+    #[allow(clippy::too_many_arguments)]
+    fn track(
+        &self,
+        d: &Density,
+        ray: &Ray,
+        t_max: f32,
+        hero: usize,
+        s: &mut Sampler,
+        beta: &mut Vec3A,
+        r: &mut Vec3A,
+    ) -> Flight {
+        let mu = self.sigma_t.max_element() * d.grid.max;
+        let Some((t0, t1)) = d.span(ray, t_max).filter(|_| mu > 0.0) else { return Flight::Through };
+        let mut t = t0;
+        for _ in 0..MAX_STEPS {
+            t -= (1.0 - s.next()).ln() / mu;
+            if !(t < t1) {
+                return Flight::Through;
+            }
+            let sigma_t = self.sigma_t * d.grid.eval(d.to_grid.transform_point3a(ray.origin + ray.dir * t));
+            let u = s.next();
+            if u * mu < sigma_t[hero] {
+                return weigh(Flight::Scatter(t), sigma_t * self.albedo, sigma_t, beta, r);
+            }
+            let sigma_n = Vec3A::splat(mu) - sigma_t;
+            if weigh(Flight::Through, sigma_n, sigma_n, beta, r) == Flight::Absorbed {
+                return Flight::Absorbed;
+            }
+        }
+        Flight::Absorbed
+    }
+
+    /// The fraction of light that gets through the first `d` of the ray (an infinite `d`
+    /// allowed), per channel: Beer–Lambert's exp(−σt·d) in a homogeneous medium, ratio
+    /// tracking's estimate Π(1 − σt(xᵢ)/μ̄) in a grid.
+    pub fn transmittance(&self, ray: &Ray, d: f32, s: &mut Sampler) -> Vec3A {
+        let Some(g) = &self.density else { return self.transmittance_over(d) };
+        let mu = self.sigma_t.max_element() * g.grid.max;
+        let Some((t0, t1)) = g.span(ray, d).filter(|_| mu > 0.0) else { return Vec3A::ONE };
+        let (mut t, mut tr) = (t0, Vec3A::ONE);
+        for _ in 0..MAX_STEPS {
+            t -= (1.0 - s.next()).ln() / mu;
+            if !(t < t1) {
+                return tr;
+            }
+            let sigma_t = self.sigma_t * g.grid.eval(g.to_grid.transform_point3a(ray.origin + ray.dir * t));
+            tr *= Vec3A::ONE - sigma_t / mu;
+            if tr.max_element() <= 0.0 {
+                return Vec3A::ZERO;
+            }
+        }
+        Vec3A::ZERO
+    }
+
+    /// A homogeneous medium's transmittance over a length `d`: exp(−σt·d), 1 where σt = 0
+    /// (also for an infinite d).
+    pub fn transmittance_over(&self, d: f32) -> Vec3A {
         let f = |s: f32| if s > 0.0 { (-s * d).exp() } else { 1.0 };
         Vec3A::new(f(self.sigma_t.x), f(self.sigma_t.y), f(self.sigma_t.z))
+    }
+}
+
+/// Multiplies the throughput by an event's f and the relative densities by its p per channel,
+/// both divided by mean(r·p) (module docs); absorbed where nothing can go on.
+fn weigh(flight: Flight, f: Vec3A, p: Vec3A, beta: &mut Vec3A, r: &mut Vec3A) -> Flight {
+    let k = mean(*r * p);
+    if !(k > 0.0) || f == Vec3A::ZERO {
+        return Flight::Absorbed;
+    }
+    *beta *= f / k;
+    *r *= p / k;
+    flight
+}
+
+impl Density {
+    /// The part [t0, t1) of the ray's [0, t_max) inside the grid's cube (outside it the
+    /// density is 0), by the slab test in the grid's coordinates (an affine map keeps t).
+    fn span(&self, ray: &Ray, t_max: f32) -> Option<(f32, f32)> {
+        let o = self.to_grid.transform_point3a(ray.origin);
+        let d = self.to_grid.transform_vector3a(ray.dir);
+        let inv = d.recip();
+        let (a, b) = (-o * inv, (Vec3A::ONE - o) * inv);
+        // NaN (0 · ∞, a ray along a face) falls to the other operand in min/max.
+        let t0 = a.min(b).max_element().max(0.0);
+        let t1 = a.max(b).min_element().min(t_max);
+        (t0 < t1).then_some((t0, t1))
     }
 }
 
@@ -105,15 +221,22 @@ mod tests {
     #[test]
     fn flight_passes_with_beer_lambert_probability() {
         for sigma_t in [Vec3A::splat(1.5), Vec3A::new(0.2, 1.0, 3.0), Vec3A::new(0.0, 0.5, 4.0)] {
-            let m = Medium { name: "m".into(), sigma_t, albedo: Vec3A::splat(0.5), phase: Phase { g: 0.0 } };
+            let m = Medium {
+                name: "m".into(),
+                sigma_t,
+                albedo: Vec3A::splat(0.5),
+                phase: Phase { g: 0.0 },
+                density: None,
+            };
             let (d, n) = (0.8f32, 400_000u64);
             let mut sum = [0.0f64; 3];
             let mut sq = [0.0f64; 3];
             for k in 0..n {
-                let (u_hero, u) = Sampler::new(5, k, 0).next2();
+                let mut s = Sampler::new(5, k, 0);
                 let (mut beta, mut r) = (Vec3A::ONE, Vec3A::ONE);
-                let hero = ((u_hero * 3.0) as usize).min(2);
-                if m.sample_flight(d, hero, u, &mut beta, &mut r) == Flight::Through {
+                let hero = ((s.next() * 3.0) as usize).min(2);
+                let ray = Ray { origin: Vec3A::ZERO, dir: Vec3A::X };
+                if m.sample_flight(&ray, d, hero, &mut s, &mut beta, &mut r) == Flight::Through {
                     assert!((r.x + r.y + r.z - 3.0).abs() < 1e-5, "r = {r} has mean 1");
                     for c in 0..3 {
                         sum[c] += beta[c] as f64;
@@ -121,7 +244,7 @@ mod tests {
                     }
                 }
             }
-            let truth = m.transmittance(d);
+            let truth = m.transmittance_over(d);
             for c in 0..3 {
                 let mean = sum[c] / n as f64;
                 let se = ((sq[c] / n as f64 - mean * mean) / n as f64).sqrt();

@@ -3,7 +3,7 @@
 
 use super::super::bsdf::Bsdf;
 use super::super::geometry::{Prim, PrimInfo};
-use super::super::media::{Medium, Phase};
+use super::super::media::{Density, Grid, Medium, Phase};
 use super::super::texture::{RoughnessSpec, Texture};
 use super::super::{bvh::Bvh, microfacet, obj, ply, surfaces, Error};
 use super::file::*;
@@ -57,6 +57,16 @@ impl Placement {
             Some(m) => m.transform_point3(p),
             None => self.rotation * (self.scale * p) + self.translation,
         }
+    }
+
+    /// The transform as one affine map.
+    fn affine(&self) -> glam::DAffine3 {
+        self.matrix.unwrap_or_else(|| {
+            glam::DAffine3::from_mat3_translation(
+                self.rotation * DMat3::from_diagonal(self.scale),
+                self.translation,
+            )
+        })
     }
 
     /// Whether the transform mirrors (and so flips a mesh's winding).
@@ -254,7 +264,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
     let mut prims = Vec::new();
     let mut info = Vec::new();
     let mut object_names = vec!["background".to_string()];
-    let media = build_media(&file.media, path)?;
+    let media = build_media(&file.media, path, &dir)?;
     let medium_index = |name: Option<&str>, field: &str| -> Result<Option<u32>, Error> {
         name.map(|name| {
             media.iter().position(|m| m.name == name).map(|i| i as u32).ok_or_else(|| {
@@ -458,6 +468,21 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
     } else {
         bvh.order.iter().map(|&i| boundaries[i as usize]).collect()
     };
+    // A medium no shape bounds and the camera is not in can never be entered.
+    for (i, m) in media.iter().enumerate() {
+        let used = camera_medium == Some(i as u32)
+            || file.shapes.iter().any(|s| {
+                let (a, b) = s.media();
+                a == Some(m.name.as_str()) || b == Some(m.name.as_str())
+            });
+        if !used {
+            return Err(field_err(
+                path,
+                &format!("media[{i}] ({})", m.name),
+                "is not the camera's medium and no shape's interior or exterior: nothing could enter it (give a shape `interior = \"NAME\"`, or the camera `medium`)",
+            ));
+        }
+    }
     if !media.is_empty() && file.render.integrator.name == "path" {
         return Err(field_err(
             path,
@@ -819,7 +844,7 @@ fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error>
 
 /// The `[[media]]`, each value checked: names unique, coefficients finite and ≥ 0, albedo in
 /// [0, 1], g in (−1, 1).
-fn build_media(specs: &[MediumSpec], path: &Path) -> Result<Vec<Medium>, Error> {
+fn build_media(specs: &[MediumSpec], path: &Path, dir: &Path) -> Result<Vec<Medium>, Error> {
     let mut media: Vec<Medium> = Vec::new();
     for (i, m) in specs.iter().enumerate() {
         let field = format!("media[{i}] ({})", m.name);
@@ -869,7 +894,49 @@ fn build_media(specs: &[MediumSpec], path: &Path) -> Result<Vec<Medium>, Error> 
         if !sigma_t.is_finite() {
             return Err(field_err(path, &field, "σt times scale overflows single precision"));
         }
-        media.push(Medium { name: m.name.clone(), sigma_t, albedo, phase: Phase { g: g as f32 } });
+        let density = match &m.grid {
+            None if m.grid_transform.is_some() || m.grid_bbox.is_some() => {
+                return Err(field_err(
+                    path,
+                    &field,
+                    "`grid_transform` and `grid_bbox` place a `grid`, which is not given",
+                ))
+            }
+            None => None,
+            Some(file) => {
+                let grid = Grid::read(&dir.join(file))?;
+                let place = m
+                    .grid_transform
+                    .clone()
+                    .unwrap_or_default()
+                    .build(path, &format!("{field}.grid_transform"))?;
+                let mut to_world = place.affine();
+                if m.grid_bbox == Some(true) {
+                    let (lo, hi) = grid.bbox;
+                    let extent = hi - lo;
+                    if !(extent.min_element() > 0.0 && extent.is_finite() && lo.is_finite()) {
+                        return Err(field_err(
+                            path,
+                            &format!("{field}.grid_bbox"),
+                            format!("{file}'s box {lo} to {hi} is empty or not finite"),
+                        ));
+                    }
+                    to_world = to_world
+                        * glam::DAffine3::from_scale_rotation_translation(
+                            extent.as_dvec3(),
+                            glam::DQuat::IDENTITY,
+                            lo.as_dvec3(),
+                        );
+                }
+                let to_grid = to_world.inverse();
+                let to_grid = glam::Affine3A::from_mat3_translation(
+                    to_grid.matrix3.as_mat3(),
+                    to_grid.translation.as_vec3(),
+                );
+                Some(Density { grid, to_grid })
+            }
+        };
+        media.push(Medium { name: m.name.clone(), sigma_t, albedo, phase: Phase { g: g as f32 }, density });
     }
     Ok(media)
 }

@@ -56,6 +56,11 @@ impl SceneFile {
                 fix(m);
             }
         }
+        for m in &mut self.media {
+            if let Some(g) = &mut m.grid {
+                fix(g);
+            }
+        }
     }
 }
 
@@ -371,6 +376,19 @@ pub struct MediumSpec {
     pub scale: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub g: Option<f64>,
+    /// A heterogeneous medium: a Mitsuba `.vol` grid (relative to the scene file) whose values
+    /// multiply σt point by point (1 or 3 channels, trilinear, 0 outside the grid; see
+    /// `render::media::grid`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub grid: Option<String>,
+    /// Where the grid lies: the transform taking its cube [0, 1]³ into the scene (default the
+    /// identity), as Mitsuba's `gridvolume` `to_world`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub grid_transform: Option<TransformSpec>,
+    /// `true`: the grid's cube is first mapped onto the box its file gives (Mitsuba's
+    /// `use_grid_bbox`). Default false.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub grid_bbox: Option<bool>,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]

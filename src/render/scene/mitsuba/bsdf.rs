@@ -166,9 +166,11 @@ pub(super) fn bsdf(b: &Elem, name: String) -> Result<MaterialSpec, Error> {
             m.ior = Some(int / ext);
             m.albedo = Some(TextureSpec::Constant(tint));
         }
-        other => return Err(b.unsupported(format!(
+        other => {
+            return Err(b.unsupported(format!(
             "bsdf \"{other}\": lumen reads diffuse, conductor, roughconductor, dielectric, null and twosided"
-        ))),
+        )))
+        }
     }
     p.finish("reflectance (diffuse); material, eta, k, specular_reflectance, distribution, alpha (conductors); int_ior, ext_ior, specular_reflectance, specular_transmittance (dielectric)")?;
     Ok(m)

@@ -3,8 +3,8 @@
 //! `lumen scene convert` can show what was read.
 //!
 //! How each part maps (Mitsuba 3's plugin reference names the parameters):
-//! - `integrator`: `path`, `volpath`, `volpathmis` (a scene without media: the path tracer)
-//!   and `direct` (= `path` with `max_depth` 2), with `max_depth` (−1: unbounded) and
+//! - `integrator`: `path`, `volpath` and `volpathmis` (lumen's volpath with media, its path
+//!   tracer, the same image faster, without) and `direct` (= `path` with `max_depth` 2), with `max_depth` (−1: unbounded) and
 //!   `rr_depth`; `moment` renders its inner integrator (lumen writes the variance beside the
 //!   mean anyway). lumen's roulette starts after 5 segments, Mitsuba's default `rr_depth`:
 //!   another `rr_depth` changes the noise, not the expected image, and is accepted.
@@ -22,9 +22,12 @@
 //!   in `twosided`. Colours as `rgb`, `float`, `spectrum` (a constant or wavelength:value
 //!   pairs, turned into RGB as Mitsuba's RGB variants do: `spectrum`), or a `checkerboard` /
 //!   `bitmap` texture.
-//! - `shape`: `obj`, `ply`, `sphere`, `rectangle`, `cube`, with `to_world`, `flip_normals`, a `bsdf`
-//!   and an `area` emitter (the shape's material then emits). `emitter`: `point`, `spot`,
-//!   `directional`, `constant`, `envmap`.
+//! - `shape`: `obj`, `ply`, `sphere`, `rectangle`, `cube`, with `to_world`, `flip_normals`, a `bsdf`,
+//!   an `area` emitter (the shape's material then emits) and `interior` / `exterior` media (a
+//!   shape without a BSDF is diffuse even where it bounds a medium, as Mitsuba 3.9 renders it).
+//!   `emitter`: `point`, `spot`, `directional`, `constant`, `envmap`.
+//! - `medium`: `homogeneous` and `heterogeneous` (a `gridvolume` σt), in shapes and
+//!   the sensor; the `null` BSDF for a medium's invisible boundary.
 //!
 //! Anything else, and any parameter a plugin does not read, is refused by name and line with
 //! what lumen supports instead: nothing is dropped silently.
@@ -330,9 +333,9 @@ impl Converter {
         {
             return Err(m.error("a shape's <medium> needs name=\"interior\" or name=\"exterior\""));
         }
+        // A shape without a BSDF is diffuse, also where it bounds a medium (as Mitsuba 3.9
+        // renders it): a medium's invisible boundary takes <bsdf type="null"/>.
         let mut material = match bsdfs.as_slice() {
-            // Mitsuba gives a shape without a BSDF that bounds a medium the null BSDF.
-            [] if interior.is_some() => Some(self.null_material()),
             [] => None,
             [b] => Some(self.material(b, &name)?),
             _ => return Err(e.error("has more than one <bsdf>")),
@@ -480,20 +483,12 @@ impl Converter {
             .chain((2..).map(|k| format!("{base}-{k}")))
             .find(|n| !taken(n))
             .unwrap_or_default();
-        self.media.push(medium::medium(m, name.clone())?);
+        let spec = medium::medium(m, name.clone(), &|e: &Elem, f: &str| self.file(e, f))?;
+        self.media.push(spec);
         if let Some(id) = m.attr("id") {
             self.medium_ids.insert(id.to_string(), name.clone());
         }
         Ok(name)
-    }
-
-    /// Mitsuba's `null` BSDF, made once.
-    fn null_material(&mut self) -> String {
-        let name = "mitsuba-null";
-        if !self.materials.iter().any(|m| m.name == name) {
-            self.materials.push(bsdf::null(name));
-        }
-        name.to_string()
     }
 
     /// `base`, or `base-2`, `base-3` … whichever no material has yet.
