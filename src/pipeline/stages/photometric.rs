@@ -258,8 +258,12 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<photometric::In
     if pixels.is_empty() {
         return Err(StageError::Config(format!("{}: no pixel sees one smooth piece of the object", c.scene)));
     }
-    let albedo =
-        pixels.iter().map(|&i| std::array::from_fn(|ch| truth.albedo.data[3 * i + ch] as f64)).collect();
+    // A translucent object (a medium behind a null surface) has no surface albedo to compare
+    // the solver's with.
+    let surfaceless = scene.materials.iter().any(|m| matches!(m.bsdf, render::bsdf::Bsdf::Null));
+    let albedo = (!surfaceless).then(|| {
+        pixels.iter().map(|&i| std::array::from_fn(|ch| truth.albedo.data[3 * i + ch] as f64)).collect()
+    });
 
     // Towards the camera from each pixel's surface point: the reversed ray through the pixel
     // centre (OpenCV pixel coordinates), from the scene's camera model, as a calibrated setup
@@ -344,7 +348,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<photometric::In
     }
     Ok(Some((
         input,
-        Truth { normals, albedo: Some(albedo) },
+        Truth { normals, albedo },
         Findings { notes, files, ..Default::default() },
     )))
 }
