@@ -233,6 +233,16 @@ fn bad_values() {
     assert!(e.contains("materials[1] (g)") && e.contains("dielectric"), "{e}");
     let e = scene_error(&glossy("type = \"lambertian\"\nior = 1.5\n"), &[]);
     assert!(e.contains("materials[1] (g).ior") && e.contains("dielectric"), "{e}");
+    let e = scene_error(&glossy("type = \"plastic\"\nior = 0.1\n"), &[]);
+    assert!(e.contains("materials[1] (g).ior") && e.contains("[0.25, 4]"), "{e}");
+    let e = scene_error(&glossy("type = \"plastic\"\nspecular = [1.5, 1.0, 1.0]\n"), &[]);
+    assert!(e.contains("materials[1] (g).specular") && e.contains("create energy"), "{e}");
+    let e = scene_error(&glossy("type = \"plastic\"\nexponent = 10.0\n"), &[]);
+    assert!(e.contains("materials[1] (g)") && e.contains("plastic material takes no"), "{e}");
+    let e = scene_error(&glossy("type = \"lambertian\"\nnonlinear = true\n"), &[]);
+    assert!(e.contains("materials[1] (g).nonlinear") && e.contains("only a plastic"), "{e}");
+    let e = scene_error(&glossy("type = \"thin-dielectric\"\ntwo_sided = false\n"), &[]);
+    assert!(e.contains("materials[1] (g).two_sided") && e.contains("two sides"), "{e}");
 }
 
 #[test]

@@ -128,13 +128,29 @@ fn malformed_scenes_are_refused_by_element_and_line() {
         (vec![("scene.xml", scene_with(&sphere("<ref id=\"nothing\"/>")))], "names id \"nothing\"", BadInput),
         (vec![("scene.xml", scene_with("<shape type=\"sphere\"><float name=\"radius\" value=\"$r\"/></shape>"))], "uses $r", BadInput),
         (vec![("scene.xml", scene_with("<shape type=\"sphere\"><float name=\"radius\" value=\"big\"/></shape>"))], "\"big\" is not a finite number", BadInput),
-        (vec![("scene.xml", scene_with(&sphere("<bsdf type=\"plastic\"/>")))], "bsdf \"plastic\": lumen reads diffuse", Unsupported),
+        (vec![("scene.xml", scene_with(&sphere("<bsdf type=\"roughplastic\"/>")))], "bsdf \"roughplastic\": lumen has no rough coat", Unsupported),
+        (vec![("scene.xml", scene_with(&sphere("<bsdf type=\"hair\"/>")))], "bsdf \"hair\": lumen reads diffuse", Unsupported),
+        (
+            vec![("scene.xml", scene_with("<shape type=\"sphere\"><emitter type=\"area\"><spectrum type=\"blackbody\" name=\"radiance\"><float name=\"temperature\" value=\"3000\"/></spectrum></emitter></shape>"))],
+            "a blackbody is spectral only",
+            Unsupported,
+        ),
+        (
+            vec![("scene.xml", scene_with(&sphere("<bsdf type=\"plastic\"><rgb name=\"specular_reflectance\" value=\"2\"/></bsdf>")))],
+            "more would create energy",
+            BadInput,
+        ),
+        (
+            vec![("scene.xml", scene_with(&sphere("<bsdf type=\"thindielectric\"><rgb name=\"specular_reflectance\" value=\"0.5\"/><rgb name=\"specular_transmittance\" value=\"0.9\"/></bsdf>")))],
+            "tint both alike",
+            Unsupported,
+        ),
         (
             vec![("scene.xml", scene_with(&sphere("<bsdf type=\"diffuse\"><rgb name=\"reflectance\" value=\"0.5\"/><float name=\"shininess\" value=\"3\"/></bsdf>")))],
             "<float name=\"shininess\"> at",
             Unsupported,
         ),
-        (vec![("scene.xml", scene_with("<shape type=\"disk\"/>"))], "shape \"disk\"", Unsupported),
+        (vec![("scene.xml", scene_with("<shape type=\"cylinder\"/>"))], "shape \"cylinder\"", Unsupported),
         (
             vec![("scene.xml", scene_with("<shape type=\"sphere\"><transform name=\"to_world\"><scale value=\"1, 2, 1\"/></transform></shape>"))],
             "lumen's spheres stay round",
@@ -217,10 +233,10 @@ fn ref_expansion_is_bounded() {
 fn cli_names_the_fault() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("scene.xml");
-    std::fs::write(&path, scene_with("<shape type=\"disk\"/>")).unwrap();
+    std::fs::write(&path, scene_with("<shape type=\"cylinder\"/>")).unwrap();
     let (code, err) =
         lumen(&["render", path.to_str().unwrap(), "--out", dir.path().join("o.exr").to_str().unwrap()]);
-    assert!(code != 0 && err.contains("shape \"disk\"") && err.contains("scene.xml:7"), "{err}");
+    assert!(code != 0 && err.contains("shape \"cylinder\"") && err.contains("scene.xml:7"), "{err}");
     assert_eq!(fault_in(&err), "unsupported", "{err}");
     assert!(!dir.path().join("o.exr").exists());
 }

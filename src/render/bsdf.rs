@@ -1,6 +1,6 @@
 //! Reflectance models: Lambertian, normalised Blinn-Phong, rough conductors with GGX or
-//! Beckmann microfacets (`render::microfacet`), and the smooth mirror and dielectric
-//! (`render::specular`).
+//! Beckmann microfacets (`render::microfacet`), the smooth mirror, dielectric and thin
+//! dielectric (`render::specular`), and smooth plastic (`render::plastic`).
 //!
 //! Blinn-Phong, the form photometric stereo fits:
 //!
@@ -19,6 +19,7 @@
 
 pub use super::geometry::basis;
 use super::microfacet::{self, Distribution};
+use super::plastic;
 use super::specular;
 pub use super::transport::{cosine_hemisphere, unit_circle};
 use glam::Vec3A;
@@ -55,6 +56,33 @@ pub enum Bsdf {
     /// No surface at all, only where a medium begins or ends (Mitsuba's `null`): the path goes
     /// on straight through, unweighted.
     Null,
+    /// A thin pane of a dielectric of index `eta` relative to the medium on both sides
+    /// (Mitsuba's `thindielectric`, `render::specular::thin_dielectric`): it reflects, or lets
+    /// light through undeviated; the material's colour tints both.
+    ThinDielectric {
+        eta: f32,
+    },
+    /// Smooth plastic (Mitsuba's `plastic`, `render::plastic`): a diffuse base of
+    /// the material's colour under a smooth dielectric coat of relative index `eta`, whose
+    /// mirror reflection `specular` tints; `fdr_int` is the coat's reflectance for diffuse
+    /// light from inside, and `nonlinear` lets light reflected back into the base take its
+    /// colour each time.
+    Plastic {
+        eta: f32,
+        fdr_int: f32,
+        specular: Vec3A,
+        nonlinear: bool,
+    },
+}
+
+/// A direction sampled from a model: wi, the weight f·cos/pdf, and whether a delta lobe
+/// (a mirror, refraction or a pass through) produced it, so that the emitter the ray reaches
+/// counts in full.
+#[derive(Clone, Copy, Debug)]
+pub struct Sample {
+    pub wi: Vec3A,
+    pub weight: Vec3A,
+    pub delta: bool,
 }
 
 /// Rec. 709 luminance of linear RGB.
@@ -66,7 +94,7 @@ impl Bsdf {
     /// Whether the model scatters into single directions (f and pdf are Dirac deltas).
     #[inline]
     pub fn is_delta(&self) -> bool {
-        matches!(self, Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Null)
+        matches!(self, Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Null | Bsdf::ThinDielectric { .. })
     }
 
     /// The model with roughness α (conductors only; others are returned as they are).
@@ -94,7 +122,13 @@ impl Bsdf {
     fn specular_probability(&self, kd: Vec3A) -> f32 {
         match *self {
             Bsdf::Lambertian => 0.0,
-            Bsdf::Conductor { .. } | Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Null => 1.0,
+            Bsdf::Conductor { .. }
+            | Bsdf::Mirror { .. }
+            | Bsdf::Dielectric { .. }
+            | Bsdf::Null
+            | Bsdf::ThinDielectric { .. } => 1.0,
+            // Depends on the direction too: `plastic::specular_probability`.
+            Bsdf::Plastic { .. } => 0.0,
             Bsdf::BlinnPhong { specular, .. } => {
                 let (d, s) = (luminance(kd), luminance(specular));
                 if s <= 0.0 {
@@ -125,8 +159,9 @@ impl Bsdf {
             return Vec3A::ZERO;
         }
         match *self {
-            Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Null => Vec3A::ZERO,
+            Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Null | Bsdf::ThinDielectric { .. } => Vec3A::ZERO,
             Bsdf::Lambertian => kd * FRAC_1_PI,
+            Bsdf::Plastic { eta, fdr_int, nonlinear, .. } => plastic::diffuse(kd, eta, fdr_int, nonlinear, co, ci),
             Bsdf::BlinnPhong { specular, exponent } => {
                 let h = (wo + wi).normalize();
                 let ch = n.dot(h).max(0.0);
@@ -160,8 +195,11 @@ impl Bsdf {
         let ps = self.specular_probability(kd);
         let diffuse = ci / PI;
         match *self {
-            Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Null => 0.0,
+            Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Null | Bsdf::ThinDielectric { .. } => 0.0,
             Bsdf::Lambertian => diffuse,
+            Bsdf::Plastic { eta, specular, .. } => {
+                (1.0 - plastic::specular_probability(kd, specular, eta, co)) * diffuse
+            }
             Bsdf::Conductor { distribution, alpha, .. } => {
                 let h = (wo + wi).normalize();
                 let oh = wo.dot(h);
@@ -186,11 +224,14 @@ impl Bsdf {
         }
     }
 
-    /// Samples wi for wo; returns wi and the weight f·cos/pdf, or `None` when the sample
-    /// leaves below the surface (the path ends there). Only a dielectric's refracted
-    /// direction goes below n.
+    /// Samples wi for wo: wi, the weight f·cos/pdf and whether a delta lobe produced it, or
+    /// `None` when the sample leaves below the surface (the path ends there). Only a
+    /// dielectric's refracted direction and a thin dielectric's or null surface's direction
+    /// through go below n.
     #[inline]
-    pub fn sample(&self, kd: Vec3A, n: Vec3A, wo: Vec3A, u1: f32, u2: f32) -> Option<(Vec3A, Vec3A)> {
+    pub fn sample(&self, kd: Vec3A, n: Vec3A, wo: Vec3A, u1: f32, u2: f32) -> Option<Sample> {
+        let delta = |wi: Vec3A, weight: Vec3A| Some(Sample { wi, weight, delta: true });
+        let smooth = |wi: Vec3A, weight: Vec3A| Some(Sample { wi, weight, delta: false });
         match *self {
             Bsdf::Mirror { fresnel } => {
                 let c = n.dot(wo);
@@ -202,18 +243,47 @@ impl Bsdf {
                         microfacet::fresnel_conductor(c, eta.z, k.z),
                     ),
                 };
-                (c > 0.0).then(|| (specular::reflect(wo, n), kd * f))
+                if c > 0.0 {
+                    delta(specular::reflect(wo, n), kd * f)
+                } else {
+                    None
+                }
             }
-            Bsdf::Null => Some((-wo, Vec3A::ONE)),
+            Bsdf::Null => delta(-wo, Vec3A::ONE),
             Bsdf::Dielectric { eta } => {
                 if n.dot(wo) <= 0.0 {
                     return None;
                 }
                 let (wi, w) = specular::sample_dielectric(n, wo, eta, u1);
-                Some((wi, kd * w))
+                delta(wi, kd * w)
+            }
+            Bsdf::ThinDielectric { eta } => {
+                if n.dot(wo) <= 0.0 {
+                    return None;
+                }
+                delta(specular::thin_dielectric(n, wo, eta, u1), kd)
+            }
+            Bsdf::Plastic { eta, specular, .. } => {
+                let co = n.dot(wo);
+                if co <= 0.0 {
+                    return None;
+                }
+                let (fi, _) = specular::fresnel_dielectric(co, eta);
+                let ps = plastic::specular_probability(kd, specular, eta, co);
+                if u1 < ps {
+                    return delta(specular::reflect(wo, n), specular * (fi / ps));
+                }
+                let u = ((u1 - ps) / (1.0 - ps)).min(1.0 - f32::EPSILON);
+                let wi = cosine_hemisphere(n, u, u2);
+                let ci = n.dot(wi);
+                if ci <= 0.0 {
+                    return None;
+                }
+                // f·cos/pdf with pdf = (1 − ps)·cos/π.
+                smooth(wi, self.eval(kd, n, wo, wi) * (PI / (1.0 - ps)))
             }
             // f·cos/pdf = (kd/π)·cos/(cos/π) = kd.
-            Bsdf::Lambertian => Some((cosine_hemisphere(n, u1, u2), kd)),
+            Bsdf::Lambertian => smooth(cosine_hemisphere(n, u1, u2), kd),
             Bsdf::Conductor { distribution, alpha, .. } => {
                 let h = match distribution {
                     Distribution::Ggx => microfacet::sample_visible_ggx(alpha, n, wo, u1, u2),
@@ -225,7 +295,7 @@ impl Bsdf {
                 if ci <= 0.0 || !(pdf > 0.0) {
                     return None;
                 }
-                Some((wi, self.eval(kd, n, wo, wi) * (ci / pdf)))
+                smooth(wi, self.eval(kd, n, wo, wi) * (ci / pdf))
             }
             Bsdf::BlinnPhong { exponent, .. } => {
                 let ps = self.specular_probability(kd);
@@ -250,7 +320,7 @@ impl Bsdf {
                 if !(pdf > 0.0) {
                     return None;
                 }
-                Some((wi, self.eval(kd, n, wo, wi) * (ci / pdf)))
+                smooth(wi, self.eval(kd, n, wo, wi) * (ci / pdf))
             }
         }
     }
@@ -362,7 +432,7 @@ mod tests {
                     let mut sum = 0.0f64;
                     for k in 0..m {
                         let (u1, u2) = Sampler::with_kind(SamplerKind::Independent, 17, k, 0).next2();
-                        if let Some((wi, w)) = bsdf.sample(Vec3A::ONE, n, wo, u1, u2) {
+                        if let Some(Sample { wi, weight: w, .. }) = bsdf.sample(Vec3A::ONE, n, wo, u1, u2) {
                             assert!(w.is_finite() && n.dot(wi) > 0.0);
                             sum += w.x as f64;
                         }
@@ -431,7 +501,7 @@ mod tests {
                 for k in 0..m {
                     let mut s = Sampler::with_kind(SamplerKind::Independent, 11, k, 0);
                     let (u1, u2) = s.next2();
-                    if let Some((wi, w)) = bp.sample(kd, n, wo, u1, u2) {
+                    if let Some(Sample { wi, weight: w, .. }) = bp.sample(kd, n, wo, u1, u2) {
                         assert!(w.is_finite() && n.dot(wi) > 0.0);
                         sum += w.x as f64;
                     }
@@ -490,7 +560,7 @@ mod tests {
             let mut observed = vec![0.0f64; nt * np];
             for k in 0..samples {
                 let (u1, u2) = Sampler::with_kind(SamplerKind::Independent, 3 + case as u64, k, 0).next2();
-                if let Some((wi, _)) = bsdf.sample(kd, n, wo, u1, u2) {
+                if let Some(Sample { wi, .. }) = bsdf.sample(kd, n, wo, u1, u2) {
                     observed[cell(wi)] += 1.0;
                 }
             }
@@ -520,6 +590,77 @@ mod tests {
                 p >= alpha,
                 "case {case} ({bsdf:?}, θo {theta_o}°): χ² p-value {p:.3e} below {alpha:.3e}"
             );
+        }
+    }
+
+    /// Smooth plastic's directional albedo in closed form against the mean sample weight
+    /// (4·10⁵ samples, 4 SE): s·F(θo) + (1 − F(θo))·ρ, or with `nonlinear` the base's share
+    /// ρ(1 − F_dr)/(1 − ρF_dr), since ∫(1 − F(θi))·cos/π dωi = η²(1 − F_dr). Every diffuse
+    /// sample's weight is f·cos/pdf from `eval` and `pdf`.
+    #[test]
+    fn plastic_albedo_closed_form() {
+        for (eta, kd, spec, nonlinear) in
+            [(1.49f32, 0.5f32, 1.0f32, false), (1.33, 0.8, 0.6, true), (1.8, 0.2, 1.0, false), (1.49, 1.0, 1.0, false)]
+        {
+            let fdr = plastic::diffuse_reflectance_inside(eta as f64) as f32;
+            let bsdf = Bsdf::Plastic { eta, fdr_int: fdr, specular: Vec3A::splat(spec), nonlinear };
+            let kd3 = Vec3A::splat(kd);
+            for deg in [0.0f32, 30.0, 60.0, 85.0] {
+                let wo = dir(deg, 20.0);
+                let (fi, _) = specular::fresnel_dielectric(wo.z, eta);
+                let base = if nonlinear { kd * (1.0 - fdr) / (1.0 - kd * fdr) } else { kd };
+                let want = (spec * fi + (1.0 - fi) * base) as f64;
+                let mut s = Sampler::new(7, deg as u64, 1);
+                let n = 400_000;
+                let (mut sum, mut sum2) = (0.0f64, 0.0f64);
+                for _ in 0..n {
+                    let (u1, u2) = s.next2();
+                    let Some(smp) = bsdf.sample(kd3, Vec3A::Z, wo, u1, u2) else { continue };
+                    if !smp.delta {
+                        let (f, pdf) = (bsdf.eval(kd3, Vec3A::Z, wo, smp.wi), bsdf.pdf(kd3, Vec3A::Z, wo, smp.wi));
+                        let direct = f.x * smp.wi.z / pdf;
+                        assert!((smp.weight.x - direct).abs() <= 1e-4 * direct, "{} vs {direct}", smp.weight.x);
+                    }
+                    let w = smp.weight.x as f64;
+                    sum += w;
+                    sum2 += w * w;
+                }
+                let mean = sum / n as f64;
+                let se = ((sum2 / n as f64 - mean * mean).max(0.0) / n as f64).sqrt();
+                assert!(
+                    (mean - want).abs() < 4.0 * se + 1e-5,
+                    "η {eta}, ρ {kd}, s {spec}, nonlinear {nonlinear}, θo {deg}°: {mean} ± {se} vs {want}"
+                );
+            }
+        }
+    }
+
+    /// A thin pane reflects with probability 2R/(1 + R) (R the Fresnel reflectance, the light
+    /// bounced between its faces summed) and otherwise passes light undeviated, weight 1.
+    #[test]
+    fn thin_dielectric_reflects_two_r_over_one_plus_r() {
+        for (deg, eta) in [(0.0f32, 1.5f32), (45.0, 1.5), (80.0, 1.5), (60.0, 1.33)] {
+            let wo = dir(deg, 0.0);
+            let (r, _) = specular::fresnel_dielectric(wo.z, eta);
+            let want = 2.0 * r as f64 / (1.0 + r as f64);
+            let bsdf = Bsdf::ThinDielectric { eta };
+            let mut s = Sampler::new(3, deg as u64, 2);
+            let n = 200_000;
+            let mut reflected = 0usize;
+            for _ in 0..n {
+                let (u1, u2) = s.next2();
+                let smp = bsdf.sample(Vec3A::ONE, Vec3A::Z, wo, u1, u2).expect("a pane always scatters");
+                assert!(smp.delta && smp.weight == Vec3A::ONE);
+                if smp.wi.z > 0.0 {
+                    assert!((smp.wi - Vec3A::new(-wo.x, -wo.y, wo.z)).length() < 1e-6);
+                    reflected += 1;
+                } else {
+                    assert_eq!(smp.wi, -wo);
+                }
+            }
+            let p = reflected as f64 / n as f64;
+            let se = (want * (1.0 - want) / n as f64).sqrt();
+            assert!((p - want).abs() < 4.0 * se + 1e-6, "θ {deg}°, η {eta}: {p} vs {want}");
         }
     }
 }

@@ -12,6 +12,10 @@
 //!   (Snell: η_i sin θi = η_t sin θt) with 1 − F, so the weight is R in both cases, divided by
 //!   η_ti² = (η_t/η_i)² on refraction because radiance is carried (L/η² is invariant along a
 //!   path; Veach 1997, §5.2). Beyond the critical angle F = 1: total internal reflection.
+//! - Thin dielectric (Mitsuba's `thindielectric`), a pane whose two faces reflect in turn:
+//!   summing the light bounced between them, R' = R + T²R + T²R³ + … = 2R/(1 + R) with
+//!   R = F(cos θi, η), T = 1 − R; reflected with probability R', else through undeviated
+//!   (wi = −wo, the pane's refractions cancel), weight R in both cases.
 
 use glam::Vec3A;
 
@@ -49,6 +53,18 @@ pub fn sample_dielectric(n: Vec3A, wo: Vec3A, eta: f32, u: f32) -> (Vec3A, f32) 
     // Refracted direction: the tangential part scales by 1/η, the normal part is −cos θt.
     let wi = (-wo / eta + n * (cos_i / eta - cos_t)).normalize();
     (wi, 1.0 / (eta * eta))
+}
+
+/// Samples a thin dielectric pane of index `eta` for `wo` on the side of `n`: the mirror
+/// direction with probability 2R/(1 + R), else straight through.
+#[inline]
+pub fn thin_dielectric(n: Vec3A, wo: Vec3A, eta: f32, u: f32) -> Vec3A {
+    let (r, _) = fresnel_dielectric(n.dot(wo), eta);
+    if u < 2.0 * r / (1.0 + r) {
+        reflect(wo, n)
+    } else {
+        -wo
+    }
 }
 
 #[cfg(test)]

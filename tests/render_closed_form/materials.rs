@@ -222,7 +222,8 @@ material = "tex"
 /// radiance L, the whole 8 × 8 image (sphere and background). Whatever a lossless material
 /// does with the light, every path ends in the environment with weight 1, so the image is L
 /// (Lambertian of albedo 1, perfect mirror, clear glass — the glass also checks that refracted
-/// rays leave from the right side and that the η² factors of entering and leaving cancel);
+/// rays leave from the right side and that the η² factors of entering and leaving cancel —, a
+/// thin pane, white plastic, whose coat and base together lose nothing);
 /// a lossy one (rough conductors, Blinn-Phong within its energy bound, a gold mirror) never
 /// shows more than L. No sample may be NaN or infinite.
 #[test]
@@ -232,12 +233,16 @@ fn white_furnace_per_bsdf() {
         "type = \"mirror\"\nalbedo = [1.0, 1.0, 1.0]",
         "type = \"dielectric\"\nalbedo = [1.0, 1.0, 1.0]\nior = 1.5",
         "type = \"dielectric\"\nalbedo = [1.0, 1.0, 1.0]\nior = 0.7",
+        "type = \"thin-dielectric\"\nalbedo = [1.0, 1.0, 1.0]\nior = 1.5",
+        "type = \"plastic\"\nalbedo = [1.0, 1.0, 1.0]\nior = 1.5",
+        "type = \"plastic\"\nalbedo = [1.0, 1.0, 1.0]\nior = 1.33\nnonlinear = true",
     ];
     let lossy = [
         "type = \"conductor\"\nalbedo = [1.0, 1.0, 1.0]\nalpha = 0.5\neta = [0.2, 0.2, 0.2]\nk = [5.0, 5.0, 5.0]",
         "type = \"conductor\"\nalbedo = [1.0, 1.0, 1.0]\ndistribution = \"beckmann\"\nalpha = 1.0\neta = [0.2, 0.2, 0.2]\nk = [5.0, 5.0, 5.0]",
         "type = \"blinn-phong\"\nalbedo = [0.4, 0.4, 0.4]\nspecular = [0.55, 0.55, 0.55]\nexponent = 10.0",
         "type = \"mirror\"\nalbedo = [1.0, 1.0, 1.0]\neta = [0.143, 0.374, 1.442]\nk = [3.983, 2.385, 1.603]",
+        "type = \"plastic\"\nalbedo = [0.5, 0.5, 0.5]\nnonlinear = true",
     ];
     let l = 2.0;
     for (material, is_lossless) in lossless.iter().map(|m| (m, true)).chain(lossy.iter().map(|m| (m, false)))
@@ -247,7 +252,7 @@ fn white_furnace_per_bsdf() {
         );
         let dir = tempfile::tempdir().unwrap();
         let scene = common::scene(&text, dir.path()).unwrap();
-        let film = render::render(&scene, &common::settings(&scene, 1024, 64));
+        let film = render::render(&scene, &common::settings(&scene, 8192, 64));
         assert_eq!(film.dropped_samples, 0, "{material}: non-finite samples");
         let n = (film.mean.data.len() / 3) as f64;
         for c in 0..3 {

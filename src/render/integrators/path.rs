@@ -38,7 +38,7 @@ mod lanes;
 
 pub use lanes::supported as lanes_supported;
 
-use super::super::bsdf::Bsdf;
+use super::super::bsdf::{Bsdf, Sample};
 use super::super::film::{pixel_stats, Film, RR_START};
 use super::super::geometry::Ray;
 use super::super::sampler::Sampler;
@@ -143,11 +143,11 @@ pub fn trace(scene: &Scene, mut ray: Ray, max_depth: u32, s: &mut Sampler) -> Ve
         }
 
         let (u1, u2) = s.next2();
-        let Some((wi, weight)) = bsdf.sample(albedo, n, wo, u1, u2) else {
+        let Some(Sample { wi, weight, delta: delta_lobe }) = bsdf.sample(albedo, n, wo, u1, u2) else {
             break;
         };
         // After a delta vertex the emitter the ray reaches counts in full (weight 1).
-        mis_pdf = if delta { Some(f32::INFINITY) } else { glossy.then(|| bsdf.pdf(albedo, n, wo, wi)) };
+        mis_pdf = if delta_lobe { Some(f32::INFINITY) } else { glossy.then(|| bsdf.pdf(albedo, n, wo, wi)) };
         beta *= weight;
         if depth >= RR_START {
             let (killed, survivor) = transport::roulette(beta, s.next());

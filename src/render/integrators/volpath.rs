@@ -24,7 +24,7 @@
 //! Depth as in `path` and Mitsuba: `max_depth` counts segments between real vertices (surface
 //! or medium scattering); Russian roulette after 5 of them.
 
-use super::super::bsdf::Bsdf;
+use super::super::bsdf::{Bsdf, Sample};
 use super::super::film::{pixel_stats, Film, RR_START};
 use super::super::geometry::Ray;
 use super::super::media::Flight;
@@ -212,10 +212,10 @@ pub fn trace(scene: &Scene, mut ray: Ray, max_depth: u32, s: &mut Sampler) -> Ve
             }
         }
         let (u1, u2) = s.next2();
-        let Some((wi, weight)) = bsdf.sample(albedo, n, wo, u1, u2) else {
+        let Some(Sample { wi, weight, delta: delta_lobe }) = bsdf.sample(albedo, n, wo, u1, u2) else {
             break;
         };
-        mis_pdf = if delta { Some(f32::INFINITY) } else { glossy.then(|| bsdf.pdf(albedo, n, wo, wi)) };
+        mis_pdf = if delta_lobe { Some(f32::INFINITY) } else { glossy.then(|| bsdf.pdf(albedo, n, wo, wi)) };
         last = surf.p;
         crossings = 0;
         beta *= weight;

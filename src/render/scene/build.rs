@@ -22,6 +22,10 @@ fn field_err(path: &Path, field: &str, message: impl Into<String>) -> Error {
 /// infinity and rendered black.
 pub const MAX_SCENE_VALUE: f64 = 1e30;
 
+/// Triangles in a disk's fan (`ShapeSpec::Disk`): its area falls short of πr² by
+/// 1 − N·sin(2π/N)/(2π) ≈ (2π/N)²/6 = 6.3·10⁻⁶ at N = 1024.
+pub const DISK_SEGMENTS: u32 = 1024;
+
 /// Finite and within ±`MAX_SCENE_VALUE`.
 fn representable(v: f64) -> bool {
     v.is_finite() && v.abs() <= MAX_SCENE_VALUE
@@ -246,7 +250,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
             _ => None,
         };
         let one_sided = m.two_sided == Some(false);
-        if one_sided && matches!(bsdf, Bsdf::Dielectric { .. } | Bsdf::Null) {
+        if one_sided && matches!(bsdf, Bsdf::Dielectric { .. } | Bsdf::ThinDielectric { .. } | Bsdf::Null) {
             return Err(field_err(
                 path,
                 &format!("{field}.two_sided"),
@@ -423,6 +427,29 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                     let info_of =
                         |uv| PrimInfo { material: mtl, object_id: id, reverse, uv, normal: Vec3A::ZERO };
                     push_parallelogram(&mut prims, &mut info, o, u - o, v - o, info_of);
+                }
+            }
+            ShapeSpec::Disk { material, transform, reverse_orientation, .. } => {
+                let place = transform.build(path, &format!("{field}.transform"))?;
+                let mtl = material_index(material, &format!("{field}.material"))?;
+                object_names.push(format!("disk{i}"));
+                let id = object_names.len() as u32 - 1;
+                let reverse = *reverse_orientation ^ place.mirrors();
+                let centre = Vec3A::from(place.apply(DVec3::ZERO).as_vec3());
+                let rim = |k: u32| {
+                    let phi = std::f64::consts::TAU * k as f64 / DISK_SEGMENTS as f64;
+                    Vec3A::from(place.apply(DVec3::new(phi.cos(), phi.sin(), 0.0)).as_vec3())
+                };
+                for k in 0..DISK_SEGMENTS {
+                    let (a, b) = (rim(k), rim(k + 1));
+                    let (e1, e2) = (a - centre, b - centre);
+                    if e1.cross(e2).length_squared() == 0.0 {
+                        continue; // a transform that flattens the disk to a line
+                    }
+                    prims.push(Prim::Triangle { v0: centre, e1, e2 });
+                    let (va, vb) = (k as f32 / DISK_SEGMENTS as f32, (k + 1) as f32 / DISK_SEGMENTS as f32);
+                    let uv = [Vec2::new(0.0, 0.5 * (va + vb)), Vec2::new(1.0, va), Vec2::new(1.0, vb)];
+                    info.push(PrimInfo { material: mtl, object_id: id, reverse, uv, normal: Vec3A::ZERO });
                 }
             }
             ShapeSpec::Torus { .. } | ShapeSpec::Blob { .. } | ShapeSpec::Relief { .. } => {
@@ -726,15 +753,30 @@ fn build_camera(c: &CameraSpec, path: &Path) -> Result<(CameraModel, CameraToWor
 
 /// The reflectance model a material names, each field checked.
 fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error> {
-    let blinn_phong = m.specular.is_some() || m.exponent.is_some();
+    let blinn_phong = (m.specular.is_some() && m.kind != "plastic") || m.exponent.is_some();
     let rough = m.distribution.is_some() || m.alpha.is_some();
     let conductor = rough || m.eta.is_some() || m.k.is_some();
     let foreign = |kind: &str, other: &str| {
         field_err(path, field, format!("a {kind} material takes no {other} fields (check `type`)"))
     };
-    if m.ior.is_some() && m.kind != "dielectric" {
-        return Err(field_err(path, &format!("{field}.ior"), "only a dielectric material takes `ior`"));
+    if m.ior.is_some() && !matches!(m.kind.as_str(), "dielectric" | "thin-dielectric" | "plastic") {
+        return Err(field_err(
+            path,
+            &format!("{field}.ior"),
+            "only a dielectric, thin-dielectric or plastic material takes `ior`",
+        ));
     }
+    if m.nonlinear.is_some() && m.kind != "plastic" {
+        return Err(field_err(path, &format!("{field}.nonlinear"), "only a plastic material takes `nonlinear`"));
+    }
+    let index = |default: f64| {
+        let ior = m.ior.unwrap_or(default);
+        if (0.25..=4.0).contains(&ior) {
+            Ok(ior)
+        } else {
+            Err(field_err(path, &format!("{field}.ior"), format!("{ior}: expected a relative index in [0.25, 4]")))
+        }
+    };
     let complex_index = |eta: [f64; 3], k: [f64; 3]| {
         let eta = non_negative3(path, &format!("{field}.eta"), eta)?;
         let k = non_negative3(path, &format!("{field}.k"), k)?;
@@ -819,16 +861,28 @@ fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error>
             _ => Err(field_err(path, field, "a mirror takes both `eta` and `k` or neither (a perfect mirror)")),
         },
         "dielectric" if blinn_phong || conductor => Err(foreign("dielectric", "blinn-phong or conductor")),
-        "dielectric" => {
-            let ior = m.ior.unwrap_or(1.5046 / 1.000277);
-            if !(0.25..=4.0).contains(&ior) {
+        "dielectric" => Ok(Bsdf::Dielectric { eta: index(1.5046 / 1.000277)? as f32 }),
+        "thin-dielectric" if blinn_phong || conductor => {
+            Err(foreign("thin-dielectric", "blinn-phong or conductor"))
+        }
+        "thin-dielectric" => Ok(Bsdf::ThinDielectric { eta: index(1.5046 / 1.000277)? as f32 }),
+        "plastic" if blinn_phong || conductor => Err(foreign("plastic", "blinn-phong or conductor")),
+        "plastic" => {
+            let eta = index(1.49 / 1.000277)?;
+            let specular = non_negative3(path, &format!("{field}.specular"), m.specular.unwrap_or([1.0; 3]))?;
+            if specular.max_element() > 1.0 {
                 return Err(field_err(
                     path,
-                    &format!("{field}.ior"),
-                    format!("{ior}: expected a relative index in [0.25, 4]"),
+                    &format!("{field}.specular"),
+                    format!("{:?}: each value must be in [0, 1] (more would create energy)", m.specular),
                 ));
             }
-            Ok(Bsdf::Dielectric { eta: ior as f32 })
+            Ok(Bsdf::Plastic {
+                eta: eta as f32,
+                fdr_int: crate::render::plastic::diffuse_reflectance_inside(eta) as f32,
+                specular,
+                nonlinear: m.nonlinear.unwrap_or(false),
+            })
         }
         "null" if blinn_phong || conductor => Err(foreign("null", "blinn-phong or conductor")),
         "null" => Ok(Bsdf::Null),
@@ -836,7 +890,7 @@ fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error>
             path,
             &format!("{field}.type"),
             format!(
-                "'{other}' is not a known material (expected \"lambertian\", \"blinn-phong\", \"conductor\", \"mirror\", \"dielectric\" or \"null\")"
+                "'{other}' is not a known material (expected \"lambertian\", \"blinn-phong\", \"conductor\", \"mirror\", \"dielectric\", \"thin-dielectric\", \"plastic\" or \"null\")"
             ),
         )),
     }

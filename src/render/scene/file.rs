@@ -183,14 +183,18 @@ pub struct MaterialSpec {
     /// conductor, Mitsuba's `conductor`: a perfect mirror tinted by `albedo`, or with the
     /// Fresnel reflectance of `eta` and `k` when both are given) or `"dielectric"` (smooth
     /// glass or water, Mitsuba's `dielectric`; `albedo` tints reflection and transmission,
-    /// [1, 1, 1] for clear glass; see `render::specular`) or `"null"` (no surface, only the
+    /// [1, 1, 1] for clear glass; see `render::specular`), `"thin-dielectric"` (a pane of
+    /// glass, Mitsuba's `thindielectric`: reflects or lets light through undeviated; `albedo`
+    /// tints both), `"plastic"` (smooth plastic, Mitsuba's `plastic`: `albedo` is the diffuse
+    /// base's colour under a clear coat, `render::plastic`) or `"null"` (no surface, only the
     /// boundary of a medium: paths go straight through; it takes no `albedo`).
     #[serde(rename = "type")]
     pub kind: String,
     /// The diffuse colour (kd), or a tint for the other types; every type but `"null"` needs it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub albedo: Option<TextureSpec>,
-    /// Blinn-Phong only: specular colour ks (kd + ks ≤ 1 conserves energy).
+    /// Blinn-Phong: specular colour ks (kd + ks ≤ 1 conserves energy). Plastic: the tint of
+    /// the coat's mirror reflection (default [1, 1, 1]).
     pub specular: Option<[f64; 3]>,
     /// Blinn-Phong only: the exponent e (shininess), > 0.
     pub exponent: Option<f64>,
@@ -204,10 +208,15 @@ pub struct MaterialSpec {
     /// η = [0.143, 0.374, 1.442], k = [3.983, 2.385, 1.603]; mirror default none: F = 1).
     pub eta: Option<[f64; 3]>,
     pub k: Option<[f64; 3]>,
-    /// Dielectric only: index of refraction of the inside relative to the outside (the side
-    /// the surface normal points to), in [1/4, 4]; default 1.5046 / 1.000277 (Mitsuba's BK7
-    /// glass in air).
+    /// Dielectric, thin dielectric and plastic: index of refraction of the inside (the glass,
+    /// the pane, the coat) relative to the outside (the side the surface normal points to), in
+    /// [1/4, 4]; default 1.5046 / 1.000277 (Mitsuba's BK7 glass in air), for plastic
+    /// 1.49 / 1.000277 (polypropylene).
     pub ior: Option<f64>,
+    /// Plastic only: the base's colour at every reflection inside the coat, ρ/(1 − ρ·F_dr)
+    /// instead of ρ/(1 − F_dr) (Mitsuba's `nonlinear`; default false, see `render::plastic`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nonlinear: Option<bool>,
     /// Emitted radiance (linear RGB), one-sided along the surface normal: makes every shape
     /// with this material an area light.
     pub emission: Option<[f64; 3]>,
@@ -314,6 +323,22 @@ pub enum ShapeSpec {
         #[serde(default, skip_serializing_if = "Option::is_none")]
         exterior: Option<String>,
     },
+    /// Mitsuba's `disk`: the unit disk in the plane z = 0 through `transform`, facing +z, with
+    /// texture coordinates (r, φ/2π). Built as a fan of `DISK_SEGMENTS` triangles (its area
+    /// within 6.3·10⁻⁶ of the disk's, its rim within 4.7·10⁻⁶ of the radius): an exact disk
+    /// would need a primitive of its own in the BVH and light sampling for a difference no
+    /// render can show.
+    Disk {
+        material: String,
+        #[serde(default)]
+        transform: TransformSpec,
+        #[serde(default)]
+        reverse_orientation: bool,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        interior: Option<String>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        exterior: Option<String>,
+    },
     /// A parallelogram `corner + s·edge_u + t·edge_v`, s, t ∈ [0, 1] (the texture coordinates),
     /// facing edge_u × edge_v.
     Quad {
@@ -350,6 +375,7 @@ impl ShapeSpec {
             | ShapeSpec::Blob { interior, exterior, .. }
             | ShapeSpec::Relief { interior, exterior, .. }
             | ShapeSpec::Cube { interior, exterior, .. }
+            | ShapeSpec::Disk { interior, exterior, .. }
             | ShapeSpec::Quad { interior, exterior, .. } => (interior.as_deref(), exterior.as_deref()),
         }
     }

@@ -1,5 +1,6 @@
 //! Mitsuba's BSDFs as lumen materials: `diffuse`, `conductor`, `roughconductor`,
-//! `dielectric` and `twosided`, with named conductors and indices of refraction (`named`).
+//! `dielectric`, `thindielectric`, `plastic`, `null` and `twosided`, with named conductors and
+//! indices of refraction (`named`).
 
 use super::super::super::texture::{RoughnessSpec, TextureSpec};
 use super::super::super::Error;
@@ -20,6 +21,7 @@ pub(super) fn lambertian(name: &str, albedo: TextureSpec) -> MaterialSpec {
         eta: None,
         k: None,
         ior: None,
+        nonlinear: None,
         emission: None,
         // Mitsuba's diffuse and conductors are black from behind unless wrapped in `twosided`.
         two_sided: Some(false),
@@ -83,6 +85,29 @@ fn complex_index(b: &Elem, p: &Props) -> Result<([f64; 3], [f64; 3]), Error> {
     }
 }
 
+/// A dielectric's or thin dielectric's relative index int_ior/ext_ior (default BK7 in air)
+/// and its one tint: lumen tints reflection and transmission alike.
+fn dielectric(b: &Elem, p: &Props) -> Result<(f64, [f64; 3]), Error> {
+    let int = ior(p, "int_ior", "bk7")?;
+    let ext = ior(p, "ext_ior", "air")?;
+    if !(int > 0.0 && ext > 0.0) {
+        return Err(b.error(format!("int_ior {int}, ext_ior {ext}: expected positive indices")));
+    }
+    let r = p.color("specular_reflectance")?.map(|c| c.rgb(b, "specular_reflectance")).transpose()?;
+    let t = p.color("specular_transmittance")?.map(|c| c.rgb(b, "specular_transmittance")).transpose()?;
+    let tint = match (r, t) {
+        (None, None) => [1.0; 3],
+        (Some(a), None) | (None, Some(a)) if a == [1.0; 3] => a,
+        (Some(a), Some(c)) if a == c => a,
+        _ => {
+            return Err(b.unsupported(
+                "different specular_reflectance and specular_transmittance: lumen's dielectrics tint both alike",
+            ))
+        }
+    };
+    Ok((int / ext, tint))
+}
+
 pub(super) fn bsdf(b: &Elem, name: String) -> Result<MaterialSpec, Error> {
     let p = Props::new(b);
     let mut m = lambertian(&name, TextureSpec::Constant([0.5; 3]));
@@ -143,35 +168,44 @@ pub(super) fn bsdf(b: &Elem, name: String) -> Result<MaterialSpec, Error> {
             return Ok(null(&name));
         }
         "dielectric" => {
-            let int = ior(&p, "int_ior", "bk7")?;
+            let (eta, tint) = dielectric(b, &p)?;
+            m.kind = "dielectric".into();
+            m.two_sided = None;
+            m.ior = Some(eta);
+            m.albedo = Some(TextureSpec::Constant(tint));
+        }
+        "thindielectric" => {
+            let (eta, tint) = dielectric(b, &p)?;
+            m.kind = "thin-dielectric".into();
+            m.two_sided = None;
+            m.ior = Some(eta);
+            m.albedo = Some(TextureSpec::Constant(tint));
+        }
+        "plastic" => {
+            let int = ior(&p, "int_ior", "polypropylene")?;
             let ext = ior(&p, "ext_ior", "air")?;
             if !(int > 0.0 && ext > 0.0) {
                 return Err(b.error(format!("int_ior {int}, ext_ior {ext}: expected positive indices")));
             }
-            let r = p.color("specular_reflectance")?.map(|c| c.rgb(b, "specular_reflectance")).transpose()?;
-            let t =
-                p.color("specular_transmittance")?.map(|c| c.rgb(b, "specular_transmittance")).transpose()?;
-            let tint = match (r, t) {
-                (None, None) => [1.0; 3],
-                (Some(a), None) | (None, Some(a)) if a == [1.0; 3] => a,
-                (Some(a), Some(c)) if a == c => a,
-                _ => {
-                    return Err(b.unsupported(
-                        "different specular_reflectance and specular_transmittance: lumen's dielectric tints both alike",
-                    ))
-                }
-            };
-            m.kind = "dielectric".into();
-            m.two_sided = None;
+            m.kind = "plastic".into();
             m.ior = Some(int / ext);
-            m.albedo = Some(TextureSpec::Constant(tint));
+            m.albedo = Some(p.color("diffuse_reflectance")?.map_or(TextureSpec::Constant([0.5; 3]), Color::texture));
+            m.specular =
+                p.color("specular_reflectance")?.map(|c| c.rgb(b, "specular_reflectance")).transpose()?;
+            m.nonlinear = p.boolean("nonlinear")?;
+        }
+        "roughplastic" | "roughdielectric" => {
+            return Err(b.unsupported(format!(
+                "bsdf \"{}\": lumen has no rough coat or rough glass yet; it reads plastic and dielectric (smooth), roughconductor",
+                b.plugin()
+            )))
         }
         other => {
             return Err(b.unsupported(format!(
-            "bsdf \"{other}\": lumen reads diffuse, conductor, roughconductor, dielectric, null and twosided"
+            "bsdf \"{other}\": lumen reads diffuse, conductor, roughconductor, dielectric, thindielectric, plastic, null and twosided"
         )))
         }
     }
-    p.finish("reflectance (diffuse); material, eta, k, specular_reflectance, distribution, alpha (conductors); int_ior, ext_ior, specular_reflectance, specular_transmittance (dielectric)")?;
+    p.finish("reflectance (diffuse); material, eta, k, specular_reflectance, distribution, alpha (conductors); int_ior, ext_ior, specular_reflectance, specular_transmittance (dielectric, thindielectric); int_ior, ext_ior, diffuse_reflectance, specular_reflectance, nonlinear (plastic)")?;
     Ok(m)
 }

@@ -16,13 +16,15 @@
 //!   (width, height, `box` or `gaussian` rfilter, gaussian by default as in Mitsuba); `sampler`: `independent` → independent, `stratified`,
 //!   `multijitter`, `orthogonal`, `ldsampler` → lumen's Sobol sampler; `sample_count` → spp.
 //! - `bsdf`: `diffuse` → lambertian; `conductor` → mirror, `roughconductor` → conductor (named
-//!   `material`s in `named`, or `eta`/`k`; `specular_reflectance` tints); `dielectric` (named
-//!   or numeric `int_ior`/`ext_ior`); `twosided` around one BSDF. As in Mitsuba, a diffuse or
-//!   conductor material is one-sided (`two_sided = false`: black from behind) unless wrapped
-//!   in `twosided`. Colours as `rgb`, `float`, `spectrum` (a constant or wavelength:value
+//!   `material`s in `named`, or `eta`/`k`; `specular_reflectance` tints); `dielectric` and
+//!   `thindielectric` (named or numeric `int_ior`/`ext_ior`); `plastic` (`diffuse_reflectance`,
+//!   `specular_reflectance`, `nonlinear`; default coat polypropylene); `twosided` around one
+//!   BSDF. As in Mitsuba, a diffuse, conductor or plastic material is one-sided
+//!   (`two_sided = false`: black from behind) unless wrapped in `twosided`. Colours as `rgb`, `float`, `spectrum` (a constant or wavelength:value
 //!   pairs, turned into RGB as Mitsuba's RGB variants do: `spectrum`), or a `checkerboard` /
 //!   `bitmap` texture.
-//! - `shape`: `obj`, `ply`, `sphere`, `rectangle`, `cube`, with `to_world`, `flip_normals`, a `bsdf`,
+//! - `shape`: `obj`, `ply`, `sphere`, `rectangle`, `cube`, `disk` (a fan of 1024 triangles,
+//!   `ShapeSpec::Disk`), with `to_world`, `flip_normals`, a `bsdf`,
 //!   an `area` emitter (the shape's material then emits) and `interior` / `exterior` media (a
 //!   shape without a BSDF is diffuse even where it bounds a medium, as Mitsuba 3.9 renders it).
 //!   `emitter`: `point`, `spot`, `directional`, `constant`, `envmap`.
@@ -444,9 +446,16 @@ impl Converter {
                 interior: interior.clone(),
                 exterior: exterior.clone(),
             },
+            "disk" => ShapeSpec::Disk {
+                material,
+                transform: TransformSpec { matrix: Some(rows(&m)), ..Default::default() },
+                reverse_orientation: flip,
+                interior: interior.clone(),
+                exterior: exterior.clone(),
+            },
             other => {
                 return Err(e.unsupported(format!(
-                    "shape \"{other}\": lumen reads obj, ply, sphere, rectangle and cube"
+                    "shape \"{other}\": lumen reads obj, ply, sphere, rectangle, cube and disk"
                 )))
             }
         };

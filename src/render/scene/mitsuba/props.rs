@@ -183,6 +183,11 @@ fn color(c: &Elem) -> Result<Color, Error> {
             }
         }
         "spectrum" => {
+            if c.attr("type") == Some("blackbody") {
+                return Err(c.unsupported(
+                    "a blackbody is spectral only: Mitsuba's RGB variants cannot evaluate it either (\"not implemented for non-spectral modes\"); give its colour as <rgb>",
+                ));
+            }
             if c.attr("type").is_some() || c.attr("filename").is_some() {
                 return Err(c.unsupported(
                     "a spectrum plugin or file: lumen reads a constant spectrum or wavelength:value pairs here",
