@@ -241,6 +241,10 @@ fn bad_values() {
     assert!(e.contains("materials[1] (g)") && e.contains("plastic material takes no"), "{e}");
     let e = scene_error(&glossy("type = \"lambertian\"\nnonlinear = true\n"), &[]);
     assert!(e.contains("materials[1] (g).nonlinear") && e.contains("only a plastic"), "{e}");
+    let e = scene_error(&glossy("type = \"rough-dielectric\"\nk = [1.0, 1.0, 1.0]\n"), &[]);
+    assert!(e.contains("materials[1] (g)") && e.contains("its index is `ior`"), "{e}");
+    let e = scene_error(&glossy("type = \"rough-dielectric\"\nalpha = 0.0\n"), &[]);
+    assert!(e.contains("materials[1] (g).alpha") && e.contains("[0.001, 1]"), "{e}");
     let e = scene_error(&glossy("type = \"thin-dielectric\"\ntwo_sided = false\n"), &[]);
     assert!(e.contains("materials[1] (g).two_sided") && e.contains("two sides"), "{e}");
 }

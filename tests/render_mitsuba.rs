@@ -187,3 +187,12 @@ fn plastic_and_thin_pane_match_mitsuba() {
     let xml = references().join("plastic-pane.xml");
     file_matches_mitsuba(&references(), "plastic-pane", &xml, 2_000_000 / (64 * 64), 8, 0.9975);
 }
+
+/// Rough glass (Beckmann and GGX, BK7 and water) against Mitsuba 3.9's `roughdielectric`
+/// (32 × 512 spp), by the media scenes' protocol: a budget of 2·10⁶ samples, means within 1 %,
+/// ≥ 99.75 % of pixel channels passing the z-test.
+#[test]
+fn rough_glass_matches_mitsuba() {
+    let xml = references().join("rough-glass.xml");
+    file_matches_mitsuba(&references(), "rough-glass", &xml, 2_000_000 / (64 * 64), 12, 0.9975);
+}

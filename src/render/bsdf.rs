@@ -1,6 +1,7 @@
 //! Reflectance models: Lambertian, normalised Blinn-Phong, rough conductors with GGX or
 //! Beckmann microfacets (`render::microfacet`), the smooth mirror, dielectric and thin
-//! dielectric (`render::specular`), and smooth plastic (`render::plastic`).
+//! dielectric (`render::specular`), rough glass (`render::rough_dielectric`) and smooth plastic
+//! (`render::plastic`).
 //!
 //! Blinn-Phong, the form photometric stereo fits:
 //!
@@ -20,6 +21,7 @@
 pub use super::geometry::basis;
 use super::microfacet::{self, Distribution};
 use super::plastic;
+use super::rough_dielectric;
 use super::specular;
 pub use super::transport::{cosine_hemisphere, unit_circle};
 use glam::Vec3A;
@@ -56,6 +58,14 @@ pub enum Bsdf {
     /// No surface at all, only where a medium begins or ends (Mitsuba's `null`): the path goes
     /// on straight through, unweighted.
     Null,
+    /// Rough glass (`render::rough_dielectric`, Mitsuba's `roughdielectric`): a dielectric
+    /// interface of relative index `eta` (as `Dielectric`'s) made of microfacets of roughness
+    /// α; the material's colour tints reflection and transmission alike.
+    RoughDielectric {
+        distribution: Distribution,
+        alpha: f32,
+        eta: f32,
+    },
     /// A thin pane of a dielectric of index `eta` relative to the medium on both sides
     /// (Mitsuba's `thindielectric`, `render::specular::thin_dielectric`): it reflects, or lets
     /// light through undeviated; the material's colour tints both.
@@ -97,13 +107,28 @@ impl Bsdf {
         matches!(self, Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Null | Bsdf::ThinDielectric { .. })
     }
 
-    /// The model with roughness α (conductors only; others are returned as they are).
+    /// Whether `sample` uses its third number (a rough dielectric's choice of lobe).
+    #[inline]
+    pub fn needs_third_number(&self) -> bool {
+        matches!(self, Bsdf::RoughDielectric { .. })
+    }
+
+    /// Whether light reaching the surface from behind (through it) is evaluated by `eval`, so
+    /// that light sampling must look below the surface too.
+    #[inline]
+    pub fn transmits(&self) -> bool {
+        matches!(self, Bsdf::RoughDielectric { .. })
+    }
+
+    /// The model with roughness α (rough conductors and glass; others are returned as they
+    /// are).
     #[inline]
     pub fn with_alpha(self, a: f32) -> Bsdf {
         match self {
             Bsdf::Conductor { distribution, eta, k, .. } => {
                 Bsdf::Conductor { distribution, alpha: a, eta, k }
             }
+            Bsdf::RoughDielectric { distribution, eta, .. } => Bsdf::RoughDielectric { distribution, alpha: a, eta },
             b => b,
         }
     }
@@ -114,6 +139,9 @@ impl Bsdf {
     pub fn facing(self, front: bool) -> Bsdf {
         match self {
             Bsdf::Dielectric { eta } if !front => Bsdf::Dielectric { eta: 1.0 / eta },
+            Bsdf::RoughDielectric { distribution, alpha, eta } if !front => {
+                Bsdf::RoughDielectric { distribution, alpha, eta: 1.0 / eta }
+            }
             b => b,
         }
     }
@@ -123,6 +151,7 @@ impl Bsdf {
         match *self {
             Bsdf::Lambertian => 0.0,
             Bsdf::Conductor { .. }
+            | Bsdf::RoughDielectric { .. }
             | Bsdf::Mirror { .. }
             | Bsdf::Dielectric { .. }
             | Bsdf::Null
@@ -154,12 +183,19 @@ impl Bsdf {
 
     #[inline(never)]
     fn eval_other(&self, kd: Vec3A, n: Vec3A, wo: Vec3A, wi: Vec3A) -> Vec3A {
+        if let Bsdf::RoughDielectric { distribution, alpha, eta } = *self {
+            return kd * rough_dielectric::eval(distribution, alpha, eta, n, wo, wi);
+        }
         let (co, ci) = (n.dot(wo), n.dot(wi));
         if co <= 0.0 || ci <= 0.0 {
             return Vec3A::ZERO;
         }
         match *self {
-            Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Null | Bsdf::ThinDielectric { .. } => Vec3A::ZERO,
+            Bsdf::Mirror { .. }
+            | Bsdf::Dielectric { .. }
+            | Bsdf::Null
+            | Bsdf::ThinDielectric { .. }
+            | Bsdf::RoughDielectric { .. } => Vec3A::ZERO,
             Bsdf::Lambertian => kd * FRAC_1_PI,
             Bsdf::Plastic { eta, fdr_int, nonlinear, .. } => plastic::diffuse(kd, eta, fdr_int, nonlinear, co, ci),
             Bsdf::BlinnPhong { specular, exponent } => {
@@ -188,6 +224,9 @@ impl Bsdf {
 
     /// Density (solid angle) with which `sample` returns wi.
     pub fn pdf(&self, kd: Vec3A, n: Vec3A, wo: Vec3A, wi: Vec3A) -> f32 {
+        if let Bsdf::RoughDielectric { distribution, alpha, eta } = *self {
+            return rough_dielectric::pdf(distribution, alpha, eta, n, wo, wi);
+        }
         let (co, ci) = (n.dot(wo), n.dot(wi));
         if co <= 0.0 || ci <= 0.0 {
             return 0.0;
@@ -195,7 +234,11 @@ impl Bsdf {
         let ps = self.specular_probability(kd);
         let diffuse = ci / PI;
         match *self {
-            Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Null | Bsdf::ThinDielectric { .. } => 0.0,
+            Bsdf::Mirror { .. }
+            | Bsdf::Dielectric { .. }
+            | Bsdf::Null
+            | Bsdf::ThinDielectric { .. }
+            | Bsdf::RoughDielectric { .. } => 0.0,
             Bsdf::Lambertian => diffuse,
             Bsdf::Plastic { eta, specular, .. } => {
                 (1.0 - plastic::specular_probability(kd, specular, eta, co)) * diffuse
@@ -224,12 +267,13 @@ impl Bsdf {
         }
     }
 
-    /// Samples wi for wo: wi, the weight f·cos/pdf and whether a delta lobe produced it, or
+    /// Samples wi for wo: wi, the weight f·|cos|/pdf and whether a delta lobe produced it, or
     /// `None` when the sample leaves below the surface (the path ends there). Only a
-    /// dielectric's refracted direction and a thin dielectric's or null surface's direction
-    /// through go below n.
+    /// dielectric's refracted direction (smooth or rough) and a thin dielectric's or null
+    /// surface's direction through go below n. `u3` picks a rough dielectric's lobe (the
+    /// others need two numbers; `needs_third_number`).
     #[inline]
-    pub fn sample(&self, kd: Vec3A, n: Vec3A, wo: Vec3A, u1: f32, u2: f32) -> Option<Sample> {
+    pub fn sample(&self, kd: Vec3A, n: Vec3A, wo: Vec3A, u1: f32, u2: f32, u3: f32) -> Option<Sample> {
         let delta = |wi: Vec3A, weight: Vec3A| Some(Sample { wi, weight, delta: true });
         let smooth = |wi: Vec3A, weight: Vec3A| Some(Sample { wi, weight, delta: false });
         match *self {
@@ -256,6 +300,10 @@ impl Bsdf {
                 }
                 let (wi, w) = specular::sample_dielectric(n, wo, eta, u1);
                 delta(wi, kd * w)
+            }
+            Bsdf::RoughDielectric { distribution, alpha, eta } => {
+                let (wi, w) = rough_dielectric::sample(distribution, alpha, eta, n, wo, [u1, u2, u3])?;
+                smooth(wi, kd * w)
             }
             Bsdf::ThinDielectric { eta } => {
                 if n.dot(wo) <= 0.0 {
@@ -432,7 +480,7 @@ mod tests {
                     let mut sum = 0.0f64;
                     for k in 0..m {
                         let (u1, u2) = Sampler::with_kind(SamplerKind::Independent, 17, k, 0).next2();
-                        if let Some(Sample { wi, weight: w, .. }) = bsdf.sample(Vec3A::ONE, n, wo, u1, u2) {
+                        if let Some(Sample { wi, weight: w, .. }) = bsdf.sample(Vec3A::ONE, n, wo, u1, u2, 0.5) {
                             assert!(w.is_finite() && n.dot(wi) > 0.0);
                             sum += w.x as f64;
                         }
@@ -501,7 +549,7 @@ mod tests {
                 for k in 0..m {
                     let mut s = Sampler::with_kind(SamplerKind::Independent, 11, k, 0);
                     let (u1, u2) = s.next2();
-                    if let Some(Sample { wi, weight: w, .. }) = bp.sample(kd, n, wo, u1, u2) {
+                    if let Some(Sample { wi, weight: w, .. }) = bp.sample(kd, n, wo, u1, u2, 0.5) {
                         assert!(w.is_finite() && n.dot(wi) > 0.0);
                         sum += w.x as f64;
                     }
@@ -560,7 +608,7 @@ mod tests {
             let mut observed = vec![0.0f64; nt * np];
             for k in 0..samples {
                 let (u1, u2) = Sampler::with_kind(SamplerKind::Independent, 3 + case as u64, k, 0).next2();
-                if let Some(Sample { wi, .. }) = bsdf.sample(kd, n, wo, u1, u2) {
+                if let Some(Sample { wi, .. }) = bsdf.sample(kd, n, wo, u1, u2, 0.5) {
                     observed[cell(wi)] += 1.0;
                 }
             }
@@ -615,7 +663,7 @@ mod tests {
                 let (mut sum, mut sum2) = (0.0f64, 0.0f64);
                 for _ in 0..n {
                     let (u1, u2) = s.next2();
-                    let Some(smp) = bsdf.sample(kd3, Vec3A::Z, wo, u1, u2) else { continue };
+                    let Some(smp) = bsdf.sample(kd3, Vec3A::Z, wo, u1, u2, 0.5) else { continue };
                     if !smp.delta {
                         let (f, pdf) = (bsdf.eval(kd3, Vec3A::Z, wo, smp.wi), bsdf.pdf(kd3, Vec3A::Z, wo, smp.wi));
                         let direct = f.x * smp.wi.z / pdf;
@@ -649,7 +697,7 @@ mod tests {
             let mut reflected = 0usize;
             for _ in 0..n {
                 let (u1, u2) = s.next2();
-                let smp = bsdf.sample(Vec3A::ONE, Vec3A::Z, wo, u1, u2).expect("a pane always scatters");
+                let smp = bsdf.sample(Vec3A::ONE, Vec3A::Z, wo, u1, u2, 0.5).expect("a pane always scatters");
                 assert!(smp.delta && smp.weight == Vec3A::ONE);
                 if smp.wi.z > 0.0 {
                     assert!((smp.wi - Vec3A::new(-wo.x, -wo.y, wo.z)).length() < 1e-6);
@@ -661,6 +709,82 @@ mod tests {
             let p = reflected as f64 / n as f64;
             let se = (want * (1.0 - want) / n as f64).sqrt();
             assert!((p - want).abs() < 4.0 * se + 1e-6, "θ {deg}°, η {eta}: {p} vs {want}");
+        }
+    }
+
+    /// Rough glass sampled over the whole sphere of directions (reflection and refraction,
+    /// from outside η = 1.5 and from inside η = 1/1.5), Pearson's χ² against `pdf` as in
+    /// `chi_square_sampling` (32 × 32 cells over cos θ ∈ [−1, 1] and φ); and the mean sample
+    /// weight equal to ∫ f·|cos θi| dωi by the same quadrature, at most 1 from outside (the
+    /// single-scattering model loses what microfacets send to the wrong side).
+    #[test]
+    fn rough_dielectric_sampling_over_the_sphere() {
+        use crate::math::stats::{chi2_test, sidak_alpha};
+        let n = Vec3A::Z;
+        let mut cases = Vec::new();
+        for (distribution, alpha) in [(Distribution::Ggx, 0.2f32), (Distribution::Ggx, 0.5), (Distribution::Beckmann, 0.3)] {
+            for eta in [1.5f32, 1.0 / 1.5] {
+                for theta_o in [0.0f32, 40.0, 75.0] {
+                    cases.push((Bsdf::RoughDielectric { distribution, alpha, eta }, theta_o));
+                }
+            }
+        }
+        let level = sidak_alpha(0.01, cases.len());
+        let (nt, np, sub) = (32usize, 32usize, 16usize);
+        let samples = 1_000_000u64;
+        for (case, &(bsdf, theta_o)) in cases.iter().enumerate() {
+            let wo = dir(theta_o, 0.0);
+            let cell = |wi: Vec3A| {
+                let t = (((wi.z.clamp(-1.0, 1.0) + 1.0) * 0.5 * nt as f32) as usize).min(nt - 1);
+                let phi = wi.y.atan2(wi.x).rem_euclid(2.0 * PI);
+                t * np + ((phi / (2.0 * PI) * np as f32) as usize).min(np - 1)
+            };
+            let (mut observed, mut weight) = (vec![0.0f64; nt * np], 0.0f64);
+            for k in 0..samples {
+                let mut s = Sampler::with_kind(SamplerKind::Independent, 40 + case as u64, k, 0);
+                let (u1, u2) = s.next2();
+                if let Some(Sample { wi, weight: w, delta }) = bsdf.sample(Vec3A::ONE, n, wo, u1, u2, s.next()) {
+                    assert!(!delta && w.is_finite() && w.x >= 0.0);
+                    observed[cell(wi)] += 1.0;
+                    weight += w.x as f64;
+                }
+            }
+            let (mut expected, mut albedo) = (vec![0.0f64; nt * np], 0.0f64);
+            for t in 0..nt {
+                // Refraction near normal incidence squeezes the lobe into a sliver around −n
+                // (and reflection around +n): finer steps in cos θ in the bands at the poles.
+                let st_sub = match t.min(nt - 1 - t) {
+                    0 => 64 * sub,
+                    1 => 4 * sub,
+                    _ => sub,
+                };
+                let area = (2.0 / nt as f64) * (2.0 * std::f64::consts::PI / np as f64) / (st_sub * sub) as f64;
+                for p in 0..np {
+                    let mut sum = 0.0f64;
+                    for a in 0..st_sub {
+                        let ct = -1.0 + 2.0 * (t as f64 + (a as f64 + 0.5) / st_sub as f64) / nt as f64;
+                        let st = (1.0 - ct * ct).max(0.0).sqrt();
+                        for b in 0..sub {
+                            let phi = 2.0 * std::f64::consts::PI * (p as f64 + (b as f64 + 0.5) / sub as f64) / np as f64;
+                            let wi = Vec3A::new((st * phi.cos()) as f32, (st * phi.sin()) as f32, ct as f32);
+                            sum += bsdf.pdf(Vec3A::ONE, n, wo, wi) as f64;
+                            albedo += bsdf.eval(Vec3A::ONE, n, wo, wi).x as f64 * ct.abs() * area;
+                        }
+                    }
+                    expected[t * np + p] = samples as f64 * sum * area;
+                }
+            }
+            let p = chi2_test(&observed, &expected).expect("enough cells");
+            assert!(p >= level, "case {case} ({bsdf:?}, θo {theta_o}°): χ² p-value {p:.3e} below {level:.3e}");
+            let mc = weight / samples as f64;
+            // Radiance entering a denser medium grows by 1/η² (L/η² is conserved), so from
+            // inside (η < 1) the bound is 1/η².
+            let Bsdf::RoughDielectric { eta, .. } = bsdf else { unreachable!() };
+            assert!(albedo <= (1.0 / (eta * eta) as f64).max(1.0) + 1e-3, "case {case}: ∫f|cos| = {albedo}");
+            assert!(
+                (mc - albedo).abs() < 0.01 * albedo,
+                "case {case} ({bsdf:?}, θo {theta_o}°): sampled {mc} vs quadrature {albedo}"
+            );
         }
     }
 }

@@ -19,6 +19,7 @@ pub mod microfacet;
 pub mod obj;
 pub mod plastic;
 pub mod ply;
+pub mod rough_dielectric;
 pub mod sampler;
 pub mod scene;
 pub mod sensor;

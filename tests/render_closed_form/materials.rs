@@ -224,8 +224,8 @@ material = "tex"
 /// (Lambertian of albedo 1, perfect mirror, clear glass — the glass also checks that refracted
 /// rays leave from the right side and that the η² factors of entering and leaving cancel —, a
 /// thin pane, white plastic, whose coat and base together lose nothing);
-/// a lossy one (rough conductors, Blinn-Phong within its energy bound, a gold mirror) never
-/// shows more than L. No sample may be NaN or infinite.
+/// a lossy one (rough conductors, Blinn-Phong within its energy bound, a gold mirror, rough
+/// glass, whose microfacets lose what they send to the wrong side) never shows more than L. No sample may be NaN or infinite.
 #[test]
 fn white_furnace_per_bsdf() {
     let lossless = [
@@ -243,6 +243,8 @@ fn white_furnace_per_bsdf() {
         "type = \"blinn-phong\"\nalbedo = [0.4, 0.4, 0.4]\nspecular = [0.55, 0.55, 0.55]\nexponent = 10.0",
         "type = \"mirror\"\nalbedo = [1.0, 1.0, 1.0]\neta = [0.143, 0.374, 1.442]\nk = [3.983, 2.385, 1.603]",
         "type = \"plastic\"\nalbedo = [0.5, 0.5, 0.5]\nnonlinear = true",
+        "type = \"rough-dielectric\"\nalbedo = [1.0, 1.0, 1.0]\nalpha = 0.3\nior = 1.5",
+        "type = \"rough-dielectric\"\nalbedo = [1.0, 1.0, 1.0]\ndistribution = \"beckmann\"\nalpha = 0.8\nior = 1.33",
     ];
     let l = 2.0;
     for (material, is_lossless) in lossless.iter().map(|m| (m, true)).chain(lossy.iter().map(|m| (m, false)))

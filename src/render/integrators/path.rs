@@ -112,12 +112,12 @@ pub fn trace(scene: &Scene, mut ray: Ray, max_depth: u32, s: &mut Sampler) -> Ve
         // The material's model by reference: a copy of the enum per vertex is measurable.
         let changed;
         let bsdf = match (&mat.bsdf, &mat.roughness) {
-            (Bsdf::Dielectric { .. }, _) if !front => {
-                changed = mat.bsdf.facing(front);
+            (_, Some(alpha)) => {
+                changed = mat.bsdf.facing(front).with_alpha(alpha.eval(scene.uv(&hit, surf.p)).x);
                 &changed
             }
-            (_, Some(alpha)) => {
-                changed = mat.bsdf.with_alpha(alpha.eval(scene.uv(&hit, surf.p)).x);
+            (Bsdf::Dielectric { .. } | Bsdf::RoughDielectric { .. }, None) if !front => {
+                changed = mat.bsdf.facing(front);
                 &changed
             }
             (b, None) => b,
@@ -127,23 +127,29 @@ pub fn trace(scene: &Scene, mut ray: Ray, max_depth: u32, s: &mut Sampler) -> Ve
         // Named by the glossy variants: written as "neither Lambertian nor delta", the test
         // let LLVM call `Bsdf::pdf` on every Lambertian vertex and throw the result away
         // (6 % of a Cornell path's instructions).
-        let glossy = matches!(bsdf, Bsdf::BlinnPhong { .. } | Bsdf::Conductor { .. });
+        let glossy = matches!(bsdf, Bsdf::BlinnPhong { .. } | Bsdf::Conductor { .. } | Bsdf::RoughDielectric { .. });
         let u_light = s.next2();
         if !delta {
             if let Some((li, wi, dist, p_light)) = scene.sample_light(u_light, surf.p) {
+                // Light through the surface counts only for a model that transmits; the shadow
+                // ray then leaves from the far side.
                 let cos = n.dot(wi);
-                if cos > 0.0 && scene.unoccluded(surf.p + n * eps, surf.p, wi, dist) {
+                let side = if cos > 0.0 { n } else { -n };
+                if (cos > 0.0 || (cos < 0.0 && bsdf.transmits()))
+                    && scene.unoccluded(surf.p + side * eps, surf.p, wi, dist)
+                {
                     let w = match p_light {
                         Some(p) if glossy => power_heuristic(p, bsdf.pdf(albedo, n, wo, wi)),
                         _ => 1.0,
                     };
-                    l += beta * bsdf.eval(albedo, n, wo, wi) * (cos * w) * li;
+                    l += beta * bsdf.eval(albedo, n, wo, wi) * (cos.abs() * w) * li;
                 }
             }
         }
 
         let (u1, u2) = s.next2();
-        let Some(Sample { wi, weight, delta: delta_lobe }) = bsdf.sample(albedo, n, wo, u1, u2) else {
+        let u3 = if bsdf.needs_third_number() { s.next() } else { 0.0 };
+        let Some(Sample { wi, weight, delta: delta_lobe }) = bsdf.sample(albedo, n, wo, u1, u2, u3) else {
             break;
         };
         // After a delta vertex the emitter the ray reaches counts in full (weight 1).

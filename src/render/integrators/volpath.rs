@@ -188,31 +188,33 @@ pub fn trace(scene: &Scene, mut ray: Ray, max_depth: u32, s: &mut Sampler) -> Ve
         let albedo = scene.albedo(surf.material, &hit, surf.p);
         let eps = epsilon(surf.p);
         let bsdf = match (&mat.bsdf, &mat.roughness) {
-            (Bsdf::Dielectric { .. }, _) if !front => mat.bsdf.facing(front),
-            (_, Some(alpha)) => mat.bsdf.with_alpha(alpha.eval(scene.uv(&hit, surf.p)).x),
-            (b, None) => *b,
+            (_, Some(alpha)) => mat.bsdf.facing(front).with_alpha(alpha.eval(scene.uv(&hit, surf.p)).x),
+            (b, None) => b.facing(front),
         };
         let delta = bsdf.is_delta();
-        let glossy = matches!(bsdf, Bsdf::BlinnPhong { .. } | Bsdf::Conductor { .. });
+        let glossy = matches!(bsdf, Bsdf::BlinnPhong { .. } | Bsdf::Conductor { .. } | Bsdf::RoughDielectric { .. });
         let u_light = s.next2();
         if !delta {
             if let Some((li, wi, dist, p_light)) = scene.sample_light(u_light, surf.p) {
+                // Through the surface only for a model that transmits (`path`'s rule).
                 let cos = n.dot(wi);
-                if cos > 0.0 {
+                if cos > 0.0 || (cos < 0.0 && bsdf.transmits()) {
+                    let side = if cos > 0.0 { n } else { -n };
                     let towards = scene.medium_after(hit.prim, surf.n, wi, medium);
-                    let tr = transmittance(scene, s, surf.p + n * eps, surf.p, wi, dist, towards);
+                    let tr = transmittance(scene, s, surf.p + side * eps, surf.p, wi, dist, towards);
                     if tr != Vec3A::ZERO {
                         let w = match p_light {
                             Some(p) if glossy => power_heuristic(p, bsdf.pdf(albedo, n, wo, wi)),
                             _ => 1.0,
                         };
-                        l += beta * tr * bsdf.eval(albedo, n, wo, wi) * (cos * w) * li;
+                        l += beta * tr * bsdf.eval(albedo, n, wo, wi) * (cos.abs() * w) * li;
                     }
                 }
             }
         }
         let (u1, u2) = s.next2();
-        let Some(Sample { wi, weight, delta: delta_lobe }) = bsdf.sample(albedo, n, wo, u1, u2) else {
+        let u3 = if bsdf.needs_third_number() { s.next() } else { 0.0 };
+        let Some(Sample { wi, weight, delta: delta_lobe }) = bsdf.sample(albedo, n, wo, u1, u2, u3) else {
             break;
         };
         mis_pdf = if delta_lobe { Some(f32::INFINITY) } else { glossy.then(|| bsdf.pdf(albedo, n, wo, wi)) };

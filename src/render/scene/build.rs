@@ -250,7 +250,12 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
             _ => None,
         };
         let one_sided = m.two_sided == Some(false);
-        if one_sided && matches!(bsdf, Bsdf::Dielectric { .. } | Bsdf::ThinDielectric { .. } | Bsdf::Null) {
+        if one_sided
+            && matches!(
+                bsdf,
+                Bsdf::Dielectric { .. } | Bsdf::RoughDielectric { .. } | Bsdf::ThinDielectric { .. } | Bsdf::Null
+            )
+        {
             return Err(field_err(
                 path,
                 &format!("{field}.two_sided"),
@@ -759,16 +764,39 @@ fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error>
     let foreign = |kind: &str, other: &str| {
         field_err(path, field, format!("a {kind} material takes no {other} fields (check `type`)"))
     };
-    if m.ior.is_some() && !matches!(m.kind.as_str(), "dielectric" | "thin-dielectric" | "plastic") {
+    if m.ior.is_some() && !matches!(m.kind.as_str(), "dielectric" | "rough-dielectric" | "thin-dielectric" | "plastic") {
         return Err(field_err(
             path,
             &format!("{field}.ior"),
-            "only a dielectric, thin-dielectric or plastic material takes `ior`",
+            "only a dielectric, rough-dielectric, thin-dielectric or plastic material takes `ior`",
         ));
     }
     if m.nonlinear.is_some() && m.kind != "plastic" {
         return Err(field_err(path, &format!("{field}.nonlinear"), "only a plastic material takes `nonlinear`"));
     }
+    // A rough model's distribution (default GGX) and α; a textured α is looked up per hit
+    // (Material::roughness) and the model keeps 0.1.
+    let microfacets = || {
+        let distribution = match m.distribution.as_deref().unwrap_or("ggx") {
+            "ggx" => microfacet::Distribution::Ggx,
+            "beckmann" => microfacet::Distribution::Beckmann,
+            other => {
+                return Err(field_err(
+                    path,
+                    &format!("{field}.distribution"),
+                    format!("'{other}': expected \"ggx\" or \"beckmann\""),
+                ))
+            }
+        };
+        let alpha = match m.alpha {
+            Some(RoughnessSpec::Constant(a)) => a,
+            _ => 0.1,
+        };
+        if !(0.001..=1.0).contains(&alpha) {
+            return Err(field_err(path, &format!("{field}.alpha"), format!("{alpha}: expected [0.001, 1]")));
+        }
+        Ok((distribution, alpha as f32))
+    };
     let index = |default: f64| {
         let ior = m.ior.unwrap_or(default);
         if (0.25..=4.0).contains(&ior) {
@@ -824,30 +852,12 @@ fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error>
         }
         "conductor" if blinn_phong => Err(foreign("conductor", "blinn-phong")),
         "conductor" => {
-            let distribution = match m.distribution.as_deref().unwrap_or("ggx") {
-                "ggx" => microfacet::Distribution::Ggx,
-                "beckmann" => microfacet::Distribution::Beckmann,
-                other => {
-                    return Err(field_err(
-                        path,
-                        &format!("{field}.distribution"),
-                        format!("'{other}': expected \"ggx\" or \"beckmann\""),
-                    ))
-                }
-            };
-            // A textured α is looked up per hit (Material::roughness); the model keeps 0.1.
-            let alpha = match m.alpha {
-                Some(RoughnessSpec::Constant(a)) => a,
-                _ => 0.1,
-            };
-            if !(0.001..=1.0).contains(&alpha) {
-                return Err(field_err(path, &format!("{field}.alpha"), format!("{alpha}: expected [0.001, 1]")));
-            }
+            let (distribution, alpha) = microfacets()?;
             let (eta, k) = complex_index(
                 m.eta.unwrap_or([0.143, 0.374, 1.442]),
                 m.k.unwrap_or([3.983, 2.385, 1.603]),
             )?;
-            Ok(Bsdf::Conductor { distribution, alpha: alpha as f32, eta, k })
+            Ok(Bsdf::Conductor { distribution, alpha, eta, k })
         }
         "mirror" if blinn_phong => Err(foreign("mirror", "blinn-phong")),
         "mirror" if rough => Err(field_err(
@@ -862,6 +872,13 @@ fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error>
         },
         "dielectric" if blinn_phong || conductor => Err(foreign("dielectric", "blinn-phong or conductor")),
         "dielectric" => Ok(Bsdf::Dielectric { eta: index(1.5046 / 1.000277)? as f32 }),
+        "rough-dielectric" if blinn_phong || m.eta.is_some() || m.k.is_some() => {
+            Err(foreign("rough-dielectric", "blinn-phong or `eta`/`k` (its index is `ior`)"))
+        }
+        "rough-dielectric" => {
+            let (distribution, alpha) = microfacets()?;
+            Ok(Bsdf::RoughDielectric { distribution, alpha, eta: index(1.5046 / 1.000277)? as f32 })
+        }
         "thin-dielectric" if blinn_phong || conductor => {
             Err(foreign("thin-dielectric", "blinn-phong or conductor"))
         }
@@ -890,7 +907,7 @@ fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error>
             path,
             &format!("{field}.type"),
             format!(
-                "'{other}' is not a known material (expected \"lambertian\", \"blinn-phong\", \"conductor\", \"mirror\", \"dielectric\", \"thin-dielectric\", \"plastic\" or \"null\")"
+                "'{other}' is not a known material (expected \"lambertian\", \"blinn-phong\", \"conductor\", \"mirror\", \"dielectric\", \"rough-dielectric\", \"thin-dielectric\", \"plastic\" or \"null\")"
             ),
         )),
     }

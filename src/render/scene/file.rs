@@ -183,7 +183,9 @@ pub struct MaterialSpec {
     /// conductor, Mitsuba's `conductor`: a perfect mirror tinted by `albedo`, or with the
     /// Fresnel reflectance of `eta` and `k` when both are given) or `"dielectric"` (smooth
     /// glass or water, Mitsuba's `dielectric`; `albedo` tints reflection and transmission,
-    /// [1, 1, 1] for clear glass; see `render::specular`), `"thin-dielectric"` (a pane of
+    /// [1, 1, 1] for clear glass; see `render::specular`), `"rough-dielectric"` (rough glass,
+    /// Mitsuba's `roughdielectric`: `ior`, `distribution` and `alpha` as a conductor's,
+    /// `render::rough_dielectric`), `"thin-dielectric"` (a pane of
     /// glass, Mitsuba's `thindielectric`: reflects or lets light through undeviated; `albedo`
     /// tints both), `"plastic"` (smooth plastic, Mitsuba's `plastic`: `albedo` is the diffuse
     /// base's colour under a clear coat, `render::plastic`) or `"null"` (no surface, only the
@@ -198,9 +200,10 @@ pub struct MaterialSpec {
     pub specular: Option<[f64; 3]>,
     /// Blinn-Phong only: the exponent e (shininess), > 0.
     pub exponent: Option<f64>,
-    /// Conductor only: `"ggx"` (default) or `"beckmann"`.
+    /// Conductor and rough dielectric only: `"ggx"` (default) or `"beckmann"`.
     pub distribution: Option<String>,
-    /// Conductor only: roughness α in [0.001, 1] (Mitsuba's `alpha`; default 0.1), a number
+    /// Conductor and rough dielectric only: roughness α in [0.001, 1] (Mitsuba's `alpha`;
+    /// default 0.1), a number
     /// or a texture (`render::texture::Texture::build_roughness`).
     pub alpha: Option<RoughnessSpec>,
     /// Conductor and mirror only: the real and imaginary parts of the complex index of
@@ -208,7 +211,7 @@ pub struct MaterialSpec {
     /// η = [0.143, 0.374, 1.442], k = [3.983, 2.385, 1.603]; mirror default none: F = 1).
     pub eta: Option<[f64; 3]>,
     pub k: Option<[f64; 3]>,
-    /// Dielectric, thin dielectric and plastic: index of refraction of the inside (the glass,
+    /// Dielectric (smooth, rough, thin) and plastic: index of refraction of the inside (the glass,
     /// the pane, the coat) relative to the outside (the side the surface normal points to), in
     /// [1/4, 4]; default 1.5046 / 1.000277 (Mitsuba's BK7 glass in air), for plastic
     /// 1.49 / 1.000277 (polypropylene).

@@ -1,5 +1,5 @@
 //! Mitsuba's BSDFs as lumen materials: `diffuse`, `conductor`, `roughconductor`,
-//! `dielectric`, `thindielectric`, `plastic`, `null` and `twosided`, with named conductors and
+//! `dielectric`, `roughdielectric`, `thindielectric`, `plastic`, `null` and `twosided`, with named conductors and
 //! indices of refraction (`named`).
 
 use super::super::super::texture::{RoughnessSpec, TextureSpec};
@@ -85,6 +85,29 @@ fn complex_index(b: &Elem, p: &Props) -> Result<([f64; 3], [f64; 3]), Error> {
     }
 }
 
+/// A rough model's `distribution` (default beckmann, as Mitsuba's) and `alpha` (or equal
+/// `alpha_u` and `alpha_v`; default 0.1).
+fn microfacets(b: &Elem, p: &Props, m: &mut MaterialSpec) -> Result<(), Error> {
+    let dist = p.string("distribution")?.unwrap_or_else(|| "beckmann".into());
+    if dist != "ggx" && dist != "beckmann" {
+        return Err(b.error(format!("distribution \"{dist}\": expected ggx or beckmann")));
+    }
+    m.distribution = Some(dist);
+    let alpha = match (p.float("alpha")?, p.float("alpha_u")?, p.float("alpha_v")?) {
+        (Some(a), None, None) => a,
+        (None, Some(u), Some(v)) if u == v => u,
+        (None, Some(_), Some(_)) => {
+            return Err(b.unsupported("alpha_u ≠ alpha_v: lumen's microfacets are isotropic"))
+        }
+        (None, None, None) => 0.1,
+        _ => return Err(b.error("give `alpha`, or both `alpha_u` and `alpha_v`")),
+    };
+    m.alpha = Some(RoughnessSpec::Constant(alpha));
+    // Visible-normal sampling changes the noise, not the image.
+    p.accept(&["sample_visible"]);
+    Ok(())
+}
+
 /// A dielectric's or thin dielectric's relative index int_ior/ext_ior (default BK7 in air)
 /// and its one tint: lumen tints reflection and transmission alike.
 fn dielectric(b: &Elem, p: &Props) -> Result<(f64, [f64; 3]), Error> {
@@ -144,24 +167,16 @@ pub(super) fn bsdf(b: &Elem, name: String) -> Result<MaterialSpec, Error> {
                 m.kind = "mirror".into();
             } else {
                 m.kind = "conductor".into();
-                let dist = p.string("distribution")?.unwrap_or_else(|| "beckmann".into());
-                if dist != "ggx" && dist != "beckmann" {
-                    return Err(b.error(format!("distribution \"{dist}\": expected ggx or beckmann")));
-                }
-                m.distribution = Some(dist);
-                let alpha = match (p.float("alpha")?, p.float("alpha_u")?, p.float("alpha_v")?) {
-                    (Some(a), None, None) => a,
-                    (None, Some(u), Some(v)) if u == v => u,
-                    (None, Some(_), Some(_)) => {
-                        return Err(b.unsupported("alpha_u ≠ alpha_v: lumen's rough conductor is isotropic"))
-                    }
-                    (None, None, None) => 0.1,
-                    _ => return Err(b.error("give `alpha`, or both `alpha_u` and `alpha_v`")),
-                };
-                m.alpha = Some(RoughnessSpec::Constant(alpha));
-                // Visible-normal sampling changes the noise, not the image.
-                p.accept(&["sample_visible"]);
+                microfacets(b, &p, &mut m)?;
             }
+        }
+        "roughdielectric" => {
+            let (eta, tint) = dielectric(b, &p)?;
+            m.kind = "rough-dielectric".into();
+            m.two_sided = None;
+            m.ior = Some(eta);
+            m.albedo = Some(TextureSpec::Constant(tint));
+            microfacets(b, &p, &mut m)?;
         }
         "null" => {
             p.finish("nothing")?;
@@ -194,18 +209,17 @@ pub(super) fn bsdf(b: &Elem, name: String) -> Result<MaterialSpec, Error> {
                 p.color("specular_reflectance")?.map(|c| c.rgb(b, "specular_reflectance")).transpose()?;
             m.nonlinear = p.boolean("nonlinear")?;
         }
-        "roughplastic" | "roughdielectric" => {
-            return Err(b.unsupported(format!(
-                "bsdf \"{}\": lumen has no rough coat or rough glass yet; it reads plastic and dielectric (smooth), roughconductor",
-                b.plugin()
-            )))
+        "roughplastic" => {
+            return Err(b.unsupported(
+                "bsdf \"roughplastic\": lumen has no rough coat yet; it reads plastic (smooth), roughconductor and roughdielectric",
+            ))
         }
         other => {
             return Err(b.unsupported(format!(
-            "bsdf \"{other}\": lumen reads diffuse, conductor, roughconductor, dielectric, thindielectric, plastic, null and twosided"
+            "bsdf \"{other}\": lumen reads diffuse, conductor, roughconductor, dielectric, roughdielectric, thindielectric, plastic, null and twosided"
         )))
         }
     }
-    p.finish("reflectance (diffuse); material, eta, k, specular_reflectance, distribution, alpha (conductors); int_ior, ext_ior, specular_reflectance, specular_transmittance (dielectric, thindielectric); int_ior, ext_ior, diffuse_reflectance, specular_reflectance, nonlinear (plastic)")?;
+    p.finish("reflectance (diffuse); material, eta, k, specular_reflectance, distribution, alpha (conductors); int_ior, ext_ior, specular_reflectance, specular_transmittance (dielectric, thindielectric), with distribution, alpha (roughdielectric); int_ior, ext_ior, diffuse_reflectance, specular_reflectance, nonlinear (plastic)")?;
     Ok(m)
 }

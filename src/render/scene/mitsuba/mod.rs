@@ -16,8 +16,8 @@
 //!   (width, height, `box` or `gaussian` rfilter, gaussian by default as in Mitsuba); `sampler`: `independent` → independent, `stratified`,
 //!   `multijitter`, `orthogonal`, `ldsampler` → lumen's Sobol sampler; `sample_count` → spp.
 //! - `bsdf`: `diffuse` → lambertian; `conductor` → mirror, `roughconductor` → conductor (named
-//!   `material`s in `named`, or `eta`/`k`; `specular_reflectance` tints); `dielectric` and
-//!   `thindielectric` (named or numeric `int_ior`/`ext_ior`); `plastic` (`diffuse_reflectance`,
+//!   `material`s in `named`, or `eta`/`k`; `specular_reflectance` tints); `dielectric`,
+//!   `roughdielectric` and `thindielectric` (named or numeric `int_ior`/`ext_ior`); `plastic` (`diffuse_reflectance`,
 //!   `specular_reflectance`, `nonlinear`; default coat polypropylene); `twosided` around one
 //!   BSDF. As in Mitsuba, a diffuse, conductor or plastic material is one-sided
 //!   (`two_sided = false`: black from behind) unless wrapped in `twosided`. Colours as `rgb`, `float`, `spectrum` (a constant or wavelength:value
