@@ -167,6 +167,11 @@ fn bad_values() {
     assert!(e.contains("lights[0]") && e.contains("`radiance`") && e.contains("`map`"), "{e}");
     let e = scene_error("[[lights]]\ntype = \"environment\"\nmap = \"sky.exr\"\nscale = -2.0\n", &[]);
     assert!(e.contains("lights[0].scale") && e.contains("-2"), "{e}");
+    let mirror = "rotation = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]]\n";
+    let e = scene_error(&format!("[[lights]]\ntype = \"environment\"\nmap = \"sky.exr\"\n{mirror}"), &[]);
+    assert!(e.contains("lights[0].rotation") && e.contains("determinant +1"), "{e}");
+    let e = scene_error(&format!("{env}{mirror}"), &[]);
+    assert!(e.contains("lights[0]") && e.contains("`rotation`"), "{e}");
     let e = scene_error(&format!("{spot}cutoff_deg = 120.0\n"), &[]);
     assert!(e.contains("lights[0].cutoff_deg") && e.contains("120"), "{e}");
     let e = scene_error(&format!("{spot}cutoff_deg = 20.0\nbeam_width_deg = 30.0\n"), &[]);

@@ -19,14 +19,20 @@
 //! and the direction is uniform in solid angle inside the cell (uniform in φ and cos θ), so
 //! the density is P(cell)/Ω — exact and piecewise-constant in solid angle. A cell whose four
 //! corners are black has no light and is never picked.
+//!
+//! A rotation (Mitsuba's `to_world`) turns the map: a world direction d looks up the map at
+//! R⁻¹·d, and sampled directions are turned by R; densities are unchanged.
 
 use crate::error::Invalid;
 use crate::image::Image;
-use glam::Vec3A;
+use glam::{Mat3A, Vec3A};
 use std::f32::consts::PI;
 
 #[derive(Debug)]
 pub struct EnvMap {
+    /// The map's frame in the world (a rotation; identity unless turned), and its inverse.
+    to_world: Mat3A,
+    to_map: Mat3A,
     width: usize,
     height: usize,
     texels: Vec<Vec3A>,
@@ -149,13 +155,29 @@ impl EnvMap {
                 0.0
             });
         }
-        Ok(EnvMap { width: w, height: h, texels, cos_rows, row_cdf, cell_cdf, cell_prob, mean_radiance })
+        Ok(EnvMap {
+            to_world: Mat3A::IDENTITY,
+            to_map: Mat3A::IDENTITY,
+            width: w,
+            height: h,
+            texels,
+            cos_rows,
+            row_cdf,
+            cell_cdf,
+            cell_prob,
+            mean_radiance,
+        })
+    }
+
+    /// The map turned by the rotation `r` (map frame → world; orthonormal, determinant 1).
+    pub fn rotated(self, r: Mat3A) -> EnvMap {
+        EnvMap { to_world: r, to_map: r.transpose(), ..self }
     }
 
     /// Bilinear radiance in direction `d` (unit).
     #[inline]
     pub fn eval(&self, d: Vec3A) -> Vec3A {
-        let (u, v) = direction_to_uv(d);
+        let (u, v) = direction_to_uv(self.to_map * d);
         let (w, h) = (self.width, self.height);
         let (i0, fx) = Self::column(u, w);
         let y = v * (h - 1) as f32;
@@ -180,7 +202,7 @@ impl EnvMap {
     /// The cell (row j, column i) holding direction `d`.
     #[inline]
     fn cell(&self, d: Vec3A) -> (usize, usize) {
-        let (u, v) = direction_to_uv(d);
+        let (u, v) = direction_to_uv(self.to_map * d);
         let (i, _) = Self::column(u, self.width);
         let j = ((v * (self.height - 1) as f32) as usize).min(self.height - 2);
         (j, i)
@@ -214,7 +236,7 @@ impl EnvMap {
         let phi = 2.0 * PI * (i as f32 + 0.5 + s) / w as f32;
         let omega = self.cell_solid_angle(j);
         let pdf = self.cell_prob[j * w + i] / omega;
-        (pdf > 0.0 && pdf.is_finite()).then(|| (direction(phi, cos_t), pdf))
+        (pdf > 0.0 && pdf.is_finite()).then(|| (self.to_world * direction(phi, cos_t), pdf))
     }
 }
 

@@ -559,12 +559,12 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                     intensity,
                 }
             }
-            LightSpec::Environment { radiance, map, scale } => {
+            LightSpec::Environment { radiance, map, scale, rotation } => {
                 if lights.iter().any(|l| matches!(l, Light::Environment { .. })) {
                     return Err(field_err(path, &field, "a scene takes one environment light"));
                 }
                 match (radiance, map) {
-                    (Some(r), None) if scale.is_none() => {
+                    (Some(r), None) if scale.is_none() && rotation.is_none() => {
                         let radiance = non_negative3(path, &format!("{field}.radiance"), *r)?;
                         Light::Environment { radiance, mean: radiance }
                     }
@@ -577,6 +577,9 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                                 format!("{scale}: expected a finite number ≥ 0"),
                             ));
                         }
+                        let turn = rotation
+                            .map(|r| rotation_matrix(path, &format!("{field}.rotation"), &r))
+                            .transpose()?;
                         let file = dir.join(m);
                         if !file.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")) {
                             return Err(field_err(
@@ -586,9 +589,12 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                             ));
                         }
                         let img = crate::image::io::read(&file)?;
-                        let env = super::super::envmap::EnvMap::new(&img).map_err(|e| {
+                        let mut env = super::super::envmap::EnvMap::new(&img).map_err(|e| {
                             field_err(path, &format!("{field}.map"), format!("{}: {e}", file.display()))
                         })?;
+                        if let Some(r) = turn {
+                            env = env.rotated(r);
+                        }
                         let radiance = Vec3A::splat(scale as f32);
                         let mean = radiance * env.mean_radiance;
                         environment_map = Some(env);
@@ -598,7 +604,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
                         return Err(field_err(
                             path,
                             &field,
-                            "an environment light takes `radiance` = [r, g, b], or `map` = \"file.exr\" with an optional `scale`",
+                            "an environment light takes `radiance` = [r, g, b], or `map` = \"file.exr\" with an optional `scale` and `rotation`",
                         ))
                     }
                 }
@@ -754,6 +760,16 @@ fn build_camera(c: &CameraSpec, path: &Path) -> Result<(CameraModel, CameraToWor
         _ => return Err(field_err(path, "camera", "give exactly one of `look_at` or `t_world_cam`")),
     };
     Ok((camera, pose))
+}
+
+/// A rotation given as rows: orthonormal to 10⁻⁶ with determinant +1.
+fn rotation_matrix(path: &Path, field: &str, rows: &[[f64; 3]; 3]) -> Result<glam::Mat3A, Error> {
+    let m = DMat3::from_cols_array_2d(rows).transpose();
+    let orthonormal = (m.transpose() * m).abs_diff_eq(DMat3::IDENTITY, 1e-6);
+    if !(rows.iter().flatten().all(|v| v.is_finite()) && orthonormal && m.determinant() > 0.0) {
+        return Err(field_err(path, field, format!("{rows:?}: expected a rotation (orthonormal rows, determinant +1)")));
+    }
+    Ok(glam::Mat3A::from(m.as_mat3()))
 }
 
 /// The reflectance model a material names, each field checked.

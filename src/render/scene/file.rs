@@ -431,8 +431,15 @@ pub enum LightSpec {
     /// Light from every direction, what a ray leaving the scene sees: uniform `radiance` in
     /// W/(m²·sr), as Mitsuba's `constant`, or a latitude-longitude `map` (a linear RGB EXR
     /// file, relative to the scene file; y up, see `render::envmap`) times `scale` (default 1),
-    /// as Mitsuba's `envmap`.
-    Environment { radiance: Option<[f64; 3]>, map: Option<String>, scale: Option<f64> },
+    /// as Mitsuba's `envmap`; `rotation` (3×3 rows, the map's frame → world, a rotation)
+    /// turns the map, as Mitsuba's `to_world`.
+    Environment {
+        radiance: Option<[f64; 3]>,
+        map: Option<String>,
+        scale: Option<f64>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        rotation: Option<[[f64; 3]; 3]>,
+    },
     /// Spot light at `position` aimed at `target`, as Mitsuba's `spot`: `intensity` (W/sr) on
     /// the axis and out to `beam_width_deg`, falling linearly in angle to 0 at `cutoff_deg`
     /// (defaults 20° and ¾ of the cutoff).

@@ -27,7 +27,8 @@
 //!   `ShapeSpec::Disk`), with `to_world`, `flip_normals`, a `bsdf`,
 //!   an `area` emitter (the shape's material then emits) and `interior` / `exterior` media (a
 //!   shape without a BSDF is diffuse even where it bounds a medium, as Mitsuba 3.9 renders it).
-//!   `emitter`: `point`, `spot`, `directional`, `constant`, `envmap`.
+//!   `emitter`: `point`, `spot`, `directional`, `constant`, `envmap` (turned by its
+//!   `to_world`, a rotation up to a uniform scale).
 //! - `medium`: `homogeneous` and `heterogeneous` (a `gridvolume` σt), in shapes and
 //!   the sensor; the `null` BSDF for a medium's invisible boundary.
 //!
@@ -553,18 +554,31 @@ impl Converter {
                 }
             }
             // A uniform environment looks the same under any to_world.
-            "constant" => LightSpec::Environment { radiance: Some(rgb("radiance")?), map: None, scale: None },
+            "constant" => {
+                LightSpec::Environment { radiance: Some(rgb("radiance")?), map: None, scale: None, rotation: None }
+            }
             "envmap" => {
-                if m.is_some_and(|m| !m.matrix3.abs_diff_eq(DMat3::IDENTITY, 1e-9)) {
-                    return Err(e.unsupported(
-                        "an envmap to_world with a rotation: lumen's environment map is fixed, y up",
-                    ));
-                }
+                // A rotation, up to a uniform scale (directions are normalised); anything else
+                // would bend the map.
+                let rotation = match m {
+                    Some(m) if !m.matrix3.abs_diff_eq(DMat3::IDENTITY, 1e-9) => {
+                        let s = m.matrix3.determinant().cbrt();
+                        let r = m.matrix3 * (1.0 / s);
+                        if !(s > 0.0 && (r.transpose() * r).abs_diff_eq(DMat3::IDENTITY, 1e-6)) {
+                            return Err(e.unsupported(
+                                "an envmap to_world that is not a rotation (mirrored, sheared or scaled unevenly): lumen turns environment maps, nothing more",
+                            ));
+                        }
+                        Some(r.transpose().to_cols_array_2d())
+                    }
+                    _ => None,
+                };
                 let f = p.string("filename")?.ok_or_else(|| e.error("needs `filename`"))?;
                 LightSpec::Environment {
                     radiance: None,
                     map: Some(self.file(e, &f)?),
                     scale: p.float("scale")?,
+                    rotation,
                 }
             }
             "area" => return Err(e.error("an `area` emitter belongs inside a <shape>")),
