@@ -582,6 +582,12 @@ fn bad_media() {
         ),
         (medium("sigma_t = [1.0, 1.0, 1.0]\n"), "nothing could enter it"),
         (medium("sigma_t = [1.0, 1.0, 1.0]\ngrid = \"missing.vol\"\n"), "missing.vol"),
+        (medium("sigma_t = [1.0, 1.0, 1.0]\ngrid = \"a.vol\"\nnoise = { seed = 1 }\n"), "not both"),
+        (medium("sigma_t = [1.0, 1.0, 1.0]\nnoise = { seed = 1, resolution = 100000 }\n"), "media[0] (fog).noise.resolution"),
+        (medium("sigma_t = [1.0, 1.0, 1.0]\nnoise = { seed = 1, threshold = 1.0 }\n"), "media[0] (fog).noise.threshold"),
+        (medium("sigma_t = [1.0, 1.0, 1.0]\nnoise = { seed = 1, octaves = 0 }\n"), "media[0] (fog).noise.octaves"),
+        (medium("sigma_t = [1.0, 1.0, 1.0]\nnoise = { seed = 1 }\ngrid_bbox = true\n"), "media[0] (fog).grid_bbox"),
+        (medium("sigma_t = [1.0, 1.0, 1.0]\nnoise = { seed = 1, size = 3 }\n"), "size"),
         (
             "[[materials]]\nname = \"edge\"\ntype = \"null\"\nalbedo = [1.0, 1.0, 1.0]\n".to_string(),
             "materials[1] (edge).albedo",

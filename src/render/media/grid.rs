@@ -48,6 +48,14 @@ pub struct Grid {
 }
 
 impl Grid {
+    /// A grid over [0, 1]³ from its values (x fastest, then y, then z; `channels` per voxel),
+    /// as a procedural density makes one (`media::noise`). Values must be finite and ≥ 0.
+    pub fn from_values(size: [usize; 3], channels: usize, data: Vec<f32>) -> Grid {
+        debug_assert_eq!(data.len(), size[0] * size[1] * size[2] * channels);
+        let max = data.iter().copied().fold(0.0f32, f32::max);
+        Grid { size, channels, bbox: (Vec3A::ZERO, Vec3A::ONE), data, max }
+    }
+
     /// Reads a `.vol` file, checking its header against its length and its values (finite,
     /// ≥ 0: a grid holds densities).
     pub fn read(path: &Path) -> Result<Grid, GridError> {

@@ -3,7 +3,7 @@
 
 use super::super::bsdf::Bsdf;
 use super::super::geometry::{Prim, PrimInfo};
-use super::super::media::{Density, Grid, Medium, Phase};
+use super::super::media::{noise, Density, Grid, Medium, Phase};
 use super::super::texture::{RoughnessSpec, Texture};
 use super::super::{bvh::Bvh, microfacet, obj, ply, surfaces, Error};
 use super::file::*;
@@ -981,16 +981,52 @@ fn build_media(specs: &[MediumSpec], path: &Path, dir: &Path) -> Result<Vec<Medi
         if !sigma_t.is_finite() {
             return Err(field_err(path, &field, "σt times scale overflows single precision"));
         }
-        let density = match &m.grid {
-            None if m.grid_transform.is_some() || m.grid_bbox.is_some() => {
+        let density = match (&m.grid, &m.noise) {
+            (Some(_), Some(_)) => {
+                return Err(field_err(path, &field, "give a `grid` file or a `noise`, not both"));
+            }
+            (None, None) if m.grid_transform.is_some() || m.grid_bbox.is_some() => {
                 return Err(field_err(
                     path,
                     &field,
-                    "`grid_transform` and `grid_bbox` place a `grid`, which is not given",
+                    "`grid_transform` and `grid_bbox` place a `grid` or `noise`, and neither is given",
                 ))
             }
-            None => None,
-            Some(file) => {
+            (None, None) => None,
+            (None, Some(_)) if m.grid_bbox.is_some() => {
+                return Err(field_err(path, &format!("{field}.grid_bbox"), "a noise has no box of its own: place it by `grid_transform`"));
+            }
+            (None, Some(n)) => {
+                let f = format!("{field}.noise");
+                let check = |ok: bool, key: &str, what: String| {
+                    if ok {
+                        Ok(())
+                    } else {
+                        Err(field_err(path, &format!("{f}.{key}"), what))
+                    }
+                };
+                check((1..=8).contains(&n.octaves), "octaves", format!("{}: expected 1 to 8", n.octaves))?;
+                check((1..=64).contains(&n.cells), "cells", format!("{}: expected 1 to 64", n.cells))?;
+                check((0.0..1.0).contains(&n.threshold), "threshold", format!("{}: expected a number in [0, 1)", n.threshold))?;
+                check(
+                    (2..=noise::MAX_RESOLUTION).contains(&n.resolution),
+                    "resolution",
+                    format!("{}: expected 2 to {}", n.resolution, noise::MAX_RESOLUTION),
+                )?;
+                let grid = noise::density_grid(n.seed, n.octaves, n.cells, n.threshold as f32, n.resolution);
+                let place = m
+                    .grid_transform
+                    .clone()
+                    .unwrap_or_default()
+                    .build(path, &format!("{field}.grid_transform"))?;
+                let to_grid = place.affine().inverse();
+                let to_grid = glam::Affine3A::from_mat3_translation(
+                    to_grid.matrix3.as_mat3(),
+                    to_grid.translation.as_vec3(),
+                );
+                Some(Density { grid, to_grid })
+            }
+            (Some(file), None) => {
                 let grid = Grid::read(&dir.join(file))?;
                 let place = m
                     .grid_transform

@@ -418,6 +418,42 @@ pub struct MediumSpec {
     /// `use_grid_bbox`). Default false.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub grid_bbox: Option<bool>,
+    /// A heterogeneous medium from procedural noise instead of a file (clouds, smoke), over
+    /// the cube [0, 1]³ that `grid_transform` places (`render::media::noise`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise: Option<NoiseDensitySpec>,
+}
+
+/// Fractal value noise as a medium's density (`render::media::noise`).
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseDensitySpec {
+    pub seed: u64,
+    /// Layers of noise, 1 to 8 (default 4), each on a lattice twice as fine as the last.
+    #[serde(default = "default_noise_octaves")]
+    pub octaves: u32,
+    /// Lattice nodes across the cube in the coarsest layer, 1 to 64 (default 4).
+    #[serde(default = "default_noise_cells")]
+    pub cells: u32,
+    /// The noise value below which the air is clear, in [0, 1) (default 0.4).
+    #[serde(default = "default_noise_threshold")]
+    pub threshold: f64,
+    /// Cells per side of the grid the noise is evaluated into, 2 to 512 (default 64).
+    #[serde(default = "default_noise_resolution")]
+    pub resolution: u32,
+}
+
+fn default_noise_octaves() -> u32 {
+    4
+}
+fn default_noise_cells() -> u32 {
+    4
+}
+fn default_noise_threshold() -> f64 {
+    0.4
+}
+fn default_noise_resolution() -> u32 {
+    64
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]

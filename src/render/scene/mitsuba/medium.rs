@@ -68,6 +68,7 @@ pub(super) fn medium(
         grid: None,
         grid_transform: None,
         grid_bbox: None,
+        noise: None,
     };
     let heterogeneous = match e.plugin() {
         "homogeneous" => false,
