@@ -128,7 +128,7 @@ fn malformed_scenes_are_refused_by_element_and_line() {
         (vec![("scene.xml", scene_with(&sphere("<ref id=\"nothing\"/>")))], "names id \"nothing\"", BadInput),
         (vec![("scene.xml", scene_with("<shape type=\"sphere\"><float name=\"radius\" value=\"$r\"/></shape>"))], "uses $r", BadInput),
         (vec![("scene.xml", scene_with("<shape type=\"sphere\"><float name=\"radius\" value=\"big\"/></shape>"))], "\"big\" is not a finite number", BadInput),
-        (vec![("scene.xml", scene_with(&sphere("<bsdf type=\"roughplastic\"/>")))], "bsdf \"roughplastic\": lumen has no rough coat", Unsupported),
+        (vec![("scene.xml", scene_with(&sphere("<bsdf type=\"roughplastic\"><float name=\"alpha_u\" value=\"0.1\"/><float name=\"alpha_v\" value=\"0.3\"/></bsdf>")))], "lumen's microfacets are isotropic", Unsupported),
         (vec![("scene.xml", scene_with(&sphere("<bsdf type=\"hair\"/>")))], "bsdf \"hair\": lumen reads diffuse", Unsupported),
         (
             vec![("scene.xml", scene_with("<shape type=\"sphere\"><emitter type=\"area\"><spectrum type=\"blackbody\" name=\"radiance\"><float name=\"temperature\" value=\"3000\"/></spectrum></emitter></shape>"))],

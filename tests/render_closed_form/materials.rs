@@ -225,7 +225,8 @@ material = "tex"
 /// rays leave from the right side and that the η² factors of entering and leaving cancel —, a
 /// thin pane, white plastic, whose coat and base together lose nothing);
 /// a lossy one (rough conductors, Blinn-Phong within its energy bound, a gold mirror, rough
-/// glass, whose microfacets lose what they send to the wrong side) never shows more than L. No sample may be NaN or infinite.
+/// glass and rough plastic, whose microfacets lose what they send to the wrong side) never
+/// shows more than L. No sample may be NaN or infinite.
 #[test]
 fn white_furnace_per_bsdf() {
     let lossless = [
@@ -245,6 +246,8 @@ fn white_furnace_per_bsdf() {
         "type = \"plastic\"\nalbedo = [0.5, 0.5, 0.5]\nnonlinear = true",
         "type = \"rough-dielectric\"\nalbedo = [1.0, 1.0, 1.0]\nalpha = 0.3\nior = 1.5",
         "type = \"rough-dielectric\"\nalbedo = [1.0, 1.0, 1.0]\ndistribution = \"beckmann\"\nalpha = 0.8\nior = 1.33",
+        "type = \"rough-plastic\"\nalbedo = [1.0, 1.0, 1.0]\nalpha = 0.3",
+        "type = \"rough-plastic\"\nalbedo = [1.0, 1.0, 1.0]\ndistribution = \"beckmann\"\nalpha = 0.05\nnonlinear = true",
     ];
     let l = 2.0;
     for (material, is_lossless) in lossless.iter().map(|m| (m, true)).chain(lossy.iter().map(|m| (m, false)))

@@ -774,20 +774,21 @@ fn rotation_matrix(path: &Path, field: &str, rows: &[[f64; 3]; 3]) -> Result<gla
 
 /// The reflectance model a material names, each field checked.
 fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error> {
-    let blinn_phong = (m.specular.is_some() && m.kind != "plastic") || m.exponent.is_some();
+    let coated = matches!(m.kind.as_str(), "plastic" | "rough-plastic");
+    let blinn_phong = (m.specular.is_some() && !coated) || m.exponent.is_some();
     let rough = m.distribution.is_some() || m.alpha.is_some();
     let conductor = rough || m.eta.is_some() || m.k.is_some();
     let foreign = |kind: &str, other: &str| {
         field_err(path, field, format!("a {kind} material takes no {other} fields (check `type`)"))
     };
-    if m.ior.is_some() && !matches!(m.kind.as_str(), "dielectric" | "rough-dielectric" | "thin-dielectric" | "plastic") {
+    if m.ior.is_some() && !(coated || matches!(m.kind.as_str(), "dielectric" | "rough-dielectric" | "thin-dielectric")) {
         return Err(field_err(
             path,
             &format!("{field}.ior"),
-            "only a dielectric, rough-dielectric, thin-dielectric or plastic material takes `ior`",
+            "only a dielectric (smooth, rough or thin) or plastic (smooth or rough) material takes `ior`",
         ));
     }
-    if m.nonlinear.is_some() && m.kind != "plastic" {
+    if m.nonlinear.is_some() && !coated {
         return Err(field_err(path, &format!("{field}.nonlinear"), "only a plastic material takes `nonlinear`"));
     }
     // A rough model's distribution (default GGX) and α; a textured α is looked up per hit
@@ -900,7 +901,10 @@ fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error>
         }
         "thin-dielectric" => Ok(Bsdf::ThinDielectric { eta: index(1.5046 / 1.000277)? as f32 }),
         "plastic" if blinn_phong || conductor => Err(foreign("plastic", "blinn-phong or conductor")),
-        "plastic" => {
+        "rough-plastic" if blinn_phong || m.eta.is_some() || m.k.is_some() => {
+            Err(foreign("rough-plastic", "blinn-phong or `eta`/`k` (its coat's index is `ior`)"))
+        }
+        "plastic" | "rough-plastic" => {
             let eta = index(1.49 / 1.000277)?;
             let specular = non_negative3(path, &format!("{field}.specular"), m.specular.unwrap_or([1.0; 3]))?;
             if specular.max_element() > 1.0 {
@@ -910,11 +914,34 @@ fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error>
                     format!("{:?}: each value must be in [0, 1] (more would create energy)", m.specular),
                 ));
             }
-            Ok(Bsdf::Plastic {
-                eta: eta as f32,
-                fdr_int: crate::render::plastic::diffuse_reflectance_inside(eta) as f32,
+            let nonlinear = m.nonlinear.unwrap_or(false);
+            if m.kind == "plastic" {
+                return Ok(Bsdf::Plastic {
+                    eta: eta as f32,
+                    fdr_int: crate::render::plastic::diffuse_reflectance_inside(eta) as f32,
+                    specular,
+                    nonlinear,
+                });
+            }
+            if !matches!(m.alpha, None | Some(RoughnessSpec::Constant(_))) {
+                return Err(field_err(
+                    path,
+                    &format!("{field}.alpha"),
+                    "a rough plastic's coat is tabulated for one roughness: give a number",
+                ));
+            }
+            if (eta - 1.0).abs() < 1e-6 {
+                return Err(field_err(path, &format!("{field}.ior"), "a coat of index 1 is no coat: it must differ from 1"));
+            }
+            let (distribution, alpha) = microfacets()?;
+            let eta = eta as f32;
+            Ok(Bsdf::RoughPlastic {
+                distribution,
+                alpha,
+                eta,
                 specular,
-                nonlinear: m.nonlinear.unwrap_or(false),
+                nonlinear,
+                coat: crate::render::plastic::RoughCoat::of(distribution, alpha, eta),
             })
         }
         "null" if blinn_phong || conductor => Err(foreign("null", "blinn-phong or conductor")),
@@ -923,7 +950,7 @@ fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error>
             path,
             &format!("{field}.type"),
             format!(
-                "'{other}' is not a known material (expected \"lambertian\", \"blinn-phong\", \"conductor\", \"mirror\", \"dielectric\", \"rough-dielectric\", \"thin-dielectric\", \"plastic\" or \"null\")"
+                "'{other}' is not a known material (expected \"lambertian\", \"blinn-phong\", \"conductor\", \"mirror\", \"dielectric\", \"rough-dielectric\", \"thin-dielectric\", \"plastic\", \"rough-plastic\" or \"null\")"
             ),
         )),
     }

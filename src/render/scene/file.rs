@@ -188,7 +188,9 @@ pub struct MaterialSpec {
     /// `render::rough_dielectric`), `"thin-dielectric"` (a pane of
     /// glass, Mitsuba's `thindielectric`: reflects or lets light through undeviated; `albedo`
     /// tints both), `"plastic"` (smooth plastic, Mitsuba's `plastic`: `albedo` is the diffuse
-    /// base's colour under a clear coat, `render::plastic`) or `"null"` (no surface, only the
+    /// base's colour under a clear coat, `render::plastic`), `"rough-plastic"` (the same
+    /// under a rough coat, Mitsuba's `roughplastic`: `distribution` and a constant `alpha`) or
+    /// `"null"` (no surface, only the
     /// boundary of a medium: paths go straight through; it takes no `albedo`).
     #[serde(rename = "type")]
     pub kind: String,
@@ -200,9 +202,9 @@ pub struct MaterialSpec {
     pub specular: Option<[f64; 3]>,
     /// Blinn-Phong only: the exponent e (shininess), > 0.
     pub exponent: Option<f64>,
-    /// Conductor and rough dielectric only: `"ggx"` (default) or `"beckmann"`.
+    /// Conductor, rough dielectric and rough plastic only: `"ggx"` (default) or `"beckmann"`.
     pub distribution: Option<String>,
-    /// Conductor and rough dielectric only: roughness α in [0.001, 1] (Mitsuba's `alpha`;
+    /// Conductor, rough dielectric and rough plastic only: roughness α in [0.001, 1] (Mitsuba's `alpha`;
     /// default 0.1), a number
     /// or a texture (`render::texture::Texture::build_roughness`).
     pub alpha: Option<RoughnessSpec>,
@@ -216,7 +218,7 @@ pub struct MaterialSpec {
     /// [1/4, 4]; default 1.5046 / 1.000277 (Mitsuba's BK7 glass in air), for plastic
     /// 1.49 / 1.000277 (polypropylene).
     pub ior: Option<f64>,
-    /// Plastic only: the base's colour at every reflection inside the coat, ρ/(1 − ρ·F_dr)
+    /// Plastic (smooth or rough) only: the base's colour at every reflection inside the coat, ρ/(1 − ρ·F_dr)
     /// instead of ρ/(1 − F_dr) (Mitsuba's `nonlinear`; default false, see `render::plastic`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub nonlinear: Option<bool>,

@@ -1,5 +1,6 @@
 //! Mitsuba's BSDFs as lumen materials: `diffuse`, `conductor`, `roughconductor`,
-//! `dielectric`, `roughdielectric`, `thindielectric`, `plastic`, `null` and `twosided`, with named conductors and
+//! `dielectric`, `roughdielectric`, `thindielectric`, `plastic`, `roughplastic`, `null` and
+//! `twosided`, with named conductors and
 //! indices of refraction (`named`).
 
 use super::super::super::texture::{RoughnessSpec, TextureSpec};
@@ -210,16 +211,25 @@ pub(super) fn bsdf(b: &Elem, name: String) -> Result<MaterialSpec, Error> {
             m.nonlinear = p.boolean("nonlinear")?;
         }
         "roughplastic" => {
-            return Err(b.unsupported(
-                "bsdf \"roughplastic\": lumen has no rough coat yet; it reads plastic (smooth), roughconductor and roughdielectric",
-            ))
+            let int = ior(&p, "int_ior", "polypropylene")?;
+            let ext = ior(&p, "ext_ior", "air")?;
+            if !(int > 0.0 && ext > 0.0) {
+                return Err(b.error(format!("int_ior {int}, ext_ior {ext}: expected positive indices")));
+            }
+            m.kind = "rough-plastic".into();
+            m.ior = Some(int / ext);
+            m.albedo = Some(p.color("diffuse_reflectance")?.map_or(TextureSpec::Constant([0.5; 3]), Color::texture));
+            m.specular =
+                p.color("specular_reflectance")?.map(|c| c.rgb(b, "specular_reflectance")).transpose()?;
+            m.nonlinear = p.boolean("nonlinear")?;
+            microfacets(b, &p, &mut m)?;
         }
         other => {
             return Err(b.unsupported(format!(
-            "bsdf \"{other}\": lumen reads diffuse, conductor, roughconductor, dielectric, roughdielectric, thindielectric, plastic, null and twosided"
+            "bsdf \"{other}\": lumen reads diffuse, conductor, roughconductor, dielectric, roughdielectric, thindielectric, plastic, roughplastic, null and twosided"
         )))
         }
     }
-    p.finish("reflectance (diffuse); material, eta, k, specular_reflectance, distribution, alpha (conductors); int_ior, ext_ior, specular_reflectance, specular_transmittance (dielectric, thindielectric), with distribution, alpha (roughdielectric); int_ior, ext_ior, diffuse_reflectance, specular_reflectance, nonlinear (plastic)")?;
+    p.finish("reflectance (diffuse); material, eta, k, specular_reflectance, distribution, alpha (conductors); int_ior, ext_ior, specular_reflectance, specular_transmittance (dielectric, thindielectric), with distribution, alpha (roughdielectric); int_ior, ext_ior, diffuse_reflectance, specular_reflectance, nonlinear (plastic, with distribution, alpha for roughplastic)")?;
     Ok(m)
 }

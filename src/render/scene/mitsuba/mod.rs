@@ -17,8 +17,9 @@
 //!   `multijitter`, `orthogonal`, `ldsampler` → lumen's Sobol sampler; `sample_count` → spp.
 //! - `bsdf`: `diffuse` → lambertian; `conductor` → mirror, `roughconductor` → conductor (named
 //!   `material`s in `named`, or `eta`/`k`; `specular_reflectance` tints); `dielectric`,
-//!   `roughdielectric` and `thindielectric` (named or numeric `int_ior`/`ext_ior`); `plastic` (`diffuse_reflectance`,
-//!   `specular_reflectance`, `nonlinear`; default coat polypropylene); `twosided` around one
+//!   `roughdielectric` and `thindielectric` (named or numeric `int_ior`/`ext_ior`); `plastic`
+//!   and `roughplastic` (`diffuse_reflectance`, `specular_reflectance`, `nonlinear`; default
+//!   coat polypropylene); `twosided` around one
 //!   BSDF. As in Mitsuba, a diffuse, conductor or plastic material is one-sided
 //!   (`two_sided = false`: black from behind) unless wrapped in `twosided`. Colours as `rgb`, `float`, `spectrum` (a constant or wavelength:value
 //!   pairs, turned into RGB as Mitsuba's RGB variants do: `spectrum`), or a `checkerboard` /
