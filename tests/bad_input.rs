@@ -250,7 +250,12 @@ fn bad_values() {
     assert!(e.contains("materials[1] (g)") && e.contains("its index is `ior`"), "{e}");
     let e = scene_error(&glossy("type = \"rough-dielectric\"\nalpha = 0.0\n"), &[]);
     assert!(e.contains("materials[1] (g).alpha") && e.contains("[0.001, 1]"), "{e}");
-    let e = scene_error(&glossy("type = \"rough-plastic\"\nalpha = { checker = { squares = [2, 2], even = 0.1, odd = 0.5 } }\n"), &[]);
+    let e = scene_error(
+        &glossy(
+            "type = \"rough-plastic\"\nalpha = { checker = { squares = [2, 2], even = 0.1, odd = 0.5 } }\n",
+        ),
+        &[],
+    );
     assert!(e.contains("materials[1] (g).alpha") && e.contains("one roughness"), "{e}");
     let e = scene_error(&glossy("type = \"rough-plastic\"\nior = 1.0\n"), &[]);
     assert!(e.contains("materials[1] (g).ior") && e.contains("no coat"), "{e}");

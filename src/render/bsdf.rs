@@ -1,7 +1,7 @@
 //! Reflectance models: Lambertian, normalised Blinn-Phong, rough conductors with GGX or
 //! Beckmann microfacets (`render::microfacet`), the smooth mirror, dielectric and thin
-//! dielectric (`render::specular`), rough glass (`render::rough_dielectric`) and smooth plastic
-//! (`render::plastic`).
+//! dielectric (`render::specular`), rough glass (`render::rough_dielectric`) and smooth and
+//! rough plastic (`render::plastic`).
 //!
 //! Blinn-Phong, the form photometric stereo fits:
 //!
@@ -115,7 +115,10 @@ impl Bsdf {
     /// Whether the model scatters into single directions (f and pdf are Dirac deltas).
     #[inline]
     pub fn is_delta(&self) -> bool {
-        matches!(self, Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Null | Bsdf::ThinDielectric { .. })
+        matches!(
+            self,
+            Bsdf::Mirror { .. } | Bsdf::Dielectric { .. } | Bsdf::Null | Bsdf::ThinDielectric { .. }
+        )
     }
 
     /// Whether `sample` uses its third number (a rough dielectric's choice of lobe).
@@ -139,7 +142,9 @@ impl Bsdf {
             Bsdf::Conductor { distribution, eta, k, .. } => {
                 Bsdf::Conductor { distribution, alpha: a, eta, k }
             }
-            Bsdf::RoughDielectric { distribution, eta, .. } => Bsdf::RoughDielectric { distribution, alpha: a, eta },
+            Bsdf::RoughDielectric { distribution, eta, .. } => {
+                Bsdf::RoughDielectric { distribution, alpha: a, eta }
+            }
             b => b,
         }
     }
@@ -208,7 +213,9 @@ impl Bsdf {
             | Bsdf::ThinDielectric { .. }
             | Bsdf::RoughDielectric { .. } => Vec3A::ZERO,
             Bsdf::Lambertian => kd * FRAC_1_PI,
-            Bsdf::Plastic { eta, fdr_int, nonlinear, .. } => plastic::diffuse(kd, eta, fdr_int, nonlinear, co, ci),
+            Bsdf::Plastic { eta, fdr_int, nonlinear, .. } => {
+                plastic::diffuse(kd, eta, fdr_int, nonlinear, co, ci)
+            }
             Bsdf::RoughPlastic { distribution, alpha, eta, specular, nonlinear, coat } => {
                 plastic::rough_eval(kd, specular, distribution, alpha, eta, nonlinear, coat, n, wo, wi)
             }
@@ -260,7 +267,11 @@ impl Bsdf {
             Bsdf::RoughPlastic { distribution, alpha, specular, coat, .. } => {
                 let ps = plastic::rough_specular_probability(kd, specular, coat, co);
                 let h = (wo + wi).normalize();
-                let glossy = if wo.dot(h) > 0.0 { microfacet::visible_pdf(distribution, alpha, co, n.dot(h)) } else { 0.0 };
+                let glossy = if wo.dot(h) > 0.0 {
+                    microfacet::visible_pdf(distribution, alpha, co, n.dot(h))
+                } else {
+                    0.0
+                };
                 ps * glossy + (1.0 - ps) * diffuse
             }
             Bsdf::Conductor { distribution, alpha, .. } => {
@@ -523,7 +534,9 @@ mod tests {
                     let mut sum = 0.0f64;
                     for k in 0..m {
                         let (u1, u2) = Sampler::with_kind(SamplerKind::Independent, 17, k, 0).next2();
-                        if let Some(Sample { wi, weight: w, .. }) = bsdf.sample(Vec3A::ONE, n, wo, u1, u2, 0.5) {
+                        if let Some(Sample { wi, weight: w, .. }) =
+                            bsdf.sample(Vec3A::ONE, n, wo, u1, u2, 0.5)
+                        {
                             assert!(w.is_finite() && n.dot(wi) > 0.0);
                             sum += w.x as f64;
                         }
@@ -690,9 +703,12 @@ mod tests {
     /// sample's weight is f·cos/pdf from `eval` and `pdf`.
     #[test]
     fn plastic_albedo_closed_form() {
-        for (eta, kd, spec, nonlinear) in
-            [(1.49f32, 0.5f32, 1.0f32, false), (1.33, 0.8, 0.6, true), (1.8, 0.2, 1.0, false), (1.49, 1.0, 1.0, false)]
-        {
+        for (eta, kd, spec, nonlinear) in [
+            (1.49f32, 0.5f32, 1.0f32, false),
+            (1.33, 0.8, 0.6, true),
+            (1.8, 0.2, 1.0, false),
+            (1.49, 1.0, 1.0, false),
+        ] {
             let fdr = plastic::diffuse_reflectance_inside(eta as f64) as f32;
             let bsdf = Bsdf::Plastic { eta, fdr_int: fdr, specular: Vec3A::splat(spec), nonlinear };
             let kd3 = Vec3A::splat(kd);
@@ -708,9 +724,14 @@ mod tests {
                     let (u1, u2) = s.next2();
                     let Some(smp) = bsdf.sample(kd3, Vec3A::Z, wo, u1, u2, 0.5) else { continue };
                     if !smp.delta {
-                        let (f, pdf) = (bsdf.eval(kd3, Vec3A::Z, wo, smp.wi), bsdf.pdf(kd3, Vec3A::Z, wo, smp.wi));
+                        let (f, pdf) =
+                            (bsdf.eval(kd3, Vec3A::Z, wo, smp.wi), bsdf.pdf(kd3, Vec3A::Z, wo, smp.wi));
                         let direct = f.x * smp.wi.z / pdf;
-                        assert!((smp.weight.x - direct).abs() <= 1e-4 * direct, "{} vs {direct}", smp.weight.x);
+                        assert!(
+                            (smp.weight.x - direct).abs() <= 1e-4 * direct,
+                            "{} vs {direct}",
+                            smp.weight.x
+                        );
                     }
                     let w = smp.weight.x as f64;
                     sum += w;
@@ -765,7 +786,9 @@ mod tests {
         use crate::math::stats::{chi2_test, sidak_alpha};
         let n = Vec3A::Z;
         let mut cases = Vec::new();
-        for (distribution, alpha) in [(Distribution::Ggx, 0.2f32), (Distribution::Ggx, 0.5), (Distribution::Beckmann, 0.3)] {
+        for (distribution, alpha) in
+            [(Distribution::Ggx, 0.2f32), (Distribution::Ggx, 0.5), (Distribution::Beckmann, 0.3)]
+        {
             for eta in [1.5f32, 1.0 / 1.5] {
                 for theta_o in [0.0f32, 40.0, 75.0] {
                     cases.push((Bsdf::RoughDielectric { distribution, alpha, eta }, theta_o));
@@ -786,7 +809,9 @@ mod tests {
             for k in 0..samples {
                 let mut s = Sampler::with_kind(SamplerKind::Independent, 40 + case as u64, k, 0);
                 let (u1, u2) = s.next2();
-                if let Some(Sample { wi, weight: w, delta }) = bsdf.sample(Vec3A::ONE, n, wo, u1, u2, s.next()) {
+                if let Some(Sample { wi, weight: w, delta }) =
+                    bsdf.sample(Vec3A::ONE, n, wo, u1, u2, s.next())
+                {
                     assert!(!delta && w.is_finite() && w.x >= 0.0);
                     observed[cell(wi)] += 1.0;
                     weight += w.x as f64;
@@ -801,14 +826,16 @@ mod tests {
                     1 => 4 * sub,
                     _ => sub,
                 };
-                let area = (2.0 / nt as f64) * (2.0 * std::f64::consts::PI / np as f64) / (st_sub * sub) as f64;
+                let area =
+                    (2.0 / nt as f64) * (2.0 * std::f64::consts::PI / np as f64) / (st_sub * sub) as f64;
                 for p in 0..np {
                     let mut sum = 0.0f64;
                     for a in 0..st_sub {
                         let ct = -1.0 + 2.0 * (t as f64 + (a as f64 + 0.5) / st_sub as f64) / nt as f64;
                         let st = (1.0 - ct * ct).max(0.0).sqrt();
                         for b in 0..sub {
-                            let phi = 2.0 * std::f64::consts::PI * (p as f64 + (b as f64 + 0.5) / sub as f64) / np as f64;
+                            let phi = 2.0 * std::f64::consts::PI * (p as f64 + (b as f64 + 0.5) / sub as f64)
+                                / np as f64;
                             let wi = Vec3A::new((st * phi.cos()) as f32, (st * phi.sin()) as f32, ct as f32);
                             sum += bsdf.pdf(Vec3A::ONE, n, wo, wi) as f64;
                             albedo += bsdf.eval(Vec3A::ONE, n, wo, wi).x as f64 * ct.abs() * area;
@@ -818,7 +845,10 @@ mod tests {
                 }
             }
             let p = chi2_test(&observed, &expected).expect("enough cells");
-            assert!(p >= level, "case {case} ({bsdf:?}, θo {theta_o}°): χ² p-value {p:.3e} below {level:.3e}");
+            assert!(
+                p >= level,
+                "case {case} ({bsdf:?}, θo {theta_o}°): χ² p-value {p:.3e} below {level:.3e}"
+            );
             let mc = weight / samples as f64;
             // Radiance entering a denser medium grows by 1/η² (L/η² is conserved), so from
             // inside (η < 1) the bound is 1/η².
@@ -843,7 +873,9 @@ mod tests {
         assert!((smooth.transmittance(1.0) - (1.0 - f0)).abs() < 2e-3, "T(1) {}", smooth.transmittance(1.0));
         let exact = plastic::diffuse_reflectance_inside(1.5) as f32;
         assert!((smooth.internal - exact).abs() < 0.01 * exact, "F_int {} vs {exact}", smooth.internal);
-        for (distribution, alpha, nonlinear) in [(Distribution::Ggx, 0.1f32, false), (Distribution::Beckmann, 0.4, true)] {
+        for (distribution, alpha, nonlinear) in
+            [(Distribution::Ggx, 0.1f32, false), (Distribution::Beckmann, 0.4, true)]
+        {
             let eta = 1.49f32;
             let coat = plastic::RoughCoat::of(distribution, alpha, eta);
             let bsdf = Bsdf::RoughPlastic { distribution, alpha, eta, specular: Vec3A::ONE, nonlinear, coat };
@@ -858,7 +890,9 @@ mod tests {
                     for j in 0..np {
                         let phi = 2.0 * std::f64::consts::PI * (j as f64 + 0.5) / np as f64;
                         let wi = Vec3A::new((st * phi.cos()) as f32, (st * phi.sin()) as f32, ct as f32);
-                        albedo += bsdf.eval(kd, n, wo, wi).x as f64 * ct / nt as f64 * 2.0 * std::f64::consts::PI / np as f64;
+                        albedo +=
+                            bsdf.eval(kd, n, wo, wi).x as f64 * ct / nt as f64 * 2.0 * std::f64::consts::PI
+                                / np as f64;
                     }
                 }
                 let m = 400_000;

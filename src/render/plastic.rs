@@ -109,9 +109,13 @@ mod tests {
         for eta in [1.0f64, 1.1, 1.33, 1.49, 1.5, 2.0, 2.5] {
             let n = 200_000;
             let h = 1.0 / n as f64;
-            let outside: f64 = (0..n).map(|k| (k as f64 + 0.5) * h).map(|mu| 2.0 * fresnel64(mu, eta) * mu * h).sum();
+            let outside: f64 =
+                (0..n).map(|k| (k as f64 + 0.5) * h).map(|mu| 2.0 * fresnel64(mu, eta) * mu * h).sum();
             let inside = diffuse_reflectance_inside(eta);
-            assert!(((1.0 - outside) - eta * eta * (1.0 - inside)).abs() < 1e-7, "η {eta}: {outside} {inside}");
+            assert!(
+                ((1.0 - outside) - eta * eta * (1.0 - inside)).abs() < 1e-7,
+                "η {eta}: {outside} {inside}"
+            );
         }
         assert!(diffuse_reflectance_inside(1.0).abs() < 1e-12);
     }
@@ -152,7 +156,8 @@ impl RoughCoat {
         type Key = (bool, u32, u32);
         static COATS: OnceLock<Mutex<Vec<(Key, &'static RoughCoat)>>> = OnceLock::new();
         let key = (dist == Distribution::Ggx, alpha.to_bits(), eta.to_bits());
-        let mut coats = COATS.get_or_init(|| Mutex::new(Vec::new())).lock().unwrap_or_else(|e| e.into_inner());
+        let mut coats =
+            COATS.get_or_init(|| Mutex::new(Vec::new())).lock().unwrap_or_else(|e| e.into_inner());
         if let Some((_, c)) = coats.iter().find(|(k, _)| *k == key) {
             return c;
         }

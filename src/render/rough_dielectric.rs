@@ -53,7 +53,9 @@ pub fn eval(dist: Distribution, alpha: f32, eta: f32, n: Vec3A, wo: Vec3A, wi: V
     let (co, ci) = (n.dot(wo), n.dot(wi));
     let (oh, ih) = (wo.dot(h), wi.dot(h));
     let (f, _) = fresnel_dielectric(oh, eta);
-    let dg = microfacet::d(dist, alpha, n.dot(h)) * microfacet::g1(dist, alpha, co, oh) * microfacet::g1(dist, alpha, ci, ih);
+    let dg = microfacet::d(dist, alpha, n.dot(h))
+        * microfacet::g1(dist, alpha, co, oh)
+        * microfacet::g1(dist, alpha, ci, ih);
     let v = if reflection {
         f * dg / (4.0 * co * ci)
     } else {
@@ -91,7 +93,14 @@ pub fn pdf(dist: Distribution, alpha: f32, eta: f32, n: Vec3A, wo: Vec3A, wi: Ve
 /// Samples wi for wo on n's side: a visible microfacet normal from (u1, u2), the lobe from
 /// u3. Returns wi and the weight f·|cos θi|/p without the colour.
 #[inline]
-pub fn sample(dist: Distribution, alpha: f32, eta: f32, n: Vec3A, wo: Vec3A, u: [f32; 3]) -> Option<(Vec3A, f32)> {
+pub fn sample(
+    dist: Distribution,
+    alpha: f32,
+    eta: f32,
+    n: Vec3A,
+    wo: Vec3A,
+    u: [f32; 3],
+) -> Option<(Vec3A, f32)> {
     let co = n.dot(wo);
     if co <= 0.0 {
         return None;

@@ -346,11 +346,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<photometric::In
         files.extend(images.into_iter().map(|(n, img)| (folder.join(n), Kept::Image(img))));
         files.extend(bytes.into_iter().map(|(n, b)| (folder.join(n), Kept::Bytes(b))));
     }
-    Ok(Some((
-        input,
-        Truth { normals, albedo },
-        Findings { notes, files, ..Default::default() },
-    )))
+    Ok(Some((input, Truth { normals, albedo }, Findings { notes, files, ..Default::default() })))
 }
 
 /// Reads a real dataset (`DataConfig`), keeping its ground truth apart from the input.

@@ -129,7 +129,10 @@ pub fn trace(scene: &Scene, mut ray: Ray, max_depth: u32, s: &mut Sampler) -> Ve
         // (6 % of a Cornell path's instructions).
         let glossy = matches!(
             bsdf,
-            Bsdf::BlinnPhong { .. } | Bsdf::Conductor { .. } | Bsdf::RoughDielectric { .. } | Bsdf::RoughPlastic { .. }
+            Bsdf::BlinnPhong { .. }
+                | Bsdf::Conductor { .. }
+                | Bsdf::RoughDielectric { .. }
+                | Bsdf::RoughPlastic { .. }
         );
         let u_light = s.next2();
         if !delta {

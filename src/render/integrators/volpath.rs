@@ -194,7 +194,10 @@ pub fn trace(scene: &Scene, mut ray: Ray, max_depth: u32, s: &mut Sampler) -> Ve
         let delta = bsdf.is_delta();
         let glossy = matches!(
             bsdf,
-            Bsdf::BlinnPhong { .. } | Bsdf::Conductor { .. } | Bsdf::RoughDielectric { .. } | Bsdf::RoughPlastic { .. }
+            Bsdf::BlinnPhong { .. }
+                | Bsdf::Conductor { .. }
+                | Bsdf::RoughDielectric { .. }
+                | Bsdf::RoughPlastic { .. }
         );
         let u_light = s.next2();
         if !delta {

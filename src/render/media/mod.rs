@@ -239,7 +239,9 @@ mod tests {
         let depth: f64 = (0..steps)
             .map(|k| {
                 let t = (k as f32 + 0.5) / steps as f32 * d;
-                m.sigma_t.x as f64 * g.grid.eval(ray.origin + ray.dir * t).x as f64 * (d / steps as f32) as f64
+                m.sigma_t.x as f64
+                    * g.grid.eval(ray.origin + ray.dir * t).x as f64
+                    * (d / steps as f32) as f64
             })
             .sum();
         let want = (-depth).exp();

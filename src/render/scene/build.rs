@@ -253,7 +253,10 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
         if one_sided
             && matches!(
                 bsdf,
-                Bsdf::Dielectric { .. } | Bsdf::RoughDielectric { .. } | Bsdf::ThinDielectric { .. } | Bsdf::Null
+                Bsdf::Dielectric { .. }
+                    | Bsdf::RoughDielectric { .. }
+                    | Bsdf::ThinDielectric { .. }
+                    | Bsdf::Null
             )
         {
             return Err(field_err(
@@ -767,7 +770,11 @@ fn rotation_matrix(path: &Path, field: &str, rows: &[[f64; 3]; 3]) -> Result<gla
     let m = DMat3::from_cols_array_2d(rows).transpose();
     let orthonormal = (m.transpose() * m).abs_diff_eq(DMat3::IDENTITY, 1e-6);
     if !(rows.iter().flatten().all(|v| v.is_finite()) && orthonormal && m.determinant() > 0.0) {
-        return Err(field_err(path, field, format!("{rows:?}: expected a rotation (orthonormal rows, determinant +1)")));
+        return Err(field_err(
+            path,
+            field,
+            format!("{rows:?}: expected a rotation (orthonormal rows, determinant +1)"),
+        ));
     }
     Ok(glam::Mat3A::from(m.as_mat3()))
 }
@@ -781,7 +788,9 @@ fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error>
     let foreign = |kind: &str, other: &str| {
         field_err(path, field, format!("a {kind} material takes no {other} fields (check `type`)"))
     };
-    if m.ior.is_some() && !(coated || matches!(m.kind.as_str(), "dielectric" | "rough-dielectric" | "thin-dielectric")) {
+    if m.ior.is_some()
+        && !(coated || matches!(m.kind.as_str(), "dielectric" | "rough-dielectric" | "thin-dielectric"))
+    {
         return Err(field_err(
             path,
             &format!("{field}.ior"),
@@ -789,7 +798,11 @@ fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error>
         ));
     }
     if m.nonlinear.is_some() && !coated {
-        return Err(field_err(path, &format!("{field}.nonlinear"), "only a plastic material takes `nonlinear`"));
+        return Err(field_err(
+            path,
+            &format!("{field}.nonlinear"),
+            "only a plastic material takes `nonlinear`",
+        ));
     }
     // A rough model's distribution (default GGX) and α; a textured α is looked up per hit
     // (Material::roughness) and the model keeps 0.1.
@@ -819,7 +832,11 @@ fn build_bsdf(m: &MaterialSpec, path: &Path, field: &str) -> Result<Bsdf, Error>
         if (0.25..=4.0).contains(&ior) {
             Ok(ior)
         } else {
-            Err(field_err(path, &format!("{field}.ior"), format!("{ior}: expected a relative index in [0.25, 4]")))
+            Err(field_err(
+                path,
+                &format!("{field}.ior"),
+                format!("{ior}: expected a relative index in [0.25, 4]"),
+            ))
         }
     };
     let complex_index = |eta: [f64; 3], k: [f64; 3]| {
@@ -1021,7 +1038,11 @@ fn build_media(specs: &[MediumSpec], path: &Path, dir: &Path) -> Result<Vec<Medi
             }
             (None, None) => None,
             (None, Some(_)) if m.grid_bbox.is_some() => {
-                return Err(field_err(path, &format!("{field}.grid_bbox"), "a noise has no box of its own: place it by `grid_transform`"));
+                return Err(field_err(
+                    path,
+                    &format!("{field}.grid_bbox"),
+                    "a noise has no box of its own: place it by `grid_transform`",
+                ));
             }
             (None, Some(n)) => {
                 let f = format!("{field}.noise");
@@ -1034,7 +1055,11 @@ fn build_media(specs: &[MediumSpec], path: &Path, dir: &Path) -> Result<Vec<Medi
                 };
                 check((1..=8).contains(&n.octaves), "octaves", format!("{}: expected 1 to 8", n.octaves))?;
                 check((1..=64).contains(&n.cells), "cells", format!("{}: expected 1 to 64", n.cells))?;
-                check((0.0..1.0).contains(&n.threshold), "threshold", format!("{}: expected a number in [0, 1)", n.threshold))?;
+                check(
+                    (0.0..1.0).contains(&n.threshold),
+                    "threshold",
+                    format!("{}: expected a number in [0, 1)", n.threshold),
+                )?;
                 check(
                     (2..=noise::MAX_RESOLUTION).contains(&n.resolution),
                     "resolution",

@@ -123,11 +123,9 @@ fn dielectric(b: &Elem, p: &Props) -> Result<(f64, [f64; 3]), Error> {
         (None, None) => [1.0; 3],
         (Some(a), None) | (None, Some(a)) if a == [1.0; 3] => a,
         (Some(a), Some(c)) if a == c => a,
-        _ => {
-            return Err(b.unsupported(
-                "different specular_reflectance and specular_transmittance: lumen's dielectrics tint both alike",
-            ))
-        }
+        _ => return Err(b.unsupported(
+            "different specular_reflectance and specular_transmittance: lumen's dielectrics tint both alike",
+        )),
     };
     Ok((int / ext, tint))
 }

@@ -555,9 +555,12 @@ impl Converter {
                 }
             }
             // A uniform environment looks the same under any to_world.
-            "constant" => {
-                LightSpec::Environment { radiance: Some(rgb("radiance")?), map: None, scale: None, rotation: None }
-            }
+            "constant" => LightSpec::Environment {
+                radiance: Some(rgb("radiance")?),
+                map: None,
+                scale: None,
+                rotation: None,
+            },
             "envmap" => {
                 // A rotation, up to a uniform scale (directions are normalised); anything else
                 // would bend the map.
