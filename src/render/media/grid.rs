@@ -34,6 +34,10 @@ impl GridError {
     }
 }
 
+/// Voxels per side of a brick, the unit over which a grid's majorant is kept
+/// (`brick_maxima`, `media::Density`).
+pub const BRICK: usize = 8;
+
 /// A voxel grid over [0, 1]³.
 #[derive(Clone, Debug)]
 pub struct Grid {
@@ -113,6 +117,40 @@ impl Grid {
             data,
             max,
         })
+    }
+
+    /// The largest value (any channel) the trilinear lookup can return inside each brick of
+    /// `BRICK`³ voxels: bricks indexed x fastest, `ceil(size / BRICK)` per axis. A brick's
+    /// lookups read the voxels from one before it to one after it on each axis.
+    pub fn brick_maxima(&self) -> ([usize; 3], Vec<f32>) {
+        let res = self.size.map(|n| n.div_ceil(BRICK));
+        let mut out = vec![0.0f32; res[0] * res[1] * res[2]];
+        for bz in 0..res[2] {
+            for by in 0..res[1] {
+                for bx in 0..res[0] {
+                    let b = [bx, by, bz];
+                    let range = |a: usize| {
+                        let lo = (b[a] * BRICK).saturating_sub(1);
+                        let hi = ((b[a] + 1) * BRICK).min(self.size[a] - 1);
+                        lo..=hi
+                    };
+                    let mut m = 0.0f32;
+                    for z in range(2) {
+                        for y in range(1) {
+                            let row = (z * self.size[1] + y) * self.size[0];
+                            for x in range(0) {
+                                let k = (row + x) * self.channels;
+                                for c in 0..self.channels {
+                                    m = m.max(self.data[k + c]);
+                                }
+                            }
+                        }
+                    }
+                    out[(bz * res[1] + by) * res[0] + bx] = m;
+                }
+            }
+        }
+        (res, out)
     }
 
     /// The trilinear value at `p` in the grid's coordinates ([0, 1]³), every channel (a

@@ -1076,7 +1076,7 @@ fn build_media(specs: &[MediumSpec], path: &Path, dir: &Path) -> Result<Vec<Medi
                     to_grid.matrix3.as_mat3(),
                     to_grid.translation.as_vec3(),
                 );
-                Some(Density { grid, to_grid })
+                Some(Density::new(grid, to_grid))
             }
             (Some(file), None) => {
                 let grid = Grid::read(&dir.join(file))?;
@@ -1108,7 +1108,7 @@ fn build_media(specs: &[MediumSpec], path: &Path, dir: &Path) -> Result<Vec<Medi
                     to_grid.matrix3.as_mat3(),
                     to_grid.translation.as_vec3(),
                 );
-                Some(Density { grid, to_grid })
+                Some(Density::new(grid, to_grid))
             }
         };
         media.push(Medium { name: m.name.clone(), sigma_t, albedo, phase: Phase { g: g as f32 }, density });
