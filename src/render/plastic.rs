@@ -16,8 +16,9 @@
 //! - F_dr = 2∫₀¹ F(μ, 1/η) μ dμ is integrated here in f64 (`diffuse_reflectance_inside`,
 //!   a midpoint rule past the critical angle, below which F = 1), exact to float precision;
 //!   Mitsuba uses polynomial fits (Egan & Hilgeman 1973 for η < 1, d'Eon & Irving 2011
-//!   otherwise), within 0.1 % for indices 1–2. With the exact F_dr a white base (ρ = 1) under
-//!   the coat reflects all the light it receives, which the white furnace checks.
+//!   otherwise), which differ from it by about 0.1 % (unit test). With the exact F_dr a
+//!   white base (ρ = 1) under the coat reflects all the light it receives, which the white
+//!   furnace checks.
 //! - Sampling: the mirror with probability P = F·w / (F·w + (1 − F)·(1 − w)), w = s̄/(ρ̄ + s̄)
 //!   from the means of the specular and diffuse colours (Mitsuba's choice), else a cosine-
 //!   weighted direction for the base.
@@ -31,9 +32,9 @@
 //!
 //! F_int = 2∫R(μ, 1/η)μ dμ with R the rough interface's reflectance. T is integrated over
 //! visible microfacet normals into a 64-entry table in cos θ, linearly interpolated, and F_int
-//! by a midpoint rule (`RoughCoat`), as Mitsuba tabulates them; sampling picks the glossy lobe (visible normals) with probability
-//! (1 − T)·w / ((1 − T)·w + T·(1 − w)), else the cosine-weighted base, and weighs by the
-//! mixture's density. The model is not energy conserving at high roughness (the coat's
+//! by a midpoint rule (`RoughCoat`), as Mitsuba tabulates them. Sampling picks the glossy lobe
+//! (visible normals) with probability (1 − T)·w / ((1 − T)·w + T·(1 − w)), else the cosine-
+//! weighted base, and weighs by the mixture's density. The model is not energy conserving at high roughness (the coat's
 //! single-scattering loss), as Mitsuba's is not.
 
 use super::microfacet::{self, Distribution};
