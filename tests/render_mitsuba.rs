@@ -136,8 +136,15 @@ fn gaussian_filter_matches_mitsuba() {
 /// (32 × 512 spp), by Mitsuba's own protocol: lumen spends a budget of 2·10⁶ samples (488 spp
 /// at 64 × 64), means within 1 % and ≥ 99.75 % of pixel channels passing the z-test.
 fn media_scene_matches_mitsuba(name: &str) {
+    xml_matches_mitsuba_by_budget(name, 12);
+}
+
+/// tests/data/mitsuba/NAME.xml at max depth `depth` against Mitsuba's 32 × 512-spp reference by
+/// Mitsuba's protocol: a budget of 2·10⁶ samples (488 spp at 64 × 64), means within 1 %, ≥
+/// 99.75 % of pixel channels passing the z-test.
+fn xml_matches_mitsuba_by_budget(name: &str, depth: u32) {
     let xml = references().join(format!("{name}.xml"));
-    file_matches_mitsuba(&references(), name, &xml, 2_000_000 / (64 * 64), 12, 0.9975);
+    file_matches_mitsuba(&references(), name, &xml, 2_000_000 / (64 * 64), depth, 0.9975);
 }
 
 /// Grey isotropic fog in a box with a null boundary, beside a diffuse sphere under a lamp.
@@ -184,8 +191,7 @@ fn media_smoke_grid_matches_mitsuba() {
 /// ≥ 99.75 % of pixel channels passing the z-test.
 #[test]
 fn plastic_and_thin_pane_match_mitsuba() {
-    let xml = references().join("plastic-pane.xml");
-    file_matches_mitsuba(&references(), "plastic-pane", &xml, 2_000_000 / (64 * 64), 8, 0.9975);
+    xml_matches_mitsuba_by_budget("plastic-pane", 8);
 }
 
 /// Rough glass (Beckmann and GGX, BK7 and water) against Mitsuba 3.9's `roughdielectric`
@@ -193,8 +199,7 @@ fn plastic_and_thin_pane_match_mitsuba() {
 /// ≥ 99.75 % of pixel channels passing the z-test.
 #[test]
 fn rough_glass_matches_mitsuba() {
-    let xml = references().join("rough-glass.xml");
-    file_matches_mitsuba(&references(), "rough-glass", &xml, 2_000_000 / (64 * 64), 12, 0.9975);
+    xml_matches_mitsuba_by_budget("rough-glass", 12);
 }
 
 /// The image sky turned by Mitsuba's envmap `to_world` (two rotations): lookup and
@@ -202,8 +207,7 @@ fn rough_glass_matches_mitsuba() {
 /// budget, means within 1 %, ≥ 99.75 % of pixel channels passing the z-test.
 #[test]
 fn turned_envmap_matches_mitsuba() {
-    let xml = references().join("envmap-turned.xml");
-    file_matches_mitsuba(&references(), "envmap-turned", &xml, 2_000_000 / (64 * 64), 6, 0.9975);
+    xml_matches_mitsuba_by_budget("envmap-turned", 6);
 }
 
 /// Rough plastic (a GGX coat, and a Beckmann one with the base's colour at every bounce
@@ -211,8 +215,7 @@ fn turned_envmap_matches_mitsuba() {
 /// within 1 %, ≥ 99.75 % of pixel channels passing the z-test.
 #[test]
 fn rough_plastic_matches_mitsuba() {
-    let xml = references().join("rough-plastic.xml");
-    file_matches_mitsuba(&references(), "rough-plastic", &xml, 2_000_000 / (64 * 64), 8, 0.9975);
+    xml_matches_mitsuba_by_budget("rough-plastic", 8);
 }
 
 /// A scene written as Mitsuba's users write one (defaults, an include, a checkerboard

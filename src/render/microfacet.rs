@@ -113,6 +113,16 @@ pub fn sample_visible_ggx(alpha: f32, n: Vec3A, wo: Vec3A, u1: f32, u2: f32) -> 
     (t * h.x + b * h.y + n * h.z).normalize()
 }
 
+/// A microfacet normal around `n` drawn from the normals of `dist` visible from `wo`
+/// (`sample_visible_ggx`, `sample_visible_beckmann`).
+#[inline]
+pub fn sample_visible(dist: Distribution, alpha: f32, n: Vec3A, wo: Vec3A, u1: f32, u2: f32) -> Vec3A {
+    match dist {
+        Distribution::Ggx => sample_visible_ggx(alpha, n, wo, u1, u2),
+        Distribution::Beckmann => sample_visible_beckmann(alpha, n, wo, u1, u2),
+    }
+}
+
 /// erf(x), from the f64 complementary error function.
 #[inline]
 fn erf(x: f32) -> f32 {

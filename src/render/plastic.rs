@@ -84,13 +84,21 @@ pub fn diffuse(kd: Vec3A, eta: f32, fdr_int: f32, nonlinear: bool, co: f32, ci: 
 /// Probability of sampling the coat's mirror reflection for `co` = cos θo.
 #[inline]
 pub fn specular_probability(kd: Vec3A, specular: Vec3A, eta: f32, co: f32) -> f32 {
+    let (f, _) = fresnel_dielectric(co, eta);
+    coat_lobe_probability(kd, specular, f, 1.0 - f)
+}
+
+/// The share of samples for a coat's reflection when the coat reflects R of the light and
+/// lets T through: R·w / (R·w + T·(1 − w)), w = s̄/(ρ̄ + s̄) from the colours' means (Mitsuba's
+/// choice for both plastics).
+#[inline]
+fn coat_lobe_probability(kd: Vec3A, specular: Vec3A, reflected: f32, transmitted: f32) -> f32 {
     let (d, s) = (kd.element_sum() / 3.0, specular.element_sum() / 3.0);
     if !(d + s > 0.0) {
         return 0.0;
     }
     let w = s / (d + s);
-    let (f, _) = fresnel_dielectric(co, eta);
-    let (ps, pd) = (f * w, (1.0 - f) * (1.0 - w));
+    let (ps, pd) = (reflected * w, transmitted * (1.0 - w));
     if ps + pd > 0.0 {
         ps / (ps + pd)
     } else {
@@ -205,10 +213,7 @@ fn rough_interface(dist: Distribution, alpha: f32, eta: f32, mu: f32) -> (f32, f
     for a in 0..k {
         for b in 0..k {
             let (u1, u2) = ((a as f32 + 0.5) / k as f32, (b as f32 + 0.5) / k as f32);
-            let h = match dist {
-                Distribution::Ggx => microfacet::sample_visible_ggx(alpha, n, wi, u1, u2),
-                Distribution::Beckmann => microfacet::sample_visible_beckmann(alpha, n, wi, u1, u2),
-            };
+            let h = microfacet::sample_visible(dist, alpha, n, wi, u1, u2);
             let ih = wi.dot(h);
             if ih <= 0.0 {
                 continue;
@@ -263,16 +268,6 @@ pub fn rough_eval(
 /// the coat's reflectance 1 − T(θo) against its transmittance, weighted by the colours' means).
 #[inline]
 pub fn rough_specular_probability(kd: Vec3A, specular: Vec3A, coat: &RoughCoat, co: f32) -> f32 {
-    let (d, s) = (kd.element_sum() / 3.0, specular.element_sum() / 3.0);
-    if !(d + s > 0.0) {
-        return 0.0;
-    }
-    let w = s / (d + s);
     let t = coat.transmittance(co);
-    let (ps, pd) = ((1.0 - t) * w, t * (1.0 - w));
-    if ps + pd > 0.0 {
-        ps / (ps + pd)
-    } else {
-        0.0
-    }
+    coat_lobe_probability(kd, specular, 1.0 - t, t)
 }

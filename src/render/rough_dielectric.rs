@@ -105,10 +105,7 @@ pub fn sample(
     if co <= 0.0 {
         return None;
     }
-    let h = match dist {
-        Distribution::Ggx => microfacet::sample_visible_ggx(alpha, n, wo, u[0], u[1]),
-        Distribution::Beckmann => microfacet::sample_visible_beckmann(alpha, n, wo, u[0], u[1]),
-    };
+    let h = microfacet::sample_visible(dist, alpha, n, wo, u[0], u[1]);
     let oh = wo.dot(h);
     if oh <= 0.0 {
         return None;

@@ -124,16 +124,7 @@ pub fn trace(scene: &Scene, mut ray: Ray, max_depth: u32, s: &mut Sampler) -> Ve
         };
 
         let delta = bsdf.is_delta();
-        // Named by the glossy variants: written as "neither Lambertian nor delta", the test
-        // let LLVM call `Bsdf::pdf` on every Lambertian vertex and throw the result away
-        // (6 % of a Cornell path's instructions).
-        let glossy = matches!(
-            bsdf,
-            Bsdf::BlinnPhong { .. }
-                | Bsdf::Conductor { .. }
-                | Bsdf::RoughDielectric { .. }
-                | Bsdf::RoughPlastic { .. }
-        );
+        let glossy = bsdf.is_glossy();
         let u_light = s.next2();
         if !delta {
             if let Some((li, wi, dist, p_light)) = scene.sample_light(u_light, surf.p) {

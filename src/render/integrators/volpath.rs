@@ -192,13 +192,7 @@ pub fn trace(scene: &Scene, mut ray: Ray, max_depth: u32, s: &mut Sampler) -> Ve
             (b, None) => b.facing(front),
         };
         let delta = bsdf.is_delta();
-        let glossy = matches!(
-            bsdf,
-            Bsdf::BlinnPhong { .. }
-                | Bsdf::Conductor { .. }
-                | Bsdf::RoughDielectric { .. }
-                | Bsdf::RoughPlastic { .. }
-        );
+        let glossy = bsdf.is_glossy();
         let u_light = s.next2();
         if !delta {
             if let Some((li, wi, dist, p_light)) = scene.sample_light(u_light, surf.p) {

@@ -78,6 +78,16 @@ const WORTH_BRICKS: f32 = 0.5;
 /// short (a majorant times a length beyond any scene lumen renders in reasonable time).
 const MAX_STEPS: u32 = 1 << 20;
 
+/// How a walk through a grid's tentative collisions (`Medium::walk`) ended.
+enum Walk<R> {
+    /// At the end of the ray's span.
+    End,
+    /// Where the caller's test returned this.
+    Stopped(R),
+    /// Cut short after `MAX_STEPS` collisions.
+    TooLong,
+}
+
 /// Where a ray's flight through a medium ends.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Flight {
@@ -145,11 +155,36 @@ impl Medium {
         beta: &mut Vec3A,
         r: &mut Vec3A,
     ) -> Flight {
+        let collision = |t: f32, sigma_t: Vec3A, mu: f32, s: &mut Sampler| {
+            if s.next() * mu < sigma_t[hero] {
+                return Some(weigh(Flight::Scatter(t), sigma_t * self.albedo, sigma_t, beta, r));
+            }
+            let sigma_n = (Vec3A::splat(mu) - sigma_t).max(Vec3A::ZERO);
+            (weigh(Flight::Through, sigma_n, sigma_n, beta, r) == Flight::Absorbed)
+                .then_some(Flight::Absorbed)
+        };
+        match self.walk(d, ray, t_max, s, collision) {
+            Walk::End => Flight::Through,
+            Walk::Stopped(flight) => flight,
+            Walk::TooLong => Flight::Absorbed,
+        }
+    }
+
+    /// Tentative collisions along the ray's [0, t_max) through a grid, brick by brick, at each
+    /// brick's majorant μ (free flight is memoryless: sampling starts afresh where a brick
+    /// begins); `at(t, σt(t), μ, s)` decides each, and the walk stops where it returns a value.
+    fn walk<R>(
+        &self,
+        d: &Density,
+        ray: &Ray,
+        t_max: f32,
+        s: &mut Sampler,
+        mut at: impl FnMut(f32, Vec3A, f32, &mut Sampler) -> Option<R>,
+    ) -> Walk<R> {
         let scale = self.sigma_t.max_element();
-        let Some((t0, t1)) = d.span(ray, t_max).filter(|_| scale > 0.0) else { return Flight::Through };
+        let Some((t0, t1)) = d.span(ray, t_max).filter(|_| scale > 0.0) else { return Walk::End };
         let mut steps = 0;
         for (enter, exit, brick_max) in d.bricks(ray, t0, t1) {
-            // Free flight is memoryless: a new majorant starts afresh where a brick begins.
             let mu = scale * brick_max;
             if mu <= 0.0 {
                 continue;
@@ -158,7 +193,7 @@ impl Medium {
             loop {
                 steps += 1;
                 if steps > MAX_STEPS {
-                    return Flight::Absorbed;
+                    return Walk::TooLong;
                 }
                 t -= (1.0 - s.next()).ln() / mu;
                 if !(t < exit) {
@@ -166,17 +201,12 @@ impl Medium {
                 }
                 let sigma_t =
                     self.sigma_t * d.grid.eval(d.to_grid.transform_point3a(ray.origin + ray.dir * t));
-                let u = s.next();
-                if u * mu < sigma_t[hero] {
-                    return weigh(Flight::Scatter(t), sigma_t * self.albedo, sigma_t, beta, r);
-                }
-                let sigma_n = (Vec3A::splat(mu) - sigma_t).max(Vec3A::ZERO);
-                if weigh(Flight::Through, sigma_n, sigma_n, beta, r) == Flight::Absorbed {
-                    return Flight::Absorbed;
+                if let Some(v) = at(t, sigma_t, mu, s) {
+                    return Walk::Stopped(v);
                 }
             }
         }
-        Flight::Through
+        Walk::End
     }
 
     /// The fraction of light that gets through the first `d` of the ray (an infinite `d`
@@ -184,33 +214,15 @@ impl Medium {
     /// tracking's estimate Π(1 − σt(xᵢ)/μ̄) in a grid.
     pub fn transmittance(&self, ray: &Ray, d: f32, s: &mut Sampler) -> Vec3A {
         let Some(g) = &self.density else { return self.transmittance_over(d) };
-        let scale = self.sigma_t.max_element();
-        let Some((t0, t1)) = g.span(ray, d).filter(|_| scale > 0.0) else { return Vec3A::ONE };
-        let (mut tr, mut steps) = (Vec3A::ONE, 0);
-        for (enter, exit, brick_max) in g.bricks(ray, t0, t1) {
-            let mu = scale * brick_max;
-            if mu <= 0.0 {
-                continue;
-            }
-            let mut t = enter;
-            loop {
-                steps += 1;
-                if steps > MAX_STEPS {
-                    return Vec3A::ZERO;
-                }
-                t -= (1.0 - s.next()).ln() / mu;
-                if !(t < exit) {
-                    break;
-                }
-                let sigma_t =
-                    self.sigma_t * g.grid.eval(g.to_grid.transform_point3a(ray.origin + ray.dir * t));
-                tr *= (Vec3A::ONE - sigma_t / mu).max(Vec3A::ZERO);
-                if tr.max_element() <= 0.0 {
-                    return Vec3A::ZERO;
-                }
-            }
+        let mut tr = Vec3A::ONE;
+        let collision = |_t: f32, sigma_t: Vec3A, mu: f32, _s: &mut Sampler| {
+            tr *= (Vec3A::ONE - sigma_t / mu).max(Vec3A::ZERO);
+            (tr.max_element() <= 0.0).then_some(())
+        };
+        match self.walk(g, ray, d, s, collision) {
+            Walk::End => tr,
+            Walk::Stopped(()) | Walk::TooLong => Vec3A::ZERO,
         }
-        tr
     }
 
     /// A homogeneous medium's transmittance over a length `d`: exp(−σt·d), 1 where σt = 0

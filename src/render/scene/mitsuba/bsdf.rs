@@ -112,11 +112,7 @@ fn microfacets(b: &Elem, p: &Props, m: &mut MaterialSpec) -> Result<(), Error> {
 /// A dielectric's or thin dielectric's relative index int_ior/ext_ior (default BK7 in air)
 /// and its one tint: lumen tints reflection and transmission alike.
 fn dielectric(b: &Elem, p: &Props) -> Result<(f64, [f64; 3]), Error> {
-    let int = ior(p, "int_ior", "bk7")?;
-    let ext = ior(p, "ext_ior", "air")?;
-    if !(int > 0.0 && ext > 0.0) {
-        return Err(b.error(format!("int_ior {int}, ext_ior {ext}: expected positive indices")));
-    }
+    let eta = relative_ior(b, p, "bk7")?;
     let r = p.color("specular_reflectance")?.map(|c| c.rgb(b, "specular_reflectance")).transpose()?;
     let t = p.color("specular_transmittance")?.map(|c| c.rgb(b, "specular_transmittance")).transpose()?;
     let tint = match (r, t) {
@@ -127,7 +123,17 @@ fn dielectric(b: &Elem, p: &Props) -> Result<(f64, [f64; 3]), Error> {
             "different specular_reflectance and specular_transmittance: lumen's dielectrics tint both alike",
         )),
     };
-    Ok((int / ext, tint))
+    Ok((eta, tint))
+}
+
+/// int_ior / ext_ior (named or numeric; defaults `inside` and air), both positive.
+fn relative_ior(b: &Elem, p: &Props, inside: &str) -> Result<f64, Error> {
+    let int = ior(p, "int_ior", inside)?;
+    let ext = ior(p, "ext_ior", "air")?;
+    if !(int > 0.0 && ext > 0.0) {
+        return Err(b.error(format!("int_ior {int}, ext_ior {ext}: expected positive indices")));
+    }
+    Ok(int / ext)
 }
 
 pub(super) fn bsdf(b: &Elem, name: String) -> Result<MaterialSpec, Error> {
@@ -195,32 +201,18 @@ pub(super) fn bsdf(b: &Elem, name: String) -> Result<MaterialSpec, Error> {
             m.ior = Some(eta);
             m.albedo = Some(TextureSpec::Constant(tint));
         }
-        "plastic" => {
-            let int = ior(&p, "int_ior", "polypropylene")?;
-            let ext = ior(&p, "ext_ior", "air")?;
-            if !(int > 0.0 && ext > 0.0) {
-                return Err(b.error(format!("int_ior {int}, ext_ior {ext}: expected positive indices")));
-            }
-            m.kind = "plastic".into();
-            m.ior = Some(int / ext);
+        "plastic" | "roughplastic" => {
+            m.ior = Some(relative_ior(b, &p, "polypropylene")?);
             m.albedo = Some(p.color("diffuse_reflectance")?.map_or(TextureSpec::Constant([0.5; 3]), Color::texture));
             m.specular =
                 p.color("specular_reflectance")?.map(|c| c.rgb(b, "specular_reflectance")).transpose()?;
             m.nonlinear = p.boolean("nonlinear")?;
-        }
-        "roughplastic" => {
-            let int = ior(&p, "int_ior", "polypropylene")?;
-            let ext = ior(&p, "ext_ior", "air")?;
-            if !(int > 0.0 && ext > 0.0) {
-                return Err(b.error(format!("int_ior {int}, ext_ior {ext}: expected positive indices")));
+            if b.plugin() == "plastic" {
+                m.kind = "plastic".into();
+            } else {
+                m.kind = "rough-plastic".into();
+                microfacets(b, &p, &mut m)?;
             }
-            m.kind = "rough-plastic".into();
-            m.ior = Some(int / ext);
-            m.albedo = Some(p.color("diffuse_reflectance")?.map_or(TextureSpec::Constant([0.5; 3]), Color::texture));
-            m.specular =
-                p.color("specular_reflectance")?.map(|c| c.rgb(b, "specular_reflectance")).transpose()?;
-            m.nonlinear = p.boolean("nonlinear")?;
-            microfacets(b, &p, &mut m)?;
         }
         other => {
             return Err(b.unsupported(format!(
