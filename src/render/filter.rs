@@ -14,6 +14,11 @@
 //!   interpolates that table: within 10⁻⁵ px of the exact inverse between its 0.1 % and
 //!   99.9 % quantiles, far below the noise of any render, where solving per sample cost as
 //!   much as tracing the path.
+//!
+//! Integrators that splat (light tracing: a path reaches the image at a point, not through a
+//! pixel) weigh each pixel near the point by its filter normalised to the filter's mass inside
+//! the image (`splat`), so a pixel's splatted weights integrate to 1 over the image exactly as
+//! its sampled positions are distributed: both estimate the same ∫ f·L / ∫ f.
 
 use serde::{Deserialize, Serialize};
 
@@ -41,6 +46,37 @@ impl PixelFilter {
         match self {
             PixelFilter::Box => i as f64 + u as f64 - 0.5,
             PixelFilter::Gaussian => gaussian_position(i, n, u),
+        }
+    }
+}
+
+/// The pixels, along one axis of `n` pixels, whose filter covers the position `t` (OpenCV
+/// pixel coordinates), with their weights: each pixel i's weight as a function of t is its
+/// filter cut at the image's edge and divided by its mass there, so it integrates to 1
+/// (module docs). At most 5 entries (the gaussian spans ±2 px); none outside the image.
+pub fn splat(filter: PixelFilter, t: f64, n: u32, out: &mut [(u32, f64); 5]) -> usize {
+    if !(t >= -0.5 && t < n as f64 - 0.5) {
+        return 0;
+    }
+    match filter {
+        PixelFilter::Box => {
+            out[0] = (((t + 0.5) as u32).min(n - 1), 1.0);
+            1
+        }
+        PixelFilter::Gaussian => {
+            let first = (t - RADIUS).ceil().max(0.0) as u32;
+            let last = ((t + RADIUS).floor() as u32).min(n - 1);
+            let mut k = 0;
+            for i in first..=last {
+                let w = gaussian_weight(t - i as f64);
+                if w > 0.0 && k < out.len() {
+                    let lo = (-RADIUS).max(-0.5 - i as f64);
+                    let hi = RADIUS.min(n as f64 - 0.5 - i as f64);
+                    out[k] = (i, w / (gaussian_integral(hi) - gaussian_integral(lo)));
+                    k += 1;
+                }
+            }
+            k
         }
     }
 }
@@ -174,6 +210,31 @@ mod tests {
             / 3.0;
         let closed = gaussian_integral(RADIUS) - gaussian_integral(-RADIUS);
         assert!((simpson - closed).abs() < 1e-9, "{simpson} vs {closed}");
+    }
+
+    /// A pixel's splat weights integrate to 1 over the image (midpoint rule), in the middle
+    /// and at the edge, for both filters; positions outside the image splat nothing.
+    #[test]
+    fn splat_weights_integrate_to_one() {
+        for filter in [PixelFilter::Box, PixelFilter::Gaussian] {
+            for (i, n) in [(10u32, 20u32), (0, 20), (19, 20), (0, 1)] {
+                let steps = 200_000;
+                let (a, b) = (-0.5, n as f64 - 0.5);
+                let h = (b - a) / steps as f64;
+                let mut out = [(0, 0.0); 5];
+                let mut sum = 0.0;
+                for k in 0..steps {
+                    let t = a + (k as f64 + 0.5) * h;
+                    let m = splat(filter, t, n, &mut out);
+                    sum += out[..m].iter().filter(|e| e.0 == i).map(|e| e.1).sum::<f64>() * h;
+                }
+                assert!((sum - 1.0).abs() < 1e-6, "{filter:?} pixel {i} of {n}: {sum}");
+            }
+            let mut out = [(0, 0.0); 5];
+            assert_eq!(splat(filter, -0.51, 20, &mut out), 0);
+            assert_eq!(splat(filter, 19.5, 20, &mut out), 0);
+            assert_eq!(splat(filter, f64::NAN, 20, &mut out), 0);
+        }
     }
 
     #[test]

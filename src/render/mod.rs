@@ -51,6 +51,9 @@ pub enum Error {
     /// A Mitsuba scene element lumen does not support; the message says what it supports.
     #[error("{at}: {message}")]
     MitsubaUnsupported { at: String, message: String },
+    /// What a setting asks for that lumen cannot do with this scene.
+    #[error("{what} {message}")]
+    Unsupported { what: String, message: String },
     #[error(transparent)]
     Obj(#[from] obj::ObjError),
     #[error(transparent)]
@@ -75,7 +78,7 @@ impl Error {
             Error::Ply(e) => e.fault(),
             Error::Grid(e) => e.fault(),
             Error::Image(e) => e.fault(),
-            Error::MitsubaUnsupported { .. } => Fault::Unsupported,
+            Error::MitsubaUnsupported { .. } | Error::Unsupported { .. } => Fault::Unsupported,
             Error::Parse { .. }
             | Error::Mitsuba { .. }
             | Error::Invalid { .. }

@@ -11,6 +11,7 @@
 //! pixel by pixel (`render_rows`), the start of a camera path (`camera_path`) and Veach's power
 //! heuristic.
 
+pub mod light;
 pub mod path;
 pub mod volpath;
 
@@ -32,6 +33,9 @@ pub struct Kind {
     /// Fills `film` (allocated for the settings' crop, zeroed) with the mean radiance and the
     /// variance of that mean of every pixel, and counts the samples it dropped.
     pub render: fn(&Scene, &Settings, &mut Film),
+    /// Whether it renders participating media; scenes with media are refused otherwise
+    /// (`check`).
+    pub media: bool,
 }
 
 /// Every integrator lumen has, by name.
@@ -40,11 +44,19 @@ pub const REGISTRY: &[Kind] = &[
         name: "path",
         about: "unidirectional path tracing with next-event estimation and MIS",
         render: path::render,
+        media: false,
     },
     Kind {
         name: "volpath",
         about: "path tracing through participating media (delta tracking, light sampling through media)",
         render: volpath::render,
+        media: true,
+    },
+    Kind {
+        name: "light",
+        about: "light tracing: paths from the lights, every vertex joined to the camera (Mitsuba's ptracer)",
+        render: light::render,
+        media: false,
     },
 ];
 
@@ -139,15 +151,31 @@ impl serde::Serialize for Kind {
     }
 }
 
-/// Renders the scene into a film with the settings' integrator.
+/// Why `kind` cannot render a scene (with participating media when `media`), if it cannot:
+/// the message follows the integrator's name in an error.
+pub fn refusal(kind: &Kind, media: bool) -> Option<String> {
+    (media && !kind.media).then(|| {
+        format!(
+            "is \"{}\", which does not render participating media: a scene with media takes the volpath integrator ([render] integrator = \"volpath\"; in Mitsuba XML, <integrator type=\"volpath\">)",
+            kind.name
+        )
+    })
+}
+
+/// Renders the scene into a film with the settings' integrator (which `refusal` must
+/// accept for the scene; `try_render` checks).
 pub fn render(scene: &Scene, settings: &Settings) -> Film {
     let (fw, fh) = film_size(scene, settings);
     render_into(scene, settings, Image::new(fw, fh, 3), Image::new(fw, fh, 3))
 }
 
-/// `render`, refusing with `Error::OutOfMemory` (nothing allocated) a film whose memory
-/// cannot be had, where `render` would abort: for films of a size a user chose.
+/// `render`, refusing an integrator that cannot render the scene (`refusal`), and with
+/// `Error::OutOfMemory` (nothing allocated) a film whose memory cannot be had, where
+/// `render` would abort: for films of a size a user chose.
 pub fn try_render(scene: &Scene, settings: &Settings) -> Result<Film, super::Error> {
+    if let Some(message) = refusal(settings.integrator, !scene.media.is_empty()) {
+        return Err(super::Error::Unsupported { what: "the integrator".into(), message });
+    }
     let (fw, fh) = film_size(scene, settings);
     let oom = || super::Error::OutOfMemory {
         what: format!("a {fw}×{fh} film (mean and variance, 3 float32 channels each)"),

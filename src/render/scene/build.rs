@@ -518,12 +518,8 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
             ));
         }
     }
-    if !media.is_empty() && file.render.integrator.name == "path" {
-        return Err(field_err(
-            path,
-            "render.integrator",
-            "is \"path\", which renders media as vacuum: a scene with media takes the volpath integrator ([render] integrator = \"volpath\"; in Mitsuba XML, <integrator type=\"volpath\">)",
-        ));
+    if let Some(why) = super::super::integrators::refusal(file.render.integrator, !media.is_empty()) {
+        return Err(field_err(path, "render.integrator", &why));
     }
     let info: Vec<PrimInfo> = bvh
         .order

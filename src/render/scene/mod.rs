@@ -10,6 +10,7 @@
 //! scene, its lights and the queries the integrator makes of it.
 
 mod build;
+mod emission;
 pub mod file;
 pub mod mitsuba;
 mod query;
@@ -17,6 +18,7 @@ mod query;
 pub use query::{epsilon, Surface};
 
 pub use build::build;
+pub use emission::Emission;
 pub use file::*;
 
 use super::bvh::Bvh;

@@ -168,18 +168,10 @@ impl Scene {
             Light::Directional { to_light, irradiance } => {
                 Some((irradiance / p_pick, to_light, f32::INFINITY, None))
             }
-            Light::Environment { radiance, .. } => {
-                if let Some(map) = &self.environment_map {
-                    let (wi, pdf) = map.sample(u)?;
-                    let pdf = p_pick * pdf;
-                    return Some((radiance * map.eval(wi) / pdf, wi, f32::INFINITY, Some(pdf)));
-                }
-                // Uniform over the sphere of directions.
-                let z = 1.0 - 2.0 * u.0;
-                let r = (1.0 - z * z).max(0.0).sqrt();
-                let phi = 2.0 * PI * u.1;
-                let pdf = p_pick / (4.0 * PI);
-                Some((radiance / pdf, Vec3A::new(r * phi.cos(), r * phi.sin(), z), f32::INFINITY, Some(pdf)))
+            Light::Environment { .. } => {
+                let (wi, le, pdf) = self.sample_environment(u)?;
+                let pdf = p_pick * pdf;
+                Some((le / pdf, wi, f32::INFINITY, Some(pdf)))
             }
             Light::Spot { position, axis, intensity, cutoff, beam } => {
                 let d = position - p;
@@ -195,16 +187,7 @@ impl Scene {
                     let pdf = p_pick * pdf;
                     return Some((radiance / pdf, wi, dist, Some(pdf)));
                 }
-                let shape = &self.bvh.prims[prim as usize];
-                let info = &self.info[prim as usize];
-                let (y, ny) = match shape {
-                    // The stored unit normal, reversal applied.
-                    Prim::Triangle { .. } => (shape.sample_area(u.0, u.1).0, info.normal),
-                    Prim::Sphere { .. } => {
-                        let (y, ny) = shape.sample_area(u.0, u.1);
-                        (y, if info.reverse { -ny } else { ny })
-                    }
-                };
+                let (y, ny) = self.area_light_point(prim, u);
                 let (wi, r, r2) = transport::towards(p, y);
                 let (li, pdf, lit) = transport::area_light(wi, r2, ny, radiance, area, p_pick);
                 lit.then_some((li, wi, r, Some(pdf)))

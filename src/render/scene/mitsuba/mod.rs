@@ -4,7 +4,8 @@
 //!
 //! How each part maps (Mitsuba 3's plugin reference names the parameters):
 //! - `integrator`: `path`, `volpath` and `volpathmis` (lumen's volpath with media, its path
-//!   tracer, the same image faster, without) and `direct` (= `path` with `max_depth` 2), with `max_depth` (−1: unbounded) and
+//!   tracer, the same image faster, without), `ptracer` (lumen's `light`; `samples_per_pass`
+//!   accepted, it only splits the work) and `direct` (= `path` with `max_depth` 2), with `max_depth` (−1: unbounded) and
 //!   `rr_depth`; `moment` renders its inner integrator (lumen writes the variance beside the
 //!   mean anyway). lumen's roulette starts after 5 segments, Mitsuba's default `rr_depth`:
 //!   another `rr_depth` changes the noise, not the expected image, and is accepted.
@@ -165,12 +166,21 @@ impl Converter {
                     _ => Err(e.error("needs exactly one nested <integrator>")),
                 };
             }
-            "path" | "volpath" | "volpathmis" => {
+            "path" | "volpath" | "volpathmis" | "ptracer" => {
                 // Without media the volume path tracers' image is the path tracer's, which
                 // lumen renders faster; with media, lumen's volpath.
-                if e.plugin() != "path" && !self.media.is_empty() {
-                    render.integrator = crate::render::integrators::find("volpath")
-                        .map_err(|err| e.unsupported(err.to_string()))?;
+                let name = match e.plugin() {
+                    "ptracer" => Some("light"),
+                    "volpath" | "volpathmis" if !self.media.is_empty() => Some("volpath"),
+                    _ => None,
+                };
+                if let Some(name) = name {
+                    render.integrator =
+                        crate::render::integrators::find(name).map_err(|err| e.unsupported(err.to_string()))?;
+                }
+                // How the particle tracer splits its work, not what it computes.
+                if e.plugin() == "ptracer" {
+                    p.int("samples_per_pass")?;
                 }
                 let depth = p.int("max_depth")?.unwrap_or(-1);
                 render.max_depth = match depth {
@@ -190,7 +200,7 @@ impl Converter {
             }
             other => {
                 return Err(e.unsupported(format!(
-                    "integrator \"{other}\": lumen has {} (Mitsuba's path, direct and moment map to path, volpath and volpathmis to volpath)",
+                    "integrator \"{other}\": lumen has {} (Mitsuba's path, direct and moment map to path, volpath and volpathmis to volpath, ptracer to light)",
                     crate::render::integrators::names()
                 )))
             }
@@ -198,7 +208,7 @@ impl Converter {
         if p.boolean("hide_emitters")? == Some(true) {
             return Err(e.unsupported("hide_emitters = true: lumen shows emitters seen directly"));
         }
-        p.finish("max_depth, rr_depth, hide_emitters")
+        p.finish("max_depth, rr_depth, hide_emitters, samples_per_pass")
     }
 
     /// The camera, and its clip planes.

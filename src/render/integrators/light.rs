@@ -1,0 +1,240 @@
+//! Light tracing (Mitsuba 3's `ptracer`, Veach 1997 §10.2): paths start at the lights, and
+//! every vertex they reach is joined to the camera and splatted into the film.
+//!
+//! A ray leaves a light with flux weight β (`Scene::sample_emission`). At each surface point x
+//! it reaches, with the light arriving from w_l, the camera link (`camera_ray::link_point`:
+//! an aperture point, the direction w_c to it at distance r, the pixel position and the
+//! camera's importance W) adds
+//!
+//!   β · f(x, w_c, w_l) · |cos θ_c| / r² · W
+//!
+//! to the pixels whose filter covers that position (`filter::splat`), if nothing blocks the
+//! link; f is evaluated as the path tracer evaluates it, with w_c as the outgoing direction.
+//! The path then scatters as light does: the next direction is drawn by the BSDF from w_l and
+//! β takes the adjoint weight f(x, w_next, w_l)·|cos θ_next|/p. The models are reciprocal
+//! except across a dielectric, where radiance carries the 1/η² of the change of solid angle
+//! and flux does not: a refraction's weight is the camera path's times η² (Veach §5.2).
+//!
+//! Emitters seen directly (one segment) take their own sample per path, as in Mitsuba: a point
+//! uniform on an area light, or a direction of the environment drawn by its density from an
+//! aperture point, joined to the camera. Point, spot and directional lights are never seen
+//! directly (as with camera paths). A mirror or smooth glass seen by the camera shows
+//! nothing: no link can pass through a delta BSDF. Depth counts segments as the path tracer
+//! does (a vertex k segments from the light is splatted when k + 1 ≤ max_depth), and Russian
+//! roulette starts at the same depth with the same rule.
+//!
+//! Passes: a pass traces as many light paths as the image has pixels (Mitsuba's
+//! `samples_per_pass` convention: `spp` passes trace spp·W·H paths) and is an unbiased
+//! estimate of the whole image; the film's mean is the mean of the passes and its variance of
+//! the mean their spread, divided by their number (0 with one pass). Paths are drawn from
+//! streams keyed by (path, pass), traced in parallel in fixed chunks whose splats are added in
+//! path order, so the image does not depend on the thread count, and a crop holds exactly
+//! the full image's pixels. Media are not supported (`Kind::media`).
+
+use super::super::bsdf::Bsdf;
+use super::super::camera_ray::{link_direction, link_point};
+use super::super::film::{Film, RR_START};
+use super::super::filter;
+use super::super::geometry::{Hit, Ray};
+use super::super::sampler::Sampler;
+use super::super::scene::{Light, Material, Scene};
+use super::super::transport::{self, epsilon};
+use super::Settings;
+use glam::{DVec2, Vec3A};
+use rayon::prelude::*;
+
+/// Paths a worker traces before its splats are handed back.
+const CHUNK: u64 = 1024;
+/// Paths traced before their splats are added to the pass: bounds the splats held at once.
+const GROUP: u64 = 64 * CHUNK;
+/// Keeps light paths' random streams apart from camera paths' with the same seed.
+const STREAM: u64 = 0x6c69_6768_7470_7468;
+
+/// One contribution to one film pixel (index into the film's pixels).
+type Splat = (u32, [f32; 3]);
+
+pub fn render(scene: &Scene, settings: &Settings, film: &mut Film) {
+    let paths = scene.camera.width as u64 * scene.camera.height as u64;
+    let pixels = film.mean.width as usize * film.mean.height as usize;
+    let mut sum = vec![0.0f64; 3 * pixels];
+    let mut sum2 = vec![0.0f64; 3 * pixels];
+    let mut pass = vec![0.0f64; 3 * pixels];
+    let bar = super::super::progress_bar(settings.spp as u64, "light", settings.progress);
+    let mut dropped = 0;
+    for k in 0..settings.spp {
+        pass.iter_mut().for_each(|v| *v = 0.0);
+        for start in (0..paths).step_by(GROUP as usize) {
+            let end = (start + GROUP).min(paths);
+            let chunks: Vec<(Vec<Splat>, u64)> = (start..end)
+                .step_by(CHUNK as usize)
+                .collect::<Vec<_>>()
+                .into_par_iter()
+                .map(|c| {
+                    let mut out = Vec::new();
+                    let mut lost = 0;
+                    for path in c..(c + CHUNK).min(end) {
+                        trace(scene, settings, path, k, &mut |px, v| splat(scene, film_window(film), px, v, &mut out, &mut lost));
+                    }
+                    (out, lost)
+                })
+                .collect();
+            for (splats, lost) in chunks {
+                dropped += lost;
+                for (i, v) in splats {
+                    for c in 0..3 {
+                        pass[3 * i as usize + c] += v[c] as f64;
+                    }
+                }
+            }
+        }
+        for ((s, s2), p) in sum.iter_mut().zip(sum2.iter_mut()).zip(&pass) {
+            let v = p / paths as f64;
+            *s += v;
+            *s2 += v * v;
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let n = settings.spp as f64;
+    for i in 0..3 * pixels {
+        let m = sum[i] / n;
+        film.mean.data[i] = m as f32;
+        film.variance.data[i] = if n > 1.0 { ((sum2[i] - n * m * m).max(0.0) / (n - 1.0) / n) as f32 } else { 0.0 };
+    }
+    film.dropped_samples += dropped;
+}
+
+/// The film's window in the image: origin and size.
+fn film_window(film: &Film) -> ([u32; 2], [u32; 2]) {
+    (film.origin, [film.mean.width, film.mean.height])
+}
+
+/// Adds `v` at the image position `px` to the film pixels the filter covers; a value that is
+/// not finite is dropped and counted.
+fn splat(scene: &Scene, (origin, size): ([u32; 2], [u32; 2]), px: DVec2, v: Vec3A, out: &mut Vec<Splat>, lost: &mut u64) {
+    if !v.is_finite() {
+        *lost += 1;
+        return;
+    }
+    let f = scene.render.filter;
+    let (mut xs, mut ys) = ([(0, 0.0); 5], [(0, 0.0); 5]);
+    let nx = filter::splat(f, px.x, scene.camera.width, &mut xs);
+    let ny = filter::splat(f, px.y, scene.camera.height, &mut ys);
+    for &(y, wy) in &ys[..ny] {
+        let Some(fy) = y.checked_sub(origin[1]).filter(|&r| r < size[1]) else { continue };
+        for &(x, wx) in &xs[..nx] {
+            let Some(fx) = x.checked_sub(origin[0]).filter(|&c| c < size[0]) else { continue };
+            let w = (wx * wy) as f32;
+            out.push((fy * size[0] + fx, [v.x * w, v.y * w, v.z * w]));
+        }
+    }
+}
+
+/// Light path `path` of pass `pass`: every contribution it makes, as (image position, value).
+fn trace(scene: &Scene, settings: &Settings, path: u64, pass: u32, splat: &mut impl FnMut(DVec2, Vec3A)) {
+    let mut s = Sampler::with_kind(settings.sampler, settings.seed ^ STREAM, path, pass as u64);
+    seen_directly(scene, &mut s, splat);
+    let max_depth = settings.max_depth;
+    if max_depth < 2 {
+        return;
+    }
+    let (u_pick, u_pos, u_dir) = (s.next(), s.next2(), s.next2());
+    let Some(e) = scene.sample_emission(u_pick, u_pos, u_dir) else { return };
+    let (mut ray, mut beta) = (e.ray, e.beta);
+    // `depth` segments lead from the light to the vertex; its link to the camera adds one.
+    for depth in 1..max_depth {
+        let Some(hit) = scene.bvh.intersect(&ray, 0.0, f32::INFINITY) else { break };
+        let surf = scene.surface(&ray, &hit);
+        let mat = &scene.materials[surf.material as usize];
+        let w_l = -ray.dir;
+        let front = surf.n.dot(w_l) >= 0.0;
+        // A one-sided surface is black from behind: light reaching its back goes no further.
+        if !front && mat.one_sided {
+            break;
+        }
+        let albedo = scene.albedo(surf.material, &hit, surf.p);
+        let eps = epsilon(surf.p);
+
+        if let Some(link) = link_point(scene, surf.p, s.next2()) {
+            let towards = surf.n.dot(link.dir) >= 0.0;
+            if towards || !mat.one_sided {
+                let bsdf = shading(scene, mat, &hit, surf.p, towards);
+                let n = if towards { surf.n } else { -surf.n };
+                let f = if bsdf.is_delta() { Vec3A::ZERO } else { bsdf.eval(albedo, n, link.dir, w_l) };
+                if f.max_element() > 0.0
+                    && scene.unoccluded(surf.p + n * eps, surf.p, link.dir, link.dist)
+                {
+                    let g = n.dot(link.dir).abs() * link.importance / (link.dist * link.dist);
+                    splat(link.pixel, beta * f * g);
+                }
+            }
+        }
+        if depth + 1 >= max_depth {
+            break;
+        }
+
+        let bsdf = shading(scene, mat, &hit, surf.p, front);
+        let n = if front { surf.n } else { -surf.n };
+        let (u1, u2) = s.next2();
+        let u3 = if bsdf.needs_third_number() { s.next() } else { 0.0 };
+        let Some(sample) = bsdf.sample(albedo, n, w_l, u1, u2, u3) else { break };
+        beta *= sample.weight * adjoint(&bsdf, n, sample.wi);
+        if depth >= RR_START {
+            let (killed, survivor) = transport::roulette(beta, s.next());
+            if killed {
+                break;
+            }
+            beta = survivor;
+        }
+        if beta == Vec3A::ZERO {
+            break;
+        }
+        ray = Ray { origin: transport::offset(surf.p, n, sample.wi, eps), dir: sample.wi };
+    }
+}
+
+/// The emitters the camera sees directly: one point of an area light or one direction of the
+/// environment, joined to the camera (module docs).
+fn seen_directly(scene: &Scene, s: &mut Sampler, splat: &mut impl FnMut(DVec2, Vec3A)) {
+    let (u_pick, u, u_lens) = (s.next(), s.next2(), s.next2());
+    let Some((i, p_pick, _)) = scene.pick_light(u_pick) else { return };
+    match scene.lights[i] {
+        Light::Area { prim, radiance, area } => {
+            let (y, ny) = scene.area_light_point(prim, u);
+            let Some(link) = link_point(scene, y, u_lens) else { return };
+            let cos = ny.dot(link.dir);
+            if cos > 0.0 && scene.unoccluded(y + ny * epsilon(y), y, link.dir, link.dist) {
+                let g = cos * link.importance / (link.dist * link.dist);
+                splat(link.pixel, radiance * (g * area / p_pick));
+            }
+        }
+        Light::Environment { .. } => {
+            let Some((w, le, pdf)) = scene.sample_environment(u) else { return };
+            let Some((aperture, pixel, importance)) = link_direction(scene, w, u_lens) else { return };
+            if scene.unoccluded(aperture, aperture, w, f32::INFINITY) {
+                splat(pixel, le * (importance / (pdf * p_pick)));
+            }
+        }
+        Light::Point { .. } | Light::Spot { .. } | Light::Directional { .. } => {}
+    }
+}
+
+/// The material's model at a hit, for a path on the front (`true`) or back of the surface:
+/// a dielectric seen from inside inverted, a textured roughness applied.
+fn shading(scene: &Scene, mat: &Material, hit: &Hit, p: Vec3A, front: bool) -> Bsdf {
+    let bsdf = mat.bsdf.facing(front);
+    match &mat.roughness {
+        Some(alpha) => bsdf.with_alpha(alpha.eval(scene.uv(hit, p)).x),
+        None => bsdf,
+    }
+}
+
+/// What turns the camera path's sample weight into the light path's: η² for a refraction
+/// through a dielectric of relative index η (module docs), 1 otherwise.
+#[inline]
+fn adjoint(bsdf: &Bsdf, n: Vec3A, wi: Vec3A) -> f32 {
+    match *bsdf {
+        Bsdf::Dielectric { eta } | Bsdf::RoughDielectric { eta, .. } if n.dot(wi) < 0.0 => eta * eta,
+        _ => 1.0,
+    }
+}
