@@ -1,7 +1,7 @@
 //! Camera rays: the pinhole direction through a pixel from the shared f64 camera model (so
 //! projection and distortion have one source of truth for renderer and calibration), and the
 //! thin lens; and the way back, for integrators that start paths at the lights: where a
-//! scene point or a direction reaches the image, and the camera's importance there.
+//! scene point reaches the image, and the camera's importance there.
 //!
 //! Importance. A camera path draws its pixel position uniformly over the pixel (unit area,
 //! before the filter) and its aperture point uniformly over the lens, so a pixel's value is
@@ -85,20 +85,9 @@ pub fn link_point(scene: &Scene, p: Vec3A, lens_u: (f32, f32)) -> Option<CameraL
     })
 }
 
-/// Where the camera ray leaving the aperture point `lens_u` draws along the world direction
-/// `dir` lands on the image: (aperture point, pixel, importance), as `link_point`.
-pub fn link_direction(scene: &Scene, dir: Vec3A, lens_u: (f32, f32)) -> Option<(Vec3A, DVec2, f32)> {
-    let pose = &scene.t_world_cam;
-    let v = pose.rotation.transpose() * glam::DVec3::from(glam::Vec3::from(dir));
-    let o = scene.lens.map_or(glam::DVec3::ZERO, |lens| lens_point(lens, lens_u));
-    let (pixel, importance) = image_point(scene, o, v)?;
-    let aperture = pose.translation + pose.rotation * o;
-    Some((Vec3A::from(aperture.as_vec3()), pixel, importance as f32))
-}
-
 /// The pixel position and importance of the ray from the aperture point `o` along `v`
 /// (camera frame, any length): through the focus-plane point it aims at, with the camera
-/// model's distortion, exactly inverting `camera_direction` and `lens_ray`.
+/// model's distortion, inverting `camera_direction` and `lens_ray`.
 fn image_point(scene: &Scene, o: glam::DVec3, v: glam::DVec3) -> Option<(DVec2, f64)> {
     let len = v.length();
     if !(v.z > 0.0 && len > 0.0 && len.is_finite()) {

@@ -7,6 +7,7 @@ mod common;
 
 mod camera;
 mod environment;
+mod integrators;
 mod lights;
 mod materials;
 mod media;

@@ -15,10 +15,13 @@
 //! except across a dielectric, where radiance carries the 1/η² of the change of solid angle
 //! and flux does not: a refraction's weight is the camera path's times η² (Veach §5.2).
 //!
-//! Emitters seen directly (one segment) take their own sample per path, as in Mitsuba: a point
-//! uniform on an area light, or a direction of the environment drawn by its density from an
-//! aperture point, joined to the camera. Point, spot and directional lights are never seen
-//! directly (as with camera paths). A mirror or smooth glass seen by the camera shows
+//! Emitters seen directly (one segment) take their own samples per path: a point uniform on
+//! an area light picked by power, joined to the camera, as in Mitsuba; and, where the scene
+//! has an environment, a camera ray from a position uniform over the image, which adds
+//! L·W·H where it escapes. (Mitsuba draws the environment's direction by its own density
+//! instead, which leaves a dim sky seen beside a bright sun with a rare, heavy-tailed
+//! estimate.) Point, spot and directional lights are never seen directly (as with camera
+//! paths). A mirror or smooth glass seen by the camera shows
 //! nothing: no link can pass through a delta BSDF. Depth counts segments as the path tracer
 //! does (a vertex k segments from the light is splatted when k + 1 ≤ max_depth), and Russian
 //! roulette starts at the same depth with the same rule.
@@ -32,7 +35,7 @@
 //! the full image's pixels. Media are not supported (`Kind::media`).
 
 use super::super::bsdf::Bsdf;
-use super::super::camera_ray::{link_direction, link_point};
+use super::super::camera_ray::{camera_ray, link_point, needs_lens_sample};
 use super::super::film::{Film, RR_START};
 use super::super::filter;
 use super::super::geometry::{Hit, Ray};
@@ -73,7 +76,9 @@ pub fn render(scene: &Scene, settings: &Settings, film: &mut Film) {
                     let mut out = Vec::new();
                     let mut lost = 0;
                     for path in c..(c + CHUNK).min(end) {
-                        trace(scene, settings, path, k, &mut |px, v| splat(scene, film_window(film), px, v, &mut out, &mut lost));
+                        trace(scene, settings, path, k, &mut |px, v| {
+                            splat(scene, film_window(film), px, v, &mut out, &mut lost)
+                        });
                     }
                     (out, lost)
                 })
@@ -99,7 +104,8 @@ pub fn render(scene: &Scene, settings: &Settings, film: &mut Film) {
     for i in 0..3 * pixels {
         let m = sum[i] / n;
         film.mean.data[i] = m as f32;
-        film.variance.data[i] = if n > 1.0 { ((sum2[i] - n * m * m).max(0.0) / (n - 1.0) / n) as f32 } else { 0.0 };
+        film.variance.data[i] =
+            if n > 1.0 { ((sum2[i] - n * m * m).max(0.0) / (n - 1.0) / n) as f32 } else { 0.0 };
     }
     film.dropped_samples += dropped;
 }
@@ -111,7 +117,14 @@ fn film_window(film: &Film) -> ([u32; 2], [u32; 2]) {
 
 /// Adds `v` at the image position `px` to the film pixels the filter covers; a value that is
 /// not finite is dropped and counted.
-fn splat(scene: &Scene, (origin, size): ([u32; 2], [u32; 2]), px: DVec2, v: Vec3A, out: &mut Vec<Splat>, lost: &mut u64) {
+fn splat(
+    scene: &Scene,
+    (origin, size): ([u32; 2], [u32; 2]),
+    px: DVec2,
+    v: Vec3A,
+    out: &mut Vec<Splat>,
+    lost: &mut u64,
+) {
     if !v.is_finite() {
         *lost += 1;
         return;
@@ -161,9 +174,7 @@ fn trace(scene: &Scene, settings: &Settings, path: u64, pass: u32, splat: &mut i
                 let bsdf = shading(scene, mat, &hit, surf.p, towards);
                 let n = if towards { surf.n } else { -surf.n };
                 let f = if bsdf.is_delta() { Vec3A::ZERO } else { bsdf.eval(albedo, n, link.dir, w_l) };
-                if f.max_element() > 0.0
-                    && scene.unoccluded(surf.p + n * eps, surf.p, link.dir, link.dist)
-                {
+                if f.max_element() > 0.0 && scene.unoccluded(surf.p + n * eps, surf.p, link.dir, link.dist) {
                     let g = n.dot(link.dir).abs() * link.importance / (link.dist * link.dist);
                     splat(link.pixel, beta * f * g);
                 }
@@ -193,29 +204,34 @@ fn trace(scene: &Scene, settings: &Settings, path: u64, pass: u32, splat: &mut i
     }
 }
 
-/// The emitters the camera sees directly: one point of an area light or one direction of the
-/// environment, joined to the camera (module docs).
+/// The emitters the camera sees directly (module docs): a point of an area light picked by
+/// power, joined to the camera; and the environment through a camera ray from a position
+/// uniform over the image.
 fn seen_directly(scene: &Scene, s: &mut Sampler, splat: &mut impl FnMut(DVec2, Vec3A)) {
     let (u_pick, u, u_lens) = (s.next(), s.next2(), s.next2());
-    let Some((i, p_pick, _)) = scene.pick_light(u_pick) else { return };
-    match scene.lights[i] {
-        Light::Area { prim, radiance, area } => {
+    if let Some((i, p_pick, _)) = scene.pick_light(u_pick) {
+        if let Light::Area { prim, radiance, area } = scene.lights[i] {
             let (y, ny) = scene.area_light_point(prim, u);
-            let Some(link) = link_point(scene, y, u_lens) else { return };
-            let cos = ny.dot(link.dir);
-            if cos > 0.0 && scene.unoccluded(y + ny * epsilon(y), y, link.dir, link.dist) {
-                let g = cos * link.importance / (link.dist * link.dist);
-                splat(link.pixel, radiance * (g * area / p_pick));
+            if let Some(link) = link_point(scene, y, u_lens) {
+                let cos = ny.dot(link.dir);
+                if cos > 0.0 && scene.unoccluded(y + ny * epsilon(y), y, link.dir, link.dist) {
+                    let g = cos * link.importance / (link.dist * link.dist);
+                    splat(link.pixel, radiance * (g * area / p_pick));
+                }
             }
         }
-        Light::Environment { .. } => {
-            let Some((w, le, pdf)) = scene.sample_environment(u) else { return };
-            let Some((aperture, pixel, importance)) = link_direction(scene, w, u_lens) else { return };
-            if scene.unoccluded(aperture, aperture, w, f32::INFINITY) {
-                splat(pixel, le * (importance / (pdf * p_pick)));
+    }
+    if scene.environment_light.is_some() {
+        let (u, u_lens) = (s.next2(), s.next2());
+        let (w, h) = (scene.camera.width as f64, scene.camera.height as f64);
+        let px = DVec2::new(u.0 as f64 * w - 0.5, u.1 as f64 * h - 0.5);
+        let Some(d) = scene.camera.pixel_ray(px) else { return };
+        let ray = camera_ray(scene, d, needs_lens_sample(scene, d).then_some(u_lens));
+        if scene.unoccluded(ray.origin, ray.origin, ray.dir, f32::INFINITY) {
+            if let Some((le, _)) = scene.environment(ray.dir) {
+                splat(px, le * (w * h) as f32);
             }
         }
-        Light::Point { .. } | Light::Spot { .. } | Light::Directional { .. } => {}
     }
 }
 

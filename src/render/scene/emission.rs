@@ -66,8 +66,11 @@ impl Scene {
                 (self.disk_point(w, u_pos), -w, le * (PI * r * r / (pdf * p_pick)))
             }
         };
-        (beta.max_element() > 0.0 && beta.is_finite())
-            .then_some(Emission { ray: Ray { origin, dir }, beta, light: i })
+        (beta.max_element() > 0.0 && beta.is_finite()).then_some(Emission {
+            ray: Ray { origin, dir },
+            beta,
+            light: i,
+        })
     }
 
     /// The densities with which `sample_emission`, having picked light `i`, draws the ray
