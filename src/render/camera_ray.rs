@@ -58,15 +58,15 @@ pub struct CameraLink {
     /// Unit direction from the scene point towards `aperture`, and the distance.
     pub dir: Vec3A,
     pub dist: f32,
-    /// Where the ray lands on the image, OpenCV pixel coordinates (possibly outside it).
+    /// Where the ray lands on the image, OpenCV pixel coordinates.
     pub pixel: DVec2,
     /// The camera's importance W for that ray (module docs), pixels per steradian.
     pub importance: f32,
 }
 
 /// The link from the world point `p` to the camera through the aperture point `lens_u`
-/// draws (ignored for a pinhole); `None` behind the camera, beyond the fold of the
-/// distortion, or when the point sits on the aperture.
+/// draws (ignored for a pinhole); `None` where it cannot add to the image: behind the camera,
+/// outside the image, beyond the fold of the distortion, or on the aperture itself.
 pub fn link_point(scene: &Scene, p: Vec3A, lens_u: (f32, f32)) -> Option<CameraLink> {
     let pose = &scene.t_world_cam;
     let to_cam = pose.rotation.transpose();
@@ -87,7 +87,7 @@ pub fn link_point(scene: &Scene, p: Vec3A, lens_u: (f32, f32)) -> Option<CameraL
 
 /// The pixel position and importance of the ray from the aperture point `o` along `v`
 /// (camera frame, any length): through the focus-plane point it aims at, with the camera
-/// model's distortion, inverting `camera_direction` and `lens_ray`.
+/// model's distortion, inverting `camera_direction` and `lens_ray`; `None` off the image.
 fn image_point(scene: &Scene, o: glam::DVec3, v: glam::DVec3) -> Option<(DVec2, f64)> {
     let len = v.length();
     if !(v.z > 0.0 && len > 0.0 && len.is_finite()) {
@@ -113,9 +113,14 @@ fn image_point(scene: &Scene, o: glam::DVec3, v: glam::DVec3) -> Option<(DVec2, 
         }
         (nd, det)
     };
+    let px = cam.normalized_to_pixel(nd);
+    let inside = |t: f64, n: u32| t >= -0.5 && t < n as f64 - 0.5;
+    if !(inside(px.x, cam.width) && inside(px.y, cam.height)) {
+        return None;
+    }
     let cos = v.z / len;
     let k = &cam.intrinsics;
-    Some((cam.normalized_to_pixel(nd), k.fx * k.fy * det / (cos * cos * cos)))
+    Some((px, k.fx * k.fy * det / (cos * cos * cos)))
 }
 
 /// The aperture point (camera frame, z = 0) the numbers `u` draw: uniform on the disk

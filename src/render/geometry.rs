@@ -151,8 +151,8 @@ impl Prim {
             Prim::Sphere { center, radius } => {
                 let z = 1.0 - 2.0 * u;
                 let r = (1.0 - z * z).max(0.0).sqrt();
-                let phi = 2.0 * std::f32::consts::PI * v;
-                let n = Vec3A::new(r * phi.cos(), r * phi.sin(), z);
+                let (cos, sin) = super::transport::unit_circle(v);
+                let n = Vec3A::new(r * cos, r * sin, z);
                 (center + radius * n, n)
             }
         }

@@ -28,11 +28,14 @@
 //!
 //! Passes: a pass traces as many light paths as the image has pixels (Mitsuba's
 //! `samples_per_pass` convention: `spp` passes trace spp·W·H paths) and is an unbiased
-//! estimate of the whole image; the film's mean is the mean of the passes and its variance of
-//! the mean their spread, divided by their number (0 with one pass). Paths are drawn from
-//! streams keyed by (path, pass), traced in parallel in fixed chunks whose splats are added in
-//! path order, so the image does not depend on the thread count, and a crop holds exactly
-//! the full image's pixels. Media are not supported (`Kind::media`).
+//! estimate of the whole image; the film's mean is the mean of the passes. The passes are
+//! summed in up to 64 batches of n_b passes each, and the variance of the mean is
+//! σ²/N with σ² = Σ n_b·(X_b − m)²/(B − 1) from the batches' estimates X_b (0 with one
+//! pass): one sum of a pixel's batch per batch, not per pass, which for a small image and many
+//! passes would cost as much as the paths. Paths are drawn from streams keyed by (path,
+//! pass), traced in parallel in fixed chunks whose splats are added in path order, so the
+//! image does not depend on the thread count, and a crop holds exactly the full image's
+//! pixels. Media are not supported (`Kind::media`).
 
 use super::super::bsdf::Bsdf;
 use super::super::camera_ray::{camera_ray, link_point, needs_lens_sample};
@@ -50,6 +53,8 @@ use rayon::prelude::*;
 const CHUNK: u64 = 1024;
 /// Paths traced before their splats are added to the pass: bounds the splats held at once.
 const GROUP: u64 = 64 * CHUNK;
+/// Passes are summed in at most this many batches, whose spread gives the variance.
+const BATCHES: u64 = 64;
 /// Keeps light paths' random streams apart from camera paths' with the same seed.
 const STREAM: u64 = 0x6c69_6768_7470_7468;
 
@@ -59,24 +64,33 @@ type Splat = (u32, [f32; 3]);
 pub fn render(scene: &Scene, settings: &Settings, film: &mut Film) {
     let paths = scene.camera.width as u64 * scene.camera.height as u64;
     let pixels = film.mean.width as usize * film.mean.height as usize;
+    let spp = settings.spp as u64;
+    let per_batch = spp.div_ceil(BATCHES);
+    // Per pixel channel: the sum of every splat, and Σ n_b·X_b² over the batches, X_b the
+    // batch's estimate of the pixel (n_b passes).
     let mut sum = vec![0.0f64; 3 * pixels];
-    let mut sum2 = vec![0.0f64; 3 * pixels];
-    let mut pass = vec![0.0f64; 3 * pixels];
-    let bar = super::super::progress_bar(settings.spp as u64, "light", settings.progress);
+    let mut sum_sq = vec![0.0f64; 3 * pixels];
+    let mut batch = vec![0.0f64; 3 * pixels];
+    let bar = super::super::progress_bar(spp, "light", settings.progress);
     let mut dropped = 0;
-    for k in 0..settings.spp {
-        pass.iter_mut().for_each(|v| *v = 0.0);
-        for start in (0..paths).step_by(GROUP as usize) {
-            let end = (start + GROUP).min(paths);
+    let mut batches = 0u64;
+    for first in (0..spp).step_by(per_batch as usize) {
+        let passes = per_batch.min(spp - first);
+        batch.iter_mut().for_each(|v| *v = 0.0);
+        // Path g of the batch is path g mod (W·H) of pass first + g / (W·H).
+        let total = passes * paths;
+        for start in (0..total).step_by(GROUP as usize) {
+            let end = (start + GROUP).min(total);
             let chunks: Vec<(Vec<Splat>, u64)> = (start..end)
                 .step_by(CHUNK as usize)
                 .collect::<Vec<_>>()
                 .into_par_iter()
                 .map(|c| {
-                    let mut out = Vec::new();
+                    let mut out = Vec::with_capacity(4 * CHUNK as usize);
                     let mut lost = 0;
-                    for path in c..(c + CHUNK).min(end) {
-                        trace(scene, settings, path, k, &mut |px, v| {
+                    for g in c..(c + CHUNK).min(end) {
+                        let (pass, path) = (first + g / paths, g % paths);
+                        trace(scene, settings, path, pass, &mut |px, v| {
                             splat(scene, film_window(film), px, v, &mut out, &mut lost)
                         });
                     }
@@ -87,25 +101,32 @@ pub fn render(scene: &Scene, settings: &Settings, film: &mut Film) {
                 dropped += lost;
                 for (i, v) in splats {
                     for c in 0..3 {
-                        pass[3 * i as usize + c] += v[c] as f64;
+                        batch[3 * i as usize + c] += v[c] as f64;
                     }
                 }
             }
+            bar.set_position(first + end / paths);
         }
-        for ((s, s2), p) in sum.iter_mut().zip(sum2.iter_mut()).zip(&pass) {
-            let v = p / paths as f64;
-            *s += v;
-            *s2 += v * v;
+        let n_b = passes as f64;
+        for ((s, s2), b) in sum.iter_mut().zip(sum_sq.iter_mut()).zip(&batch) {
+            let x = b / (n_b * paths as f64);
+            *s += b;
+            *s2 += n_b * x * x;
         }
-        bar.inc(1);
+        batches += 1;
     }
     bar.finish_and_clear();
-    let n = settings.spp as f64;
+    // The passes' variance σ² from the batches, Σ n_b·(X_b − m)² / (B − 1), and that of the
+    // mean of N passes, σ²/N.
+    let n = spp as f64;
     for i in 0..3 * pixels {
-        let m = sum[i] / n;
+        let m = sum[i] / (n * paths as f64);
         film.mean.data[i] = m as f32;
-        film.variance.data[i] =
-            if n > 1.0 { ((sum2[i] - n * m * m).max(0.0) / (n - 1.0) / n) as f32 } else { 0.0 };
+        film.variance.data[i] = if batches > 1 {
+            ((sum_sq[i] - n * m * m).max(0.0) / (batches - 1) as f64 / n) as f32
+        } else {
+            0.0
+        };
     }
     film.dropped_samples += dropped;
 }
@@ -144,8 +165,8 @@ fn splat(
 }
 
 /// Light path `path` of pass `pass`: every contribution it makes, as (image position, value).
-fn trace(scene: &Scene, settings: &Settings, path: u64, pass: u32, splat: &mut impl FnMut(DVec2, Vec3A)) {
-    let mut s = Sampler::with_kind(settings.sampler, settings.seed ^ STREAM, path, pass as u64);
+fn trace(scene: &Scene, settings: &Settings, path: u64, pass: u64, splat: &mut impl FnMut(DVec2, Vec3A)) {
+    let mut s = Sampler::with_kind(settings.sampler, settings.seed ^ STREAM, path, pass);
     seen_directly(scene, &mut s, splat);
     let max_depth = settings.max_depth;
     if max_depth < 2 {

@@ -152,6 +152,6 @@ pub(super) fn uniform_sphere(u: (f32, f32)) -> Vec3A {
 fn around(axis: Vec3A, cos_t: f32, u: f32) -> Vec3A {
     let (t, b) = transport::basis(axis);
     let s = (1.0 - cos_t * cos_t).max(0.0).sqrt();
-    let phi = 2.0 * PI * u;
-    (t * (s * phi.cos()) + b * (s * phi.sin()) + axis * cos_t).normalize()
+    let (cos, sin) = transport::unit_circle(u);
+    (t * (s * cos) + b * (s * sin) + axis * cos_t).normalize()
 }
