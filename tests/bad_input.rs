@@ -305,6 +305,19 @@ fn cli_render_errors_leave_no_output() {
     let (code, err) =
         lumen(&["render", scene.to_str().unwrap(), "--out", out.to_str().unwrap(), "--spp", "zero"]);
     assert_eq!(code, 2, "{err}");
+    for budget in ["0", "-1", "1e300", "NaN", "inf", "soon"] {
+        let flag = format!("--time-budget={budget}");
+        let (code, err) = lumen(&["render", scene.to_str().unwrap(), "--out", out.to_str().unwrap(), &flag]);
+        assert_eq!(code, 2, "{budget}: {err}");
+        assert!(err.contains("--time-budget") && err.contains(budget), "{budget}: {err}");
+    }
+    // An integrator that cannot render the scene's media is refused by name.
+    let haze = common::root().join("pipelines/scenes/sfm-courtyard-haze.toml");
+    let (code, err) =
+        lumen(&["render", haze.to_str().unwrap(), "--out", out.to_str().unwrap(), "--integrator", "light"]);
+    assert_eq!(code, 1, "{err}");
+    assert_eq!(common::fault_in(&err), "unsupported", "{err}");
+    assert!(err.contains("\"light\"") && err.contains("participating media"), "{err}");
     assert!(!out.exists());
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "something was written");
 }

@@ -234,9 +234,15 @@ pub struct RenderArgs {
     /// Light-transport algorithm (default: the scene's [render] integrator).
     #[arg(long, value_parser = integrator_parser())]
     pub integrator: Option<&'static render::integrators::Kind>,
-    /// Samples per pixel (default: the scene's [render] spp).
+    /// Samples per pixel (default: the scene's [render] spp; with --time-budget, the most
+    /// to render, unbounded by default). For light tracing, passes of one path per pixel.
     #[arg(long)]
     pub spp: Option<u32>,
+    /// Render for this many seconds (over 0, at most 10⁷), in rounds of samples, and write
+    /// what was reached: the sample count is printed. Each round is planned to fit in what is
+    /// left, from the time the rounds before took, and is not cut short.
+    #[arg(long, value_name = "SECONDS", value_parser = parse_time_budget)]
+    pub time_budget: Option<f64>,
     /// Longest path in segments (default: the scene's max_depth).
     #[arg(long)]
     pub max_depth: Option<u32>,
@@ -460,6 +466,15 @@ fn sibling(out: &Path, suffix: &str) -> PathBuf {
     out.with_file_name(format!("{stem}.{suffix}.exr"))
 }
 
+/// `--time-budget`: seconds over 0, at most 10⁷ (about 16 weeks).
+fn parse_time_budget(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(t) if t > 0.0 && t <= 1e7 => Ok(t),
+        Ok(_) => Err(format!("{s} s: expected a number of seconds over 0 and at most 10⁷")),
+        Err(_) => Err(format!("`{s}`: expected a number of seconds")),
+    }
+}
+
 /// `--integrator`: one of `render::integrators::REGISTRY`'s names, listed in the help.
 fn integrator_parser() -> impl clap::builder::TypedValueParser<Value = &'static render::integrators::Kind> {
     use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
@@ -473,6 +488,7 @@ fn render_cmd(a: &RenderArgs) -> Result<()> {
         out,
         integrator,
         spp,
+        time_budget,
         max_depth,
         seed,
         threads,
@@ -504,6 +520,12 @@ fn render_cmd(a: &RenderArgs) -> Result<()> {
             bail!("--spp must be at least 1");
         }
         settings.spp = s;
+    }
+    if let Some(t) = time_budget {
+        settings.time_budget = Some(*t);
+        if spp.is_none() {
+            settings.spp = u32::MAX;
+        }
     }
     if let Some(d) = max_depth {
         if d == 0 {
@@ -571,14 +593,20 @@ fn render_cmd(a: &RenderArgs) -> Result<()> {
         }
         Ok(())
     })?;
-    let paths = film.mean.width as f64 * film.mean.height as f64 * settings.spp as f64;
+    let paths = film.mean.width as f64 * film.mean.height as f64 * film.samples as f64;
+    let budget = match settings.time_budget {
+        Some(t) if film.samples < settings.spp => format!(", reached in a time budget of {t} s"),
+        Some(t) => format!(", all of them within a time budget of {t} s"),
+        None => String::new(),
+    };
     eprintln!(
-        "rendered {} ({}x{}, {} spp, max depth {}) in {secs:.2} s: {:.2} M paths/s",
+        "rendered {} ({}x{}, {} spp{budget}, max depth {}, integrator {}) in {secs:.2} s: {:.2} M paths/s",
         out.display(),
         film.mean.width,
         film.mean.height,
-        settings.spp,
+        film.samples,
         settings.max_depth,
+        settings.integrator.name,
         paths / secs / 1e6
     );
     if film.dropped_samples > 0 {

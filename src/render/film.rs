@@ -12,6 +12,9 @@ pub struct Film {
     pub origin: [u32; 2],
     /// Samples whose value was not finite and was dropped (should be 0).
     pub dropped_samples: u64,
+    /// Samples per pixel (passes, for integrators that render in passes) it holds: the
+    /// settings' `spp`, or what a time budget reached.
+    pub samples: u32,
 }
 
 /// Segments after which Russian roulette starts (`integrators::path` docs).

@@ -122,6 +122,32 @@ fn light_tracing_is_deterministic_and_crops_exactly() {
     }
 }
 
+/// A time budget renders in rounds (1, 2, 4, … samples, `first_sample` moving on) whose
+/// merged film is the film of one render of all the samples: with a budget no render can
+/// spend and an 11-sample cap, the same means (to float rounding) and variances, for the path
+/// tracer and the light tracer; a budget too small for a second round keeps the first.
+#[test]
+fn time_budget_rounds_merge_into_one_render() {
+    let scene = render::load(&common::root().join("pipelines/scenes/cornell-box.toml")).unwrap();
+    for name in ["path", "light"] {
+        let mut s = common::settings(&scene, 11, 8);
+        s.integrator = integrators::find(name).unwrap();
+        s.crop = Some([96, 40, 160, 104]);
+        let once = render::render(&scene, &s);
+        s.time_budget = Some(1e6);
+        let rounds = render::render(&scene, &s);
+        assert_eq!((once.samples, rounds.samples), (11, 11));
+        let close = |a: &[f32], b: &[f32], tol: f32| {
+            a.iter().zip(b).all(|(x, y)| (x - y).abs() <= tol * x.abs().max(y.abs()) + 1e-12)
+        };
+        assert!(close(&once.mean.data, &rounds.mean.data, 1e-5), "{name}: means differ");
+        assert!(close(&once.variance.data, &rounds.variance.data, 1e-3), "{name}: variances differ");
+        s.time_budget = Some(1e-9);
+        let first = render::render(&scene, &s);
+        assert_eq!(first.samples, 1, "{name}");
+    }
+}
+
 /// A scene with media is refused by the integrators that do not render them, naming the
 /// integrator.
 #[test]

@@ -89,7 +89,7 @@ pub fn render(scene: &Scene, settings: &Settings, film: &mut Film) {
                     let mut out = Vec::with_capacity(4 * CHUNK as usize);
                     let mut lost = 0;
                     for g in c..(c + CHUNK).min(end) {
-                        let (pass, path) = (first + g / paths, g % paths);
+                        let (pass, path) = (settings.first_sample as u64 + first + g / paths, g % paths);
                         trace(scene, settings, path, pass, &mut |px, v| {
                             splat(scene, film_window(film), px, v, &mut out, &mut lost)
                         });

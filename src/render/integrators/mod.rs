@@ -92,6 +92,12 @@ pub struct Settings {
     /// Trace eight paths at once where the integrator and the scene allow it
     /// (`integrators::path::lanes`; the image is the same either way). False forces the one-path loop, for comparisons.
     pub lanes: bool,
+    /// Index of the first sample (pass, for integrators that render in passes): a render of
+    /// samples a..b followed by one of b..c draws what one of a..c draws.
+    pub first_sample: u32,
+    /// Seconds to render for (`render_budgeted`): samples are added in rounds until the next
+    /// round would overrun the budget, or `spp` samples are reached. `None`: exactly `spp`.
+    pub time_budget: Option<f64>,
 }
 
 impl Settings {
@@ -106,6 +112,8 @@ impl Settings {
             threads: None,
             progress: false,
             lanes: true,
+            first_sample: 0,
+            time_budget: None,
         }
     }
 }
@@ -193,14 +201,69 @@ fn film_size(scene: &Scene, settings: &Settings) -> (u32, u32) {
 }
 
 fn render_into(scene: &Scene, settings: &Settings, mean: Image, variance: Image) -> Film {
+    match settings.time_budget {
+        Some(seconds) => render_budgeted(scene, settings, seconds, mean, variance),
+        None => render_once(scene, settings, mean, variance),
+    }
+}
+
+fn render_once(scene: &Scene, settings: &Settings, mean: Image, variance: Image) -> Film {
     let origin = settings.crop.map_or([0, 0], |c| [c[0], c[1]]);
-    let mut film = Film { mean, variance, origin, dropped_samples: 0 };
+    let mut film = Film { mean, variance, origin, dropped_samples: 0, samples: settings.spp };
     let mut work = || (settings.integrator.render)(scene, settings, &mut film);
     match settings.threads.and_then(|n| rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build().ok()) {
         Some(pool) => pool.install(work),
         None => work(),
     }
     film
+}
+
+/// Renders in rounds for about `seconds` of wall time: a first round of one sample (pass),
+/// then rounds that double while the time measured per sample says the next fits in what is
+/// left, stopping at `settings.spp`. The rounds' films are merged as one render of all their
+/// samples: the means weighted by their sample counts, and each pixel's sum of squares
+/// recovered from its mean and variance of the mean ((n − 1)·n·v + n·m²), so the merged
+/// variance is that of the pooled samples. The film says how many samples it reached.
+fn render_budgeted(scene: &Scene, settings: &Settings, seconds: f64, mean: Image, variance: Image) -> Film {
+    let start = std::time::Instant::now();
+    let len = mean.data.len();
+    let (mut sum, mut sum_sq) = (vec![0.0f64; len], vec![0.0f64; len]);
+    let (mut done, mut round, mut dropped) = (0u32, 1u32, 0u64);
+    let (mut mean, mut variance) = (mean, variance);
+    while done < settings.spp {
+        let part = Settings {
+            spp: round.min(settings.spp - done),
+            first_sample: settings.first_sample + done,
+            time_budget: None,
+            ..settings.clone()
+        };
+        let film = render_once(scene, &part, mean, variance);
+        let n = part.spp as f64;
+        for i in 0..len {
+            let (m, v) = (film.mean.data[i] as f64, film.variance.data[i] as f64);
+            sum[i] += n * m;
+            sum_sq[i] += (n - 1.0) * n * v + n * m * m;
+        }
+        dropped += film.dropped_samples;
+        (mean, variance) = (film.mean, film.variance);
+        done += part.spp;
+        let elapsed = start.elapsed().as_secs_f64();
+        let per_sample = elapsed / done as f64;
+        let fits = ((seconds - elapsed) / per_sample).floor();
+        if !(fits >= 1.0) {
+            break;
+        }
+        round = (2 * part.spp).min(fits.min(u32::MAX as f64) as u32);
+    }
+    let n = done as f64;
+    for i in 0..len {
+        let m = sum[i] / n;
+        mean.data[i] = m as f32;
+        variance.data[i] =
+            if n > 1.0 { ((sum_sq[i] - n * m * m).max(0.0) / (n - 1.0) / n) as f32 } else { 0.0 };
+    }
+    let origin = settings.crop.map_or([0, 0], |c| [c[0], c[1]]);
+    Film { mean, variance, origin, dropped_samples: dropped, samples: done }
 }
 
 /// Fills the film row by row, rows in parallel: `row(y, x0, x1)` gives the pixels x0..x1 of
@@ -239,7 +302,8 @@ where
 /// (no scene ray maps there; the sample is black).
 pub fn camera_path(scene: &Scene, settings: &Settings, x: u32, y: u32, k: u32) -> (Sampler, Option<Ray>) {
     let pixel_index = y as u64 * scene.camera.width as u64 + x as u64;
-    let mut s = Sampler::with_kind(settings.sampler, settings.seed, pixel_index, k as u64);
+    let k = settings.first_sample as u64 + k as u64;
+    let mut s = Sampler::with_kind(settings.sampler, settings.seed, pixel_index, k);
     let ray = camera_direction(scene, x, y, s.next2()).map(|d| {
         let lens_u = needs_lens_sample(scene, d).then(|| s.next2());
         camera_ray(scene, d, lens_u)

@@ -82,7 +82,12 @@ pub unsafe fn trace_group(
             next_job += 1;
             let (x, k) = (gx0 + (slot / spp as usize) as u32, (slot % spp as usize) as u32);
             let pixel = y as u64 * scene.camera.width as u64 + x as u64;
-            let s = Sampler::with_kind(settings.sampler, settings.seed, pixel, k as u64);
+            let s = Sampler::with_kind(
+                settings.sampler,
+                settings.seed,
+                pixel,
+                settings.first_sample as u64 + k as u64,
+            );
             lanes.samplers.set(lane, &s, x - gx0);
             lanes.slot[lane] = slot;
             lanes.x[lane] = x;
