@@ -84,6 +84,36 @@ pub fn agreement(
 
 /// Root-mean-square difference over every channel of two images of one size (NaN when the
 /// sizes differ or either is empty, which a caller records as missing).
+/// Relative mean squared error of `a` against the reference `b`, mean((a − b)²/(b² + 0.01))
+/// over the pixel channels of the window [x0, y0, x1, y1) (the whole image when `None`): the
+/// 0.01 keeps black pixels of the reference from dominating (Rousselle et al. 2011's form, as
+/// denoising and light-transport papers report it). NaN when the images' shapes differ or the
+/// window holds no pixel.
+pub fn relmse(a: &Image, b: &Image, window: Option<[u32; 4]>) -> f64 {
+    if (a.width, a.height, a.channels) != (b.width, b.height, b.channels) {
+        return f64::NAN;
+    }
+    let [x0, y0, x1, y1] = window.unwrap_or([0, 0, a.width, a.height]);
+    let (x1, y1) = (x1.min(a.width), y1.min(a.height));
+    let c = a.channels as usize;
+    let (mut sum, mut n) = (0.0, 0usize);
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let i = (y as usize * a.width as usize + x as usize) * c;
+            for k in i..i + c {
+                let (p, r) = (a.data[k] as f64, b.data[k] as f64);
+                sum += (p - r).powi(2) / (r * r + 0.01);
+                n += 1;
+            }
+        }
+    }
+    if n == 0 {
+        f64::NAN
+    } else {
+        sum / n as f64
+    }
+}
+
 pub fn rmse(a: &Image, b: &Image) -> f64 {
     if (a.width, a.height, a.channels) != (b.width, b.height, b.channels) || a.data.is_empty() {
         return f64::NAN;

@@ -8,6 +8,10 @@
 //! - `z_test_pass_fraction`: pixel channels passing the per-pixel z-test against the reference
 //!   (Šidák-corrected, α = 0.01; see `image::metrics::agreement`);
 //! - `rmse`: root-mean-square difference from the reference over pixel channels;
+//! - `relmse`: relative mean squared error against the reference, mean((x − ref)²/(ref² +
+//!   0.01)) over pixel channels (`image::metrics::relmse`), and `relmse_region` over the
+//!   case's `region` (a caustic, say): what error-against-time comparisons of integrators
+//!   plot;
 //! - `max_rel_err`, `mean_rel_err`: against a uniform expected radiance;
 //! - `mean_err_sigmas`: against a uniform expected radiance, the image mean's distance from it
 //!   in standard errors of that mean (from the film's per-pixel variance), the largest over
@@ -47,6 +51,9 @@ pub struct Config {
     /// file. When the files are absent the comparison is skipped with a note.
     pub reference: Option<String>,
     pub reference_variance: Option<String>,
+    /// Pixel window [x0, y0, x1, y1) over which `relmse_region` is measured against the
+    /// reference (the part of the image a comparison is about, such as a caustic).
+    pub region: Option<[u32; 4]>,
     /// Closed-form radiance every pixel must have (linear RGB, finite).
     pub expect_uniform: Option<[f64; 3]>,
     /// File name (.exr or .png) to save the rendered image under, in the output folder.
@@ -115,6 +122,17 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<Input, Truth>, 
             ))
         }
     };
+    if let Some([x0, y0, x1, y1]) = c.region {
+        let (w, h) = (scene.camera.width, scene.camera.height);
+        if !(x0 < x1 && y0 < y1 && x1 <= w && y1 <= h) {
+            return Err(StageError::Config(format!(
+                "region = [{x0}, {y0}, {x1}, {y1}]: expected a window [x0, y0, x1, y1) with x0 < x1 ≤ {w} and y0 < y1 ≤ {h} (the image)"
+            )));
+        }
+        if c.reference.is_none() {
+            return Err(StageError::Config("`region` measures against a `reference`: give one".into()));
+        }
+    }
     if let Reference::Images { path, mean, variance } = &reference {
         let (w, h) = (scene.camera.width, scene.camera.height);
         for (what, img) in [("reference", mean), ("reference_variance", variance)] {
@@ -192,11 +210,14 @@ pub fn validate(c: &Config, out: &Output, truth: &Truth) -> Findings {
         "{}x{} pixels, {} spp, max depth {}, integrator `{}`.",
         film.mean.width, film.mean.height, settings.spp, settings.max_depth, settings.integrator.name
     ));
-    let reference_metrics = ["mean_rel_err_r", "mean_rel_err_g", "mean_rel_err_b", "rmse"];
+    let mut reference_metrics = vec!["mean_rel_err_r", "mean_rel_err_g", "mean_rel_err_b", "rmse", "relmse"];
+    if c.region.is_some() {
+        reference_metrics.push("relmse_region");
+    }
     match &truth.reference {
         Reference::None => {}
         Reference::Absent(why) => {
-            for name in reference_metrics {
+            for name in &reference_metrics {
                 f.metrics.push(Metric::skipped(name, "", Better::Lower, why.clone()));
             }
             f.metrics.push(Metric::skipped("z_test_pass_fraction", "", Better::Higher, why.clone()));
@@ -214,6 +235,20 @@ pub fn validate(c: &Config, out: &Output, truth: &Truth) -> Findings {
                         ));
                     }
                     f.metrics.push(Metric::new("rmse", metrics::rmse(&film.mean, mean), "", Better::Lower));
+                    f.metrics.push(Metric::new(
+                        "relmse",
+                        metrics::relmse(&film.mean, mean, None),
+                        "",
+                        Better::Lower,
+                    ));
+                    if let Some(region) = c.region {
+                        f.metrics.push(Metric::new(
+                            "relmse_region",
+                            metrics::relmse(&film.mean, mean, Some(region)),
+                            "",
+                            Better::Lower,
+                        ));
+                    }
                     f.metrics.push(Metric::new("z_test_pass_fraction", a.pass_fraction, "", Better::Higher));
                     f.notes.push(format!(
                         "z-test against {}: {} of {} pixel channels beyond |z| = {:.2} (Šidák α = {:.2e}).",
@@ -226,7 +261,7 @@ pub fn validate(c: &Config, out: &Output, truth: &Truth) -> Findings {
                 }
                 Err(e) => {
                     let why = format!("reference {}: {e}", clean(path).display());
-                    for name in reference_metrics {
+                    for name in &reference_metrics {
                         f.metrics.push(Metric::missing(name, "", Better::Lower, why.clone()));
                     }
                     f.metrics.push(Metric::missing("z_test_pass_fraction", "", Better::Higher, why));
