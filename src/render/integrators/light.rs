@@ -10,10 +10,7 @@
 //!
 //! to the pixels whose filter covers that position (`filter::splat`), if nothing blocks the
 //! link; f is evaluated as the path tracer evaluates it, with w_c as the outgoing direction.
-//! The path then scatters as light does: the next direction is drawn by the BSDF from w_l and
-//! β takes the adjoint weight f(x, w_next, w_l)·|cos θ_next|/p. The models are reciprocal
-//! except across a dielectric, where radiance carries the 1/η² of the change of solid angle
-//! and flux does not: a refraction's weight is the camera path's times η² (Veach §5.2).
+//! The path then scatters as light does (`particle::walk`).
 //!
 //! Emitters seen directly (one segment) take their own samples per path: a point uniform on
 //! an area light picked by power, joined to the camera, as in Mitsuba; and, where the scene
@@ -37,14 +34,13 @@
 //! image does not depend on the thread count, and a crop holds exactly the full image's
 //! pixels. Media are not supported (`Kind::media`).
 
-use super::super::bsdf::Bsdf;
 use super::super::camera_ray::{camera_ray, link_point, needs_lens_sample};
-use super::super::film::{Film, RR_START};
+use super::super::film::Film;
 use super::super::filter;
-use super::super::geometry::{Hit, Ray};
 use super::super::sampler::Sampler;
-use super::super::scene::{Light, Material, Scene};
-use super::super::transport::{self, epsilon};
+use super::super::scene::{Light, Scene};
+use super::super::transport::epsilon;
+use super::particle::{shading, walk};
 use super::Settings;
 use glam::{DVec2, Vec3A};
 use rayon::prelude::*;
@@ -168,61 +164,20 @@ fn splat(
 fn trace(scene: &Scene, settings: &Settings, path: u64, pass: u64, splat: &mut impl FnMut(DVec2, Vec3A)) {
     let mut s = Sampler::with_kind(settings.sampler, settings.seed ^ STREAM, path, pass);
     seen_directly(scene, &mut s, splat);
-    let max_depth = settings.max_depth;
-    if max_depth < 2 {
-        return;
-    }
-    let (u_pick, u_pos, u_dir) = (s.next(), s.next2(), s.next2());
-    let Some(e) = scene.sample_emission(u_pick, u_pos, u_dir) else { return };
-    let (mut ray, mut beta) = (e.ray, e.beta);
-    // `depth` segments lead from the light to the vertex; its link to the camera adds one.
-    for depth in 1..max_depth {
-        let Some(hit) = scene.bvh.intersect(&ray, 0.0, f32::INFINITY) else { break };
-        let surf = scene.surface(&ray, &hit);
-        let mat = &scene.materials[surf.material as usize];
-        let w_l = -ray.dir;
-        let front = surf.n.dot(w_l) >= 0.0;
-        // A one-sided surface is black from behind: light reaching its back goes no further.
-        if !front && mat.one_sided {
-            break;
+    walk(scene, &mut s, settings.max_depth, |v, s| {
+        let Some(link) = link_point(scene, v.p, s.next2()) else { return };
+        let towards = v.n.dot(link.dir) >= 0.0;
+        if !towards && v.mat.one_sided {
+            return;
         }
-        let albedo = scene.albedo(surf.material, &hit, surf.p);
-        let eps = epsilon(surf.p);
-
-        if let Some(link) = link_point(scene, surf.p, s.next2()) {
-            let towards = surf.n.dot(link.dir) >= 0.0;
-            if towards || !mat.one_sided {
-                let bsdf = shading(scene, mat, &hit, surf.p, towards);
-                let n = if towards { surf.n } else { -surf.n };
-                let f = if bsdf.is_delta() { Vec3A::ZERO } else { bsdf.eval(albedo, n, link.dir, w_l) };
-                if f.max_element() > 0.0 && scene.unoccluded(surf.p + n * eps, surf.p, link.dir, link.dist) {
-                    let g = n.dot(link.dir).abs() * link.importance / (link.dist * link.dist);
-                    splat(link.pixel, beta * f * g);
-                }
-            }
+        let bsdf = shading(scene, v.mat, &v.hit, v.p, towards);
+        let n = if towards { v.n } else { -v.n };
+        let f = if bsdf.is_delta() { Vec3A::ZERO } else { bsdf.eval(v.albedo, n, link.dir, v.w_l) };
+        if f.max_element() > 0.0 && scene.unoccluded(v.p + n * epsilon(v.p), v.p, link.dir, link.dist) {
+            let g = n.dot(link.dir).abs() * link.importance / (link.dist * link.dist);
+            splat(link.pixel, v.beta * f * g);
         }
-        if depth + 1 >= max_depth {
-            break;
-        }
-
-        let bsdf = shading(scene, mat, &hit, surf.p, front);
-        let n = if front { surf.n } else { -surf.n };
-        let (u1, u2) = s.next2();
-        let u3 = if bsdf.needs_third_number() { s.next() } else { 0.0 };
-        let Some(sample) = bsdf.sample(albedo, n, w_l, u1, u2, u3) else { break };
-        beta *= sample.weight * adjoint(&bsdf, n, sample.wi);
-        if depth >= RR_START {
-            let (killed, survivor) = transport::roulette(beta, s.next());
-            if killed {
-                break;
-            }
-            beta = survivor;
-        }
-        if beta == Vec3A::ZERO {
-            break;
-        }
-        ray = Ray { origin: transport::offset(surf.p, n, sample.wi, eps), dir: sample.wi };
-    }
+    });
 }
 
 /// The emitters the camera sees directly (module docs): a point of an area light picked by
@@ -253,25 +208,5 @@ fn seen_directly(scene: &Scene, s: &mut Sampler, splat: &mut impl FnMut(DVec2, V
                 splat(px, le * (w * h) as f32);
             }
         }
-    }
-}
-
-/// The material's model at a hit, for a path on the front (`true`) or back of the surface:
-/// a dielectric seen from inside inverted, a textured roughness applied.
-fn shading(scene: &Scene, mat: &Material, hit: &Hit, p: Vec3A, front: bool) -> Bsdf {
-    let bsdf = mat.bsdf.facing(front);
-    match &mat.roughness {
-        Some(alpha) => bsdf.with_alpha(alpha.eval(scene.uv(hit, p)).x),
-        None => bsdf,
-    }
-}
-
-/// What turns the camera path's sample weight into the light path's: η² for a refraction
-/// through a dielectric of relative index η (module docs), 1 otherwise.
-#[inline]
-fn adjoint(bsdf: &Bsdf, n: Vec3A, wi: Vec3A) -> f32 {
-    match *bsdf {
-        Bsdf::Dielectric { eta } | Bsdf::RoughDielectric { eta, .. } if n.dot(wi) < 0.0 => eta * eta,
-        _ => 1.0,
     }
 }

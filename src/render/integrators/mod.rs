@@ -12,6 +12,7 @@
 //! heuristic.
 
 pub mod light;
+pub mod particle;
 pub mod path;
 pub mod volpath;
 
