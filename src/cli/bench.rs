@@ -1,4 +1,5 @@
-//! `lumen bench`: renderer speed and convergence, and calibration time against OpenCV.
+//! `lumen bench`: renderer speed and convergence, photon lookups, and calibration time against
+//! OpenCV.
 
 use super::{expand_images, parse_board};
 use anyhow::{bail, Context, Result};
@@ -259,6 +260,101 @@ pub fn bench_hdr(list: &Path, exclude: Option<[u16; 3]>, repeat: u32) -> Result<
             merge_s * 1e3,
             pixel_frames / merge_s.max(1e-9),
             fusion_s * 1e3
+        );
+    }
+    Ok(())
+}
+
+/// `lumen bench photons`: the photons of `scene_path` found by the kd-tree, the grid and a
+/// scan (module docs of `render::photons`).
+pub fn bench_photons(scene_path: &Path, counts: &str, k: u32, queries: u32) -> Result<()> {
+    use lumen::render::integrators::photon::trace_photons;
+    use lumen::render::photons::{Index, IndexKind};
+    use std::time::Instant;
+    let scene = render::load(scene_path)?;
+    let settings = render::Settings::from_scene(&scene);
+    let counts: Vec<u64> = counts
+        .split(',')
+        .map(|c| c.trim().parse::<u64>().ok().filter(|n| (1..=100_000_000).contains(n)))
+        .collect::<Option<_>>()
+        .with_context(|| {
+            format!("--counts {counts}: expected photon path counts 1 to 10⁸, comma-separated")
+        })?;
+    if !(1..=10_000).contains(&k) || queries == 0 {
+        bail!("--k {k} / --queries {queries}: expected k from 1 to 10⁴ and at least one query");
+    }
+    // Query points: where camera rays through pixel centres (cycling) first hit.
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let mut at = Vec::new();
+    for i in 0..(w as u64 * h as u64) {
+        let px = glam::DVec2::new((i % w as u64) as f64, (i / w as u64) as f64);
+        if let Some((o, d)) = scene.camera_ray(px) {
+            let ray = render::geometry::Ray {
+                origin: glam::Vec3A::from(o.as_vec3()),
+                dir: glam::Vec3A::from(d.as_vec3()),
+            };
+            if let Some(hit) = scene.bvh.intersect(&ray, 0.0, f32::INFINITY) {
+                at.push(ray.origin + ray.dir * hit.t);
+            }
+        }
+    }
+    if at.is_empty() {
+        bail!("{}: no camera ray meets a surface", scene_path.display());
+    }
+    println!("photons  |  build s (kd-tree, grid)  |  radius queries/s (kd-tree, grid, scan)  |  k-nearest queries/s (kd-tree)  |  found per query");
+    for &count in &counts {
+        let (photons, _) = trace_photons(&scene, &settings, count, 0);
+        let points: Vec<[f32; 3]> = photons.iter().map(|p| p.p.to_array()).collect();
+        let n = points.len();
+        // A radius finding about k photons: the median k-th nearest distance at 256 of the
+        // query points, spread over the image.
+        let tree = Index::build(IndexKind::Kdtree, &points, 1.0).context("indexing the photons")?;
+        let mut r2: Vec<f32> = at
+            .iter()
+            .step_by((at.len() / 256).max(1))
+            .filter_map(|&q| tree.nearest(q, k as usize, f32::MAX).last().map(|x| x.1))
+            .collect();
+        r2.sort_by(f32::total_cmp);
+        let radius = r2.get(r2.len() / 2).copied().unwrap_or(1.0).sqrt();
+        let build = |kind| {
+            let t = Instant::now();
+            let index = Index::build(kind, &points, radius);
+            (index, t.elapsed().as_secs_f64())
+        };
+        let ((Some(kd), kd_build), (Some(grid), grid_build)) =
+            (build(IndexKind::Kdtree), build(IndexKind::Grid))
+        else {
+            bail!("{n} photons: more than an index holds");
+        };
+        let rate = |index: &Index, m: usize| {
+            let t = Instant::now();
+            let mut found = 0u64;
+            for i in 0..m {
+                index.within(at[i % at.len()], radius, |_, _| found += 1);
+            }
+            (m as f64 / t.elapsed().as_secs_f64(), found as f64 / m as f64)
+        };
+        let (kd_rate, per) = rate(&kd, queries as usize);
+        let (grid_rate, _) = rate(&grid, queries as usize);
+        let m = (queries as usize).min(1000);
+        let t = Instant::now();
+        let mut found = 0u64;
+        for i in 0..m {
+            let q = at[i % at.len()];
+            found += points
+                .iter()
+                .filter(|p| glam::Vec3A::from(**p).distance_squared(q) <= radius * radius)
+                .count() as u64;
+        }
+        let scan_rate = m as f64 / t.elapsed().as_secs_f64();
+        std::hint::black_box(found);
+        let t = Instant::now();
+        for i in 0..queries as usize {
+            std::hint::black_box(kd.nearest(at[i % at.len()], k as usize, f32::MAX));
+        }
+        let knn_rate = queries as f64 / t.elapsed().as_secs_f64();
+        println!(
+            "{n:>9}  |  {kd_build:.4} {grid_build:.4}  |  {kd_rate:.3e} {grid_rate:.3e} {scan_rate:.3e}  |  {knn_rate:.3e}  |  {per:.1}"
         );
     }
     Ok(())

@@ -309,6 +309,24 @@ enum Bench {
         #[arg(long, value_parser = parse_threads)]
         threads: Option<usize>,
     },
+    /// Photon lookups: the photons of a scene (default: the Cornell box) found by kiddo's
+    /// kd-tree, by the hashed grid and by a scan, at growing photon counts: build time, and
+    /// fixed-radius queries (radius set so a query finds about `k` photons) and k-nearest
+    /// queries per second, at camera-ray hit points.
+    Photons {
+        /// Scene file (TOML or Mitsuba XML).
+        #[arg(long, default_value = "pipelines/scenes/cornell-box.toml")]
+        scene: PathBuf,
+        /// Photon paths traced, comma-separated (each stores about one photon per bounce).
+        #[arg(long, default_value = "10000,100000,1000000,10000000")]
+        counts: String,
+        /// Photons a query should find.
+        #[arg(long, default_value_t = 50)]
+        k: u32,
+        /// Queries per count (the scan does at most 1000).
+        #[arg(long, default_value_t = 200000)]
+        queries: u32,
+    },
     /// Detection and calibration time on a set of photographs; with the `opencv` feature,
     /// OpenCV's findChessboardCorners + cornerSubPix + calibrateCamera on the same images in
     /// the same run. Images are decoded before timing.
@@ -419,6 +437,9 @@ pub fn main() -> i32 {
         }
         Command::Bench { what: Bench::Convergence { scene, reference, spp, threads } } => {
             bench_convergence(&scene, &reference, &spp, threads).map(|_| 0)
+        }
+        Command::Bench { what: Bench::Photons { scene, counts, k, queries } } => {
+            bench::bench_photons(&scene, &counts, k, queries).map(|_| 0)
         }
         Command::Bench { what: Bench::Calibrate { images, board, repeat } } => {
             bench_calibrate(&images, &board, repeat).map(|_| 0)

@@ -17,6 +17,7 @@ pub mod lanes;
 pub mod media;
 pub mod microfacet;
 pub mod obj;
+pub mod photons;
 pub mod plastic;
 pub mod ply;
 pub mod rough_dielectric;

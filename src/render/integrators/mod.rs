@@ -14,6 +14,8 @@
 pub mod light;
 pub mod particle;
 pub mod path;
+pub mod photon;
+pub mod sppm;
 pub mod volpath;
 
 use super::camera_ray::{camera_direction, camera_ray, needs_lens_sample};
@@ -35,8 +37,11 @@ pub struct Kind {
     /// variance of that mean of every pixel, and counts the samples it dropped.
     pub render: fn(&Scene, &Settings, &mut Film),
     /// Whether it renders participating media; scenes with media are refused otherwise
-    /// (`check`).
+    /// (`refusal`).
     pub media: bool,
+    /// Whether it keeps a time budget itself (its passes build on each other), rather than
+    /// being called in rounds (`render_budgeted`).
+    pub progressive: bool,
 }
 
 /// Every integrator lumen has, by name.
@@ -46,18 +51,35 @@ pub const REGISTRY: &[Kind] = &[
         about: "unidirectional path tracing with next-event estimation and MIS",
         render: path::render,
         media: false,
+        progressive: false,
     },
     Kind {
         name: "volpath",
         about: "path tracing through participating media (delta tracking, light sampling through media)",
         render: volpath::render,
         media: true,
+        progressive: false,
     },
     Kind {
         name: "light",
         about: "light tracing: paths from the lights, every vertex joined to the camera (Mitsuba's ptracer)",
         render: light::render,
         media: false,
+        progressive: false,
+    },
+    Kind {
+        name: "pm",
+        about: "photon mapping: photons from the lights in a kd-tree, density estimation where camera paths meet a diffuse surface",
+        render: photon::render,
+        media: false,
+        progressive: false,
+    },
+    Kind {
+        name: "sppm",
+        about: "stochastic progressive photon mapping: per-pixel radii shrinking pass by pass, consistent",
+        render: sppm::render,
+        media: false,
+        progressive: true,
     },
 ];
 
@@ -99,6 +121,70 @@ pub struct Settings {
     /// Seconds to render for (`render_budgeted`): samples are added in rounds until the next
     /// round would overrun the budget, or `spp` samples are reached. `None`: exactly `spp`.
     pub time_budget: Option<f64>,
+    /// Photon mapping's settings (`pm`, `sppm`).
+    pub photon: PhotonSettings,
+}
+
+/// What photon mapping (`pm`) and progressive photon mapping (`sppm`) take: a scene file's
+/// `[render.photon]` table, `lumen render`'s photon flags, a pipeline case's `photon`.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PhotonSettings {
+    /// Photons traced: in all for `pm` (default 16 per pixel), per pass for `sppm` (default
+    /// one per pixel). At least 1, at most 10⁹.
+    pub count: Option<u64>,
+    /// `pm`: the gather radius in scene units (default: none, the `k` nearest photons);
+    /// `sppm`: the initial radius (default: two pixel footprints at each visible point).
+    /// Finite, over 0, at most 10³⁰.
+    pub radius: Option<f32>,
+    /// `pm`: photons per density estimate when no radius is given (default 50, 1 to 10⁴).
+    pub k: u32,
+    /// `sppm`: the share of new photons a pass keeps, which shrinks the radius (default ⅔;
+    /// Hachisuka & Jensen's α, strictly between 0 and 1).
+    pub alpha: f32,
+    /// `pm`: direct light by light sampling, caustics from their own map and the rest from one
+    /// bounce into the global map (Jensen's final gather), instead of the global map seen
+    /// directly (default false).
+    pub final_gather: bool,
+    /// How photons (`pm`) or visible points (`sppm`) are found: `kdtree` (kiddo's) or `grid`
+    /// (default: each integrator's choice, in its module docs).
+    pub index: Option<super::photons::IndexKind>,
+}
+
+impl Default for PhotonSettings {
+    fn default() -> Self {
+        PhotonSettings {
+            count: None,
+            radius: None,
+            k: 50,
+            alpha: 2.0 / 3.0,
+            final_gather: false,
+            index: Default::default(),
+        }
+    }
+}
+
+impl PhotonSettings {
+    /// Checks every value against its range; the message names the setting.
+    pub fn validate(&self) -> Result<(), String> {
+        if let Some(n) = self.count {
+            if !(1..=1_000_000_000).contains(&n) {
+                return Err(format!("photon count {n}: expected 1 to 10⁹"));
+            }
+        }
+        if let Some(r) = self.radius {
+            if !(r > 0.0 && r <= 1e30) {
+                return Err(format!("photon radius {r}: expected a finite length over 0 (at most 10³⁰)"));
+            }
+        }
+        if !(1..=10_000).contains(&self.k) {
+            return Err(format!("photon k {}: expected 1 to 10⁴ photons per estimate", self.k));
+        }
+        if !(self.alpha > 0.0 && self.alpha < 1.0) {
+            return Err(format!("photon alpha {}: expected a number strictly between 0 and 1", self.alpha));
+        }
+        Ok(())
+    }
 }
 
 impl Settings {
@@ -115,6 +201,7 @@ impl Settings {
             lanes: true,
             first_sample: 0,
             time_budget: None,
+            photon: scene.render.photon,
         }
     }
 }
@@ -203,8 +290,10 @@ fn film_size(scene: &Scene, settings: &Settings) -> (u32, u32) {
 
 fn render_into(scene: &Scene, settings: &Settings, mean: Image, variance: Image) -> Film {
     match settings.time_budget {
-        Some(seconds) => render_budgeted(scene, settings, seconds, mean, variance),
-        None => render_once(scene, settings, mean, variance),
+        Some(seconds) if !settings.integrator.progressive => {
+            render_budgeted(scene, settings, seconds, mean, variance)
+        }
+        _ => render_once(scene, settings, mean, variance),
     }
 }
 

@@ -209,6 +209,9 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
     if file.render.spp == 0 {
         return Err(field_err(path, "render.spp", "must be at least 1"));
     }
+    if let Err(e) = file.render.photon.validate() {
+        return Err(field_err(path, "render.photon", &e));
+    }
     if file.render.max_depth == 0 {
         return Err(field_err(path, "render.max_depth", "must be at least 1"));
     }

@@ -145,6 +145,9 @@ pub struct RenderSpec {
     /// `"gaussian"` (Mitsuba's default rfilter, σ = 0.5 px; `render::filter`).
     #[serde(default)]
     pub filter: super::super::filter::PixelFilter,
+    /// Photon mapping's settings, `[render.photon]` (`render::integrators::PhotonSettings`).
+    #[serde(default)]
+    pub photon: crate::render::integrators::PhotonSettings,
 }
 
 fn default_integrator() -> &'static crate::render::integrators::Kind {
@@ -169,6 +172,7 @@ impl Default for RenderSpec {
             seed: default_seed(),
             sampler: Default::default(),
             filter: Default::default(),
+            photon: Default::default(),
         }
     }
 }
