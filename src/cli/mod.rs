@@ -246,6 +246,27 @@ pub struct RenderArgs {
     /// Longest path in segments (default: the scene's max_depth).
     #[arg(long)]
     pub max_depth: Option<u32>,
+    /// pm: photons traced in all (default 16 per pixel); sppm: per pass (default one per
+    /// pixel). 1 to 10⁹.
+    #[arg(long)]
+    pub photons: Option<u64>,
+    /// pm: the gather radius in scene units (default: the --k nearest photons); sppm: the
+    /// initial radius (default: two pixel footprints).
+    #[arg(long)]
+    pub radius: Option<f32>,
+    /// pm: photons per density estimate without a radius (default 50).
+    #[arg(long)]
+    pub k: Option<u32>,
+    /// sppm: the share of new photons a pass keeps, between 0 and 1 (default 2/3).
+    #[arg(long)]
+    pub alpha: Option<f32>,
+    /// pm: Jensen's final gather (direct light sampled, caustics from their map, one bounce
+    /// into the global map).
+    #[arg(long)]
+    pub final_gather: bool,
+    /// pm, sppm: how points are found, kdtree or grid (default: the integrator's choice).
+    #[arg(long)]
+    pub photon_index: Option<render::photons::IndexKind>,
     /// Seed of every random stream (default: the scene's [render] seed).
     #[arg(long)]
     pub seed: Option<u64>,
@@ -511,6 +532,12 @@ fn render_cmd(a: &RenderArgs) -> Result<()> {
         spp,
         time_budget,
         max_depth,
+        photons,
+        radius,
+        k,
+        alpha,
+        final_gather,
+        photon_index,
         seed,
         threads,
         aov,
@@ -541,6 +568,16 @@ fn render_cmd(a: &RenderArgs) -> Result<()> {
             bail!("--spp must be at least 1");
         }
         settings.spp = s;
+    }
+    let p = &mut settings.photon;
+    p.count = photons.or(p.count);
+    p.radius = radius.or(p.radius);
+    p.k = k.unwrap_or(p.k);
+    p.alpha = alpha.unwrap_or(p.alpha);
+    p.final_gather |= *final_gather;
+    p.index = photon_index.or(p.index);
+    if let Err(e) = p.validate() {
+        bail!("{e} (--photons, --radius, --k, --alpha)");
     }
     if let Some(t) = time_budget {
         settings.time_budget = Some(*t);

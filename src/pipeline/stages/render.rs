@@ -47,6 +47,9 @@ pub struct Config {
     pub spp: Option<u32>,
     /// Longest path in segments (default: the scene's).
     pub max_depth: Option<u32>,
+    /// Photons for `pm` (in all) and `sppm` (per pass) (default: the scene's
+    /// `[render.photon] count`).
+    pub photons: Option<u64>,
     /// Reference render (EXR) and the variance of its mean (EXR), relative to the pipeline
     /// file. When the files are absent the comparison is skipped with a note.
     pub reference: Option<String>,
@@ -97,6 +100,8 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<Input, Truth>, 
     settings.progress = ctx.progress;
     settings.integrator = c.integrator.unwrap_or(settings.integrator);
     apply_overrides(&mut settings, c.spp, c.max_depth)?;
+    settings.photon.count = c.photons.or(settings.photon.count);
+    settings.photon.validate().map_err(|e| StageError::Config(format!("photons: {e}")))?;
     if let Some(e) = c.expect_uniform {
         if !e.iter().all(|v| v.is_finite() && *v > 0.0) {
             return Err(StageError::Config(format!(

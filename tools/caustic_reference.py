@@ -1,0 +1,54 @@
+"""The whole-image reference of tests/data/mitsuba/caustic.xml: Mitsuba 3's particle tracer where
+it converges (everything but the glass seen directly, which no light path reaches the camera
+through) and its path tracer where the camera sees the glass.
+
+Usage: $PEERS_PY tools/caustic_reference.py [--passes 32] [--spp 8192] [--out tests/data/mitsuba]
+Reads caustic.exr / caustic_variance.exr (tools/mitsuba_reference.py caustic: the ptracer) and
+renders the path tracer in `passes` independent renders of `spp` samples; a pixel is the path
+tracer's where any of 8 × 8 rays through its square meets the glass (the sphere's silhouette
+and the pixels it touches), the particle tracer's elsewhere. Writes caustic-full.exr and
+caustic-full_variance.exr (the variance of the mean of whichever render the pixel took). Mitsuba
+comes from the peers virtual environment (../shared/tools/peers-venv.sh), never from lumen's
+dependencies.
+"""
+import argparse, os
+import numpy as np
+import mitsuba as mi
+
+mi.set_variant('llvm_ad_rgb')
+import drjit as dr
+
+a = argparse.ArgumentParser()
+a.add_argument('--passes', type=int, default=32)
+a.add_argument('--spp', type=int, default=8192)
+a.add_argument('--out', default='tests/data/mitsuba')
+o = a.parse_args()
+d = 'tests/data/mitsuba'
+scene = mi.load_file(os.path.join(d, 'caustic.xml'), integrator='path')
+sensor = scene.sensors()[0]
+w, h = sensor.film().crop_size()
+# Which pixels see the glass: 8 × 8 rays through each pixel's square.
+sub = 8
+ys, xs, sy, sx = np.meshgrid(np.arange(h), np.arange(w), np.arange(sub), np.arange(sub), indexing='ij')
+fx = ((xs + (sx + 0.5) / sub) / w).ravel().astype(np.float32)
+fy = ((ys + (sy + 0.5) / sub) / h).ravel().astype(np.float32)
+rays, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(fx, fy), mi.Point2f(0.5, 0.5))
+si = scene.ray_intersect(rays)
+glass = [s for s in scene.shapes() if s.id() == 'glass'][0]
+hits = np.array(si.is_valid() & (si.shape == mi.ShapePtr(glass))).reshape(h, w, sub * sub).any(axis=2)
+mask = hits.copy()
+mask[1:, :] |= hits[:-1, :]
+mask[:-1, :] |= hits[1:, :]
+mask[:, 1:] |= hits[:, :-1]
+mask[:, :-1] |= hits[:, 1:]
+imgs = np.stack([np.array(mi.render(scene, spp=o.spp, seed=100 + k))[..., :3] for k in range(o.passes)])
+path_mean, path_var = imgs.mean(axis=0), imgs.var(axis=0, ddof=1) / o.passes
+pt_mean = np.array(mi.Bitmap(os.path.join(d, 'caustic.exr')))[..., :3]
+pt_var = np.array(mi.Bitmap(os.path.join(d, 'caustic_variance.exr')))[..., :3]
+mean = np.where(mask[..., None], path_mean, pt_mean).astype(np.float32)
+var = np.where(mask[..., None], path_var, pt_var).astype(np.float32)
+mi.util.write_bitmap(os.path.join(o.out, 'caustic-full.exr'), mi.TensorXf(mean), write_async=False)
+mi.util.write_bitmap(os.path.join(o.out, 'caustic-full_variance.exr'), mi.TensorXf(var), write_async=False)
+print(f'caustic-full: {mask.sum()} of {w * h} pixels from {o.passes} × {o.spp} spp of path, mean {mean.reshape(-1, 3).mean(axis=0)}',
+      flush=True)
+os._exit(0)
