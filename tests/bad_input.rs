@@ -311,6 +311,31 @@ fn cli_render_errors_leave_no_output() {
         assert_eq!(code, 2, "{budget}: {err}");
         assert!(err.contains("--time-budget") && err.contains(budget), "{budget}: {err}");
     }
+    // Photon mapping's settings out of their ranges.
+    for (flag, value, words) in [
+        ("--photons", "0", "photon count 0"),
+        ("--photons", "1000000000000000", "photon count"),
+        ("--radius", "0", "photon radius 0"),
+        ("--radius", "NaN", "photon radius NaN"),
+        ("--radius", "1e300", "photon radius inf"),
+        ("--alpha", "0", "photon alpha 0"),
+        ("--alpha", "1.5", "photon alpha 1.5"),
+        ("--k", "0", "photon k 0"),
+    ] {
+        let (code, err) = lumen(&[
+            "render",
+            scene.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--integrator",
+            "sppm",
+            &format!("{flag}={value}"),
+        ]);
+        assert_eq!(code, 1, "{flag} {value}: {err}");
+        assert!(err.contains(words), "{flag} {value}: {err}");
+    }
+    let e = scene_error("[render.photon]\nalpha = 1.0\n", &[]);
+    assert!(e.contains("render.photon") && e.contains("alpha"), "{e}");
     // An integrator that cannot render the scene's media is refused by name.
     let haze = common::root().join("pipelines/scenes/sfm-courtyard-haze.toml");
     let (code, err) =

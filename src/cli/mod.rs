@@ -247,7 +247,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub max_depth: Option<u32>,
     /// pm: photons traced in all (default 16 per pixel); sppm: per pass (default one per
-    /// pixel). 1 to 10⁹.
+    /// pixel). 1 to 10⁸.
     #[arg(long)]
     pub photons: Option<u64>,
     /// pm: the gather radius in scene units (default: the --k nearest photons); sppm: the

@@ -122,6 +122,102 @@ fn light_tracing_is_deterministic_and_crops_exactly() {
     }
 }
 
+/// Photon mapping (with and without the final gather, by the k nearest and by a fixed radius
+/// in the grid and in the kd-tree) and progressive photon mapping against the path tracer on
+/// the Cornell box: channel means within 1 % (both are biased by their kernel's blur, which
+/// the z-test would catch at the box's edges, and SPPM's passes give no variance of the
+/// mean: `integrators::sppm`).
+#[test]
+fn photon_mapping_agrees_with_the_path_tracer_on_average() {
+    use lumen::render::photons::IndexKind;
+    let scene = render::load(&common::root().join("pipelines/scenes/cornell-box.toml")).unwrap();
+    let mut s = common::settings(&scene, 64, 8);
+    s.crop = None;
+    let path = render::render(&scene, &s);
+    let reference = path.mean.channel_means();
+    let base = s.photon;
+    let cases = [
+        ("pm, k nearest", "pm", lumen::render::integrators::PhotonSettings { ..base }, 4),
+        (
+            "pm, final gather",
+            "pm",
+            lumen::render::integrators::PhotonSettings { final_gather: true, ..base },
+            4,
+        ),
+        (
+            "pm, radius, grid",
+            "pm",
+            lumen::render::integrators::PhotonSettings {
+                radius: Some(0.03),
+                index: Some(IndexKind::Grid),
+                ..base
+            },
+            4,
+        ),
+        (
+            "pm, radius, kd-tree",
+            "pm",
+            lumen::render::integrators::PhotonSettings {
+                radius: Some(0.03),
+                index: Some(IndexKind::Kdtree),
+                ..base
+            },
+            4,
+        ),
+        ("sppm", "sppm", base, 64),
+    ];
+    for (what, name, photon, spp) in cases {
+        let mut s = common::settings(&scene, spp, 8);
+        s.integrator = integrators::find(name).unwrap();
+        s.photon = photon;
+        let film = render::try_render(&scene, &s).unwrap();
+        assert!(!film.mean.has_non_finite() && film.dropped_samples == 0, "{what}");
+        for (c, (m, r)) in film.mean.channel_means().iter().zip(&reference).enumerate() {
+            assert!((m / r - 1.0).abs() < 0.01, "{what} channel {c}: mean {m} against the path tracer's {r}");
+        }
+    }
+}
+
+/// Progressive photon mapping is consistent: on the caustic its relMSE over the caustic
+/// against Mitsuba's particle tracer falls from 4 to 16 to 64 passes, and its whole-image
+/// relMSE against the whole-image reference too (the glass seen directly included).
+#[test]
+fn sppm_error_falls_as_passes_grow() {
+    let dir = common::root().join("tests/data/mitsuba");
+    let scene = render::load(&dir.join("caustic.xml")).unwrap();
+    let caustic = lumen::image::io::read_exr(&dir.join("caustic.exr")).unwrap();
+    let full = lumen::image::io::read_exr(&dir.join("caustic-full.exr")).unwrap();
+    let mut last = (f64::INFINITY, f64::INFINITY);
+    for passes in [4, 16, 64] {
+        let mut s = common::settings(&scene, passes, 8);
+        s.integrator = integrators::find("sppm").unwrap();
+        let film = render::try_render(&scene, &s).unwrap();
+        assert_eq!(film.samples, passes);
+        let e = (
+            metrics::relmse(&film.mean, &caustic, Some([58, 48, 90, 66])),
+            metrics::relmse(&film.mean, &full, None),
+        );
+        eprintln!("sppm, {passes} passes: relMSE over the caustic {:.3e}, whole image {:.3e}", e.0, e.1);
+        assert!(e.0 < last.0 && e.1 < last.1, "{passes} passes: {e:?} after {last:?}");
+        last = e;
+    }
+}
+
+/// Photon mapping's images do not depend on the thread count.
+#[test]
+fn photon_mapping_is_deterministic() {
+    let scene = render::load(&common::root().join("tests/data/mitsuba/caustic.xml")).unwrap();
+    for name in ["pm", "sppm"] {
+        let mut s = common::settings(&scene, 4, 8);
+        s.integrator = integrators::find(name).unwrap();
+        s.threads = Some(1);
+        let one = render::render(&scene, &s);
+        s.threads = Some(2);
+        let two = render::render(&scene, &s);
+        assert!(one.mean.data == two.mean.data, "{name}");
+    }
+}
+
 /// A time budget renders in rounds (1, 2, 4, … samples, `first_sample` moving on) whose
 /// merged film is the film of one render of all the samples: with a budget no render can
 /// spend and an 11-sample cap, the same means (to float rounding) and variances, for the path
