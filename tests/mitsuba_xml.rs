@@ -172,7 +172,7 @@ fn malformed_scenes_are_refused_by_element_and_line() {
         (vec![("scene.xml", scene_with("<shape type=\"sphere\"><medium type=\"homogeneous\" name=\"interior\"><phase type=\"hg\"><float name=\"g\" value=\"1\"/></phase></medium></shape>"))], "expected a number in (−1, 1)", BadInput),
         (vec![("scene.xml", scene_with("<shape type=\"sphere\"><medium type=\"homogeneous\"/></shape>"))], "needs name=\"interior\" or name=\"exterior\"", BadInput),
         (vec![("scene.xml", scene_with("<emitter type=\"area\"/>"))], "belongs inside a <shape>", BadInput),
-        (vec![("scene.xml", scene_with("<integrator type=\"ptracer\"/>"))], "integrator \"ptracer\"", Unsupported),
+        (vec![("scene.xml", scene_with("<integrator type=\"aov\"/>"))], "integrator \"aov\"", Unsupported),
         (vec![("scene.xml", scene_with("<shape type=\"sphere\"/><default name=\"x\" value=\"1\"/><shape type=\"cube\"><default name=\"y\" value=\"2\"/></shape>"))], "belongs directly in <scene>", BadInput),
         (
             vec![("scene.xml", scene_with("<shape type=\"sphere\"/><shape type=\"cube\"><transform name=\"to_world\"><rotate angle=\"30\"/></transform></shape>"))],
