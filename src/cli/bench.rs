@@ -265,8 +265,9 @@ pub fn bench_hdr(list: &Path, exclude: Option<[u16; 3]>, repeat: u32) -> Result<
     Ok(())
 }
 
-/// `lumen bench photons`: the photons of `scene_path` found by the kd-tree, the grid and a
-/// scan (module docs of `render::photons`).
+/// `lumen bench photons`: the photon pass's speed, and the photons of `scene_path` found by
+/// the kd-tree, the grid and a scan (module docs of `render::photons`). Queries run on one
+/// thread; the photon pass on all.
 pub fn bench_photons(scene_path: &Path, counts: &str, k: u32, queries: u32) -> Result<()> {
     use lumen::render::integrators::photon::trace_photons;
     use lumen::render::photons::{Index, IndexKind};
@@ -301,9 +302,11 @@ pub fn bench_photons(scene_path: &Path, counts: &str, k: u32, queries: u32) -> R
     if at.is_empty() {
         bail!("{}: no camera ray meets a surface", scene_path.display());
     }
-    println!("photons  |  build s (kd-tree, grid)  |  radius queries/s (kd-tree, grid, scan)  |  k-nearest queries/s (kd-tree)  |  found per query");
+    println!("paths  photons  |  photons/s traced  |  build s (kd-tree, grid)  |  radius queries/s (kd-tree, grid, scan)  |  k-nearest queries/s (kd-tree)  |  found per query");
     for &count in &counts {
+        let t = Instant::now();
         let (photons, _) = trace_photons(&scene, &settings, count, 0);
+        let traced = photons.len() as f64 / t.elapsed().as_secs_f64();
         let points: Vec<[f32; 3]> = photons.iter().map(|p| p.p.to_array()).collect();
         let n = points.len();
         // A radius finding about k photons: the median k-th nearest distance at 256 of the
@@ -354,7 +357,7 @@ pub fn bench_photons(scene_path: &Path, counts: &str, k: u32, queries: u32) -> R
         }
         let knn_rate = queries as f64 / t.elapsed().as_secs_f64();
         println!(
-            "{n:>9}  |  {kd_build:.4} {grid_build:.4}  |  {kd_rate:.3e} {grid_rate:.3e} {scan_rate:.3e}  |  {knn_rate:.3e}  |  {per:.1}"
+            "{count:>9} {n:>9}  |  {traced:.3e}  |  {kd_build:.4} {grid_build:.4}  |  {kd_rate:.3e} {grid_rate:.3e} {scan_rate:.3e}  |  {knn_rate:.3e}  |  {per:.1}"
         );
     }
     Ok(())

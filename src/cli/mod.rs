@@ -330,10 +330,11 @@ enum Bench {
         #[arg(long, value_parser = parse_threads)]
         threads: Option<usize>,
     },
-    /// Photon lookups: the photons of a scene (default: the Cornell box) found by kiddo's
-    /// kd-tree, by the hashed grid and by a scan, at growing photon counts: build time, and
-    /// fixed-radius queries (radius set so a query finds about `k` photons) and k-nearest
-    /// queries per second, at camera-ray hit points.
+    /// Photons: the photon pass's speed (photons stored per second, all cores), and the
+    /// photons of a scene (default: the Cornell box) found by kiddo's kd-tree, by the hashed
+    /// grid and by a scan, at growing photon counts: build time, and fixed-radius queries
+    /// (radius set so a query finds about `k` photons) and k-nearest queries per second on
+    /// one thread, at camera-ray hit points.
     Photons {
         /// Scene file (TOML or Mitsuba XML).
         #[arg(long, default_value = "pipelines/scenes/cornell-box.toml")]
