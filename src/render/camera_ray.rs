@@ -85,6 +85,18 @@ pub fn link_point(scene: &Scene, p: Vec3A, lens_u: (f32, f32)) -> Option<CameraL
     })
 }
 
+/// Where the ray from the world aperture point `aperture` (a pinhole's centre, or a point a
+/// `link_point` drew) towards the world point `p` lands, and its importance: (pixel,
+/// importance), `None` where `link_point` would give none.
+pub fn importance(scene: &Scene, aperture: Vec3A, p: Vec3A) -> Option<(DVec2, f32)> {
+    let pose = &scene.t_world_cam;
+    let to_cam = pose.rotation.transpose();
+    let o = to_cam * (glam::DVec3::from(glam::Vec3::from(aperture)) - pose.translation);
+    let o = glam::DVec3::new(o.x, o.y, 0.0);
+    let v = to_cam * (glam::DVec3::from(glam::Vec3::from(p)) - pose.translation) - o;
+    image_point(scene, o, v).map(|(px, w)| (px, w as f32))
+}
+
 /// The pixel position and importance of the ray from the aperture point `o` along `v`
 /// (camera frame, any length): through the focus-plane point it aims at, with the camera
 /// model's distortion, inverting `camera_direction` and `lens_ray`; `None` off the image.

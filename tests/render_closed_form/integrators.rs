@@ -45,9 +45,14 @@ fn every_integrator_sees_pbrts_analytic_spheres() {
 /// per-pixel z-test (both variances, Šidák at α = 0.01): ≥ 99.75 % of pixel channels pass
 /// and the channel means agree within 1 %.
 fn light_matches_path(name: &str, scene: &Scene, spp: u32, depth: u32) {
+    matches_path("light", name, scene, spp, depth)
+}
+
+/// `light_matches_path` for the integrator `integrator`.
+fn matches_path(integrator: &str, name: &str, scene: &Scene, spp: u32, depth: u32) {
     let mut s = common::settings(scene, spp, depth);
     let path = render::try_render(scene, &s).unwrap();
-    s.integrator = integrators::find("light").unwrap();
+    s.integrator = integrators::find(integrator).unwrap();
     let light = render::try_render(scene, &s).unwrap();
     assert!(!light.mean.has_non_finite() && light.dropped_samples == 0, "{name}");
     let a = metrics::agreement(&light.mean, &light.variance, &path.mean, &path.variance, 0.01).unwrap();
@@ -96,6 +101,71 @@ fn light_tracing_agrees_with_the_path_tracer() {
     let board = render::load(&scenes.join("calib-board-strong-distortion.toml")).unwrap();
     assert!(!board.camera.distortion.is_zero());
     light_matches_path("calib-board-strong-distortion", &board, 16, 2);
+}
+
+/// Bidirectional path tracing against the path tracer by the same z-test: the Cornell box,
+/// through the gaussian filter, the glossy spheres (rough conductors, a small area light),
+/// the Cornell box through a thin lens, and the caustic, where the light tracer's strategies
+/// carry the caustic (against Mitsuba's particle tracer, outside the glass). Scenes with an
+/// environment or a directional light are refused by name.
+#[test]
+fn bdpt_agrees_with_the_path_tracer() {
+    let root = common::root();
+    let scenes = root.join("pipelines/scenes");
+    let cornell = render::load(&scenes.join("cornell-box.toml")).unwrap();
+    matches_path("bdpt", "cornell-box", &cornell, 32, 8);
+    let params = [("rfilter".to_string(), "gaussian".to_string()), ("res".to_string(), "64".to_string())];
+    let gaussian =
+        render::scene::load_mitsuba(&root.join("tests/data/mitsuba/cornell-box.xml"), &params).unwrap();
+    matches_path("bdpt", "cornell-box.xml (gaussian filter)", &gaussian, 256, 8);
+    let glossy = render::load(&scenes.join("glossy-spheres.toml")).unwrap();
+    matches_path("bdpt", "glossy-spheres", &glossy, 256, 6);
+    let text = std::fs::read_to_string(scenes.join("cornell-box.toml")).unwrap();
+    let lens = text
+        .replace("[camera]\n", "[camera]\naperture_radius = 0.1\nfocus_distance = 3.0\n")
+        .replace("width = 256\nheight = 256", "width = 64\nheight = 64")
+        .replace("../../", &format!("{}/", root.display()));
+    assert!(lens.contains("aperture_radius") && lens.contains("width = 64"));
+    let dir = tempfile::tempdir().unwrap();
+    let lens = common::scene(&lens, dir.path()).unwrap();
+    assert!(lens.lens.is_some());
+    matches_path("bdpt", "cornell-box through a thin lens", &lens, 256, 8);
+    // The caustic against Mitsuba's particle tracer, outside the pixels that see the glass:
+    // there light goes light → glass → floor → glass → camera, a path with a diffuse vertex
+    // between two delta ones, which no join can make, so only the camera subpath finds it (as
+    // a path tracer does, with a tail both variance estimates miss).
+    let mitsuba = root.join("tests/data/mitsuba");
+    let caustic = render::load(&mitsuba.join("caustic.xml")).unwrap();
+    let mut s = common::settings(&caustic, 1024, 8);
+    s.integrator = integrators::find("bdpt").unwrap();
+    let mut film = render::try_render(&caustic, &s).unwrap();
+    let read = |name: &str| lumen::image::io::read_exr(&mitsuba.join(name)).unwrap();
+    let (full, ptracer, full_var) =
+        (read("caustic-full.exr"), read("caustic.exr"), read("caustic-full_variance.exr"));
+    let mut var = full_var.clone();
+    let mut glass = 0;
+    for px in 0..full.data.len() / 3 {
+        // caustic-full.exr takes the path tracer's pixels where the glass is seen.
+        if (0..3).any(|c| full.data[3 * px + c] != ptracer.data[3 * px + c]) {
+            glass += 1;
+            for c in 3 * px..3 * px + 3 {
+                film.mean.data[c] = full.data[c];
+                film.variance.data[c] = 0.0;
+                var.data[c] = 0.0;
+            }
+        }
+    }
+    assert!(glass > 500, "{glass} pixels see the glass");
+    let a = metrics::agreement(&film.mean, &film.variance, &full, &var, 0.01).unwrap();
+    let pass = 1.0 - a.failed as f64 / (a.tested - 3 * glass) as f64;
+    eprintln!("caustic, outside the glass: {a:?}, {pass:.5} pass");
+    assert!(a.mean_rel_err.iter().all(|e| e.abs() < 0.01), "caustic: {a:?}");
+    assert!(pass >= 0.9975, "caustic: {} of {} pixel channels fail", a.failed, a.tested - 3 * glass);
+    let envmap = render::load(&scenes.join("envmap-spheres.toml")).unwrap();
+    let mut s = common::settings(&envmap, 1, 4);
+    s.integrator = integrators::find("bdpt").unwrap();
+    let e = render::try_render(&envmap, &s).err().expect("refused").to_string();
+    assert!(e.contains("\"bdpt\"") && e.contains("environment"), "{e}");
 }
 
 /// The light tracer's image does not depend on the thread count, and a crop holds exactly
@@ -203,11 +273,12 @@ fn sppm_error_falls_as_passes_grow() {
     }
 }
 
-/// Photon mapping's images do not depend on the thread count.
+/// Photon mapping's and bidirectional path tracing's images do not depend on the thread
+/// count.
 #[test]
-fn photon_mapping_is_deterministic() {
+fn photon_mapping_and_bdpt_are_deterministic() {
     let scene = render::load(&common::root().join("tests/data/mitsuba/caustic.xml")).unwrap();
-    for name in ["pm", "sppm"] {
+    for name in ["pm", "sppm", "bdpt"] {
         let mut s = common::settings(&scene, 4, 8);
         s.integrator = integrators::find(name).unwrap();
         s.threads = Some(1);

@@ -58,6 +58,17 @@ const STREAM: u64 = 0x6c69_6768_7470_7468;
 type Splat = (u32, [f32; 3]);
 
 pub fn render(scene: &Scene, settings: &Settings, film: &mut Film) {
+    splat_passes(scene, settings, film, |path, pass, splat| trace(scene, settings, path, pass, splat));
+}
+
+/// Fills the film with `spp` passes of one light path per image pixel, `trace(path, pass,
+/// splat)` splatting each path's contributions (module docs: batches, variance, order).
+pub fn splat_passes(
+    scene: &Scene,
+    settings: &Settings,
+    film: &mut Film,
+    trace: impl Fn(u64, u64, &mut dyn FnMut(DVec2, Vec3A)) + Sync,
+) {
     let paths = scene.camera.width as u64 * scene.camera.height as u64;
     let pixels = film.mean.width as usize * film.mean.height as usize;
     let spp = settings.spp as u64;
@@ -86,7 +97,7 @@ pub fn render(scene: &Scene, settings: &Settings, film: &mut Film) {
                     let mut lost = 0;
                     for g in c..(c + CHUNK).min(end) {
                         let (pass, path) = (settings.first_sample as u64 + first + g / paths, g % paths);
-                        trace(scene, settings, path, pass, &mut |px, v| {
+                        trace(path, pass, &mut |px, v| {
                             splat(scene, film_window(film), px, v, &mut out, &mut lost)
                         });
                     }
@@ -161,7 +172,7 @@ fn splat(
 }
 
 /// Light path `path` of pass `pass`: every contribution it makes, as (image position, value).
-fn trace(scene: &Scene, settings: &Settings, path: u64, pass: u64, splat: &mut impl FnMut(DVec2, Vec3A)) {
+fn trace(scene: &Scene, settings: &Settings, path: u64, pass: u64, splat: &mut dyn FnMut(DVec2, Vec3A)) {
     let mut s = Sampler::with_kind(settings.sampler, settings.seed ^ STREAM, path, pass);
     seen_directly(scene, &mut s, splat);
     walk(scene, &mut s, settings.max_depth, |v, s| {
@@ -183,7 +194,7 @@ fn trace(scene: &Scene, settings: &Settings, path: u64, pass: u64, splat: &mut i
 /// The emitters the camera sees directly (module docs): a point of an area light picked by
 /// power, joined to the camera; and the environment through a camera ray from a position
 /// uniform over the image.
-fn seen_directly(scene: &Scene, s: &mut Sampler, splat: &mut impl FnMut(DVec2, Vec3A)) {
+fn seen_directly(scene: &Scene, s: &mut Sampler, splat: &mut dyn FnMut(DVec2, Vec3A)) {
     let (u_pick, u, u_lens) = (s.next(), s.next2(), s.next2());
     if let Some((i, p_pick, _)) = scene.pick_light(u_pick) {
         if let Light::Area { prim, radiance, area } = scene.lights[i] {

@@ -97,7 +97,7 @@ pub fn shading(scene: &Scene, mat: &Material, hit: &Hit, p: Vec3A, front: bool) 
 /// What turns the camera path's sample weight into the light path's: η² for a refraction
 /// through a dielectric of relative index η (module docs), 1 otherwise.
 #[inline]
-fn adjoint(bsdf: &Bsdf, n: Vec3A, wi: Vec3A) -> f32 {
+pub fn adjoint(bsdf: &Bsdf, n: Vec3A, wi: Vec3A) -> f32 {
     match *bsdf {
         Bsdf::Dielectric { eta } | Bsdf::RoughDielectric { eta, .. } if n.dot(wi) < 0.0 => eta * eta,
         _ => 1.0,

@@ -521,7 +521,12 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
             ));
         }
     }
-    if let Some(why) = super::super::integrators::refusal(file.render.integrator, !media.is_empty()) {
+    let infinite = file
+        .lights
+        .iter()
+        .any(|l| matches!(l, LightSpec::Directional { .. } | LightSpec::Environment { .. }));
+    if let Some(why) = super::super::integrators::refusal(file.render.integrator, !media.is_empty(), infinite)
+    {
         return Err(field_err(path, "render.integrator", &why));
     }
     let info: Vec<PrimInfo> = bvh

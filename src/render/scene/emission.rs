@@ -29,6 +29,11 @@ use std::f32::consts::PI;
 #[derive(Clone, Copy, Debug)]
 pub struct Emission {
     pub ray: Ray,
+    /// The point on the light it left (before the ray's offset off an area light) and the
+    /// light's normal there (zero for point and spot lights; the travel direction for
+    /// directional and environment light).
+    pub p: Vec3A,
+    pub n: Vec3A,
     /// The ray's flux weight, W.
     pub beta: Vec3A,
     /// The light it left, by index in `Scene::lights`.
@@ -40,10 +45,12 @@ impl Scene {
     /// with `u_dir`); `None` without lights or where the ray carries nothing.
     pub fn sample_emission(&self, u_pick: f32, u_pos: (f32, f32), u_dir: (f32, f32)) -> Option<Emission> {
         let (i, p_pick, _) = self.pick_light(u_pick)?;
+        let mut at = None;
         let (origin, dir, beta) = match self.lights[i] {
             Light::Area { prim, radiance, area } => {
                 let (y, n) = self.area_light_point(prim, u_pos);
                 let dir = transport::cosine_hemisphere(n, u_dir.0, u_dir.1);
+                at = Some((y, n));
                 (transport::offset(y, n, dir, transport::epsilon(y)), dir, radiance * (PI * area / p_pick))
             }
             Light::Point { position, intensity } => {
@@ -66,8 +73,14 @@ impl Scene {
                 (self.disk_point(w, u_pos), -w, le * (PI * r * r / (pdf * p_pick)))
             }
         };
+        let (p, n) = at.unwrap_or(match self.lights[i] {
+            Light::Point { .. } | Light::Spot { .. } => (origin, Vec3A::ZERO),
+            _ => (origin, dir),
+        });
         (beta.max_element() > 0.0 && beta.is_finite()).then_some(Emission {
             ray: Ray { origin, dir },
+            p,
+            n,
             beta,
             light: i,
         })
