@@ -517,3 +517,22 @@ fn disk_cell(o: Vec3A, scene: &Scene, (t, b, axis): (Vec3A, Vec3A, Vec3A), nt: u
     ((rho2 * nt as f64) as usize).min(nt - 1) * np
         + ((phi / (2.0 * std::f64::consts::PI) * np as f64) as usize).min(np - 1)
 }
+
+/// The integrator a render case gets when it names none: `sppm` where a delta surface, a
+/// small light and a diffuse receiver make a caustic, the path tracer elsewhere (no delta
+/// surface; glass under a sky, a light too large to need a caustic-capable integrator).
+#[test]
+fn caustic_scenes_choose_a_caustic_capable_integrator() {
+    let scenes = common::root().join("pipelines/scenes");
+    for (file, expected) in [
+        ("cornell-glass.toml", "sppm"),
+        ("cornell-box.toml", "path"),
+        ("glass-environment.toml", "path"),
+        ("glossy-spheres.toml", "path"),
+    ] {
+        let scene = render::load(&scenes.join(file)).unwrap();
+        let (kind, why) = integrators::choose(&scene);
+        assert_eq!(kind.name, expected, "{file}: {why}");
+        assert!(why.contains(expected), "{file}: {why}");
+    }
+}

@@ -41,7 +41,9 @@ pub struct Config {
     /// Scene file, relative to the pipeline file.
     pub scene: String,
     /// The light-transport algorithm by name, `render::integrators::REGISTRY` (default: the
-    /// scene's `[render] integrator`).
+    /// scene's `[render] integrator`, or `sppm` where that is the path tracer and the scene
+    /// has a caustic: `render::integrators::choose`, whose choice and reason the report
+    /// notes).
     pub integrator: Option<&'static render::integrators::Kind>,
     /// Samples per pixel (default: the scene's).
     pub spp: Option<u32>,
@@ -98,7 +100,15 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<Input, Truth>, 
     let mut settings = render::Settings::from_scene(&scene);
     settings.seed = ctx.seed;
     settings.progress = ctx.progress;
-    settings.integrator = c.integrator.unwrap_or(settings.integrator);
+    let mut found = Findings::default();
+    settings.integrator = match c.integrator {
+        Some(kind) => kind,
+        None => {
+            let (kind, why) = render::integrators::choose(&scene);
+            found.notes.push(format!("integrator chosen: {why}."));
+            kind
+        }
+    };
     apply_overrides(&mut settings, c.spp, c.max_depth)?;
     settings.photon.count = c.photons.or(settings.photon.count);
     settings.photon.validate().map_err(|e| StageError::Config(format!("photons: {e}")))?;
@@ -155,7 +165,6 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<Input, Truth>, 
             return Err(StageError::Config(format!("reference {}: holds non-finite pixels", path.display())));
         }
     }
-    let mut found = Findings::default();
     if scene.lights.is_empty() {
         found.notes.push(format!(
             "{}: the scene has no light (or only black emitters): the image is black.",

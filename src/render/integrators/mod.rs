@@ -283,6 +283,56 @@ pub fn refusal(kind: &Kind, media: bool, infinite_lights: bool) -> Option<String
     })
 }
 
+/// The integrator a scene needs, and why, for a pipeline render case that names none: the
+/// scene's own, unless that is the path tracer and the scene has a caustic a camera path
+/// would find only by chance: a delta surface (mirror, glass) with a small light (a point or
+/// spot light, or emitters whose area is below 1 % of the cross-section of the scene's
+/// bounding sphere) and a diffuse surface to receive it. Such scenes take `sppm`, which
+/// renders the caustic and what the glass shows of it, and lights at infinity too.
+pub fn choose(scene: &Scene) -> (&'static Kind, String) {
+    use super::scene::Light;
+    let own = scene.render.integrator;
+    if own != DEFAULT {
+        return (own, format!("the scene's own integrator, `{}`", own.name));
+    }
+    let material = |i: usize| &scene.materials[scene.info[i].material as usize];
+    let delta = (0..scene.info.len()).find(|&i| {
+        let b = &material(i).bsdf;
+        b.is_delta() && !matches!(b, super::bsdf::Bsdf::Null)
+    });
+    let diffuse =
+        (0..scene.info.len()).any(|i| !material(i).bsdf.is_delta() && material(i).emission.is_none());
+    let emitting: f32 =
+        scene.lights.iter().map(|l| if let Light::Area { area, .. } = l { *area } else { 0.0 }).sum();
+    let cross = std::f32::consts::PI * scene.bounds_radius * scene.bounds_radius;
+    let point = scene.lights.iter().any(|l| matches!(l, Light::Point { .. } | Light::Spot { .. }));
+    let small = point || (emitting > 0.0 && emitting < 0.01 * cross);
+    match delta {
+        Some(i) if small && diffuse => {
+            let sppm = find("sppm").unwrap_or(DEFAULT);
+            let light = if point {
+                "a point or spot light".to_string()
+            } else {
+                format!("emitters of {:.2} % of the scene's cross-section", 100.0 * emitting / cross)
+            };
+            (
+                sppm,
+                format!(
+                    "`sppm`: {light} and a delta surface (material `{}`) before diffuse ones make a caustic, which a camera path finds only by chance",
+                    material(i).name
+                ),
+            )
+        }
+        Some(_) if !small => (
+            own,
+            "`path`: the scene's lights are large, so a camera path finds them through its delta surfaces"
+                .into(),
+        ),
+        Some(_) => (own, "`path`: no diffuse surface receives what the delta surfaces focus".into()),
+        None => (own, "`path`: no delta surface (mirror, glass) to focus light into caustics".into()),
+    }
+}
+
 /// Whether the scene has a light at infinity (environment, directional).
 pub fn has_infinite_lights(scene: &Scene) -> bool {
     scene.lights.iter().any(|l| {
