@@ -239,7 +239,7 @@ fn camera_strategies(
 fn camera_subpath(scene: &Scene, settings: &Settings, ray: Ray, s: &mut Sampler) -> Vec<Vertex> {
     let mut path = vec![Vertex::point(Role::Camera, ray.origin, Vec3A::ZERO)];
     let pdf_dir = camera_pdf(scene, ray.origin, ray.origin + ray.dir);
-    extend(scene, settings, ray, Vec3A::ONE, pdf_dir, false, s, &mut path, settings.max_depth as usize + 1);
+    extend(scene, ray, Vec3A::ONE, pdf_dir, false, s, &mut path, settings.max_depth as usize + 1);
     path
 }
 
@@ -252,7 +252,7 @@ fn light_subpath(scene: &Scene, settings: &Settings, s: &mut Sampler) -> Vec<Ver
     v.delta = matches!(scene.lights[e.light], Light::Point { .. } | Light::Spot { .. });
     v.pdf_fwd = scene.pick_probability(e.light) * pdf_pos;
     let mut path = vec![v];
-    extend(scene, settings, e.ray, e.beta, pdf_dir, true, s, &mut path, settings.max_depth as usize);
+    extend(scene, e.ray, e.beta, pdf_dir, true, s, &mut path, settings.max_depth as usize);
     path
 }
 
@@ -261,7 +261,6 @@ fn light_subpath(scene: &Scene, settings: &Settings, s: &mut Sampler) -> Vec<Ver
 #[allow(clippy::too_many_arguments)]
 fn extend(
     scene: &Scene,
-    settings: &Settings,
     mut ray: Ray,
     mut beta: Vec3A,
     mut pdf_dir: f32,
@@ -270,7 +269,6 @@ fn extend(
     path: &mut Vec<Vertex>,
     max_vertices: usize,
 ) {
-    let _ = settings;
     while path.len() < max_vertices {
         let Some(hit) = scene.bvh.intersect(&ray, 0.0, f32::INFINITY) else { break };
         let surf = scene.surface(&ray, &hit);
