@@ -33,6 +33,7 @@
 //! table (two buckets per photon) outgrows the caches (docs/measurements.md); `index`
 //! chooses either.
 
+use super::super::bsdf::Bsdf;
 use super::super::film::{pixel_stats, Film};
 use super::super::geometry::Ray;
 use super::super::photons::{Index, IndexKind};
@@ -99,7 +100,7 @@ impl PhotonMap {
     #[allow(clippy::too_many_arguments)]
     pub fn radiance(
         &self,
-        bsdf: &super::super::bsdf::Bsdf,
+        bsdf: &Bsdf,
         albedo: Vec3A,
         x: Vec3A,
         n: Vec3A,
@@ -203,110 +204,107 @@ pub fn render(scene: &Scene, settings: &Settings, film: &mut Film) {
 }
 
 /// Radiance along a camera ray (module docs).
-fn radiance(scene: &Scene, settings: &Settings, maps: &Maps, mut ray: Ray, s: &mut Sampler) -> Vec3A {
+fn radiance(scene: &Scene, settings: &Settings, maps: &Maps, ray: Ray, s: &mut Sampler) -> Vec3A {
     let ps = &settings.photon;
-    let mut beta = Vec3A::ONE;
     let mut l = Vec3A::ZERO;
-    for _ in 0..settings.max_depth {
-        let Some(hit) = scene.bvh.intersect(&ray, 0.0, f32::INFINITY) else {
-            if let Some((le, _)) = scene.environment(ray.dir) {
-                l += beta * le;
+    let Some(x) = first_diffuse(scene, settings.max_depth, ray, s, Some(&mut l)) else { return l };
+    let estimate = |map: &PhotonMap| {
+        map.radiance(&x.bsdf, x.albedo, x.p, x.n, x.wo, ps.radius, ps.k, scene.bounds_radius)
+    };
+    match &maps.caustic {
+        None => l += x.beta * estimate(&maps.global),
+        Some(caustic) => {
+            l += x.beta * direct(scene, &x, s);
+            l += x.beta * estimate(caustic);
+            // One bounce into the global map.
+            let (u1, u2) = s.next2();
+            let u3 = if x.bsdf.needs_third_number() { s.next() } else { 0.0 };
+            if let Some(b) = x.bsdf.sample(x.albedo, x.n, x.wo, u1, u2, u3) {
+                let origin = transport::offset(x.p, x.n, b.wi, epsilon(x.p));
+                l += x.beta * b.weight * gather(scene, settings, maps, Ray { origin, dir: b.wi }, s);
             }
-            break;
+        }
+    }
+    l
+}
+
+/// The first surface other than a delta one a camera ray reaches through delta bounces
+/// (mirrors, glass): where photon mapping estimates radiance.
+#[derive(Clone, Copy)]
+pub struct Diffuse {
+    pub p: Vec3A,
+    /// The normal on ωo's side.
+    pub n: Vec3A,
+    pub wo: Vec3A,
+    pub albedo: Vec3A,
+    /// The throughput of the delta bounces before it.
+    pub beta: Vec3A,
+    pub bsdf: Bsdf,
+}
+
+/// Follows `ray` through delta bounces to the first other surface, adding to `emitted`
+/// (when given) the emitters and environment it meets on the way, that surface's own emission
+/// included, as the path tracer counts them; `None` where the path leaves the scene, ends
+/// on a one-sided surface's back or runs out of depth.
+pub fn first_diffuse(
+    scene: &Scene,
+    max_depth: u32,
+    mut ray: Ray,
+    s: &mut Sampler,
+    mut emitted: Option<&mut Vec3A>,
+) -> Option<Diffuse> {
+    let mut beta = Vec3A::ONE;
+    for _ in 0..max_depth {
+        let Some(hit) = scene.bvh.intersect(&ray, 0.0, f32::INFINITY) else {
+            if let (Some(l), Some((le, _))) = (emitted.as_deref_mut(), scene.environment(ray.dir)) {
+                *l += beta * le;
+            }
+            return None;
         };
         let surf = scene.surface(&ray, &hit);
         let mat = &scene.materials[surf.material as usize];
         let wo = -ray.dir;
         let front = surf.n.dot(wo) >= 0.0;
-        if let Some(le) = mat.emission {
-            if front {
-                l += beta * le;
-            }
+        if let (Some(l), Some(le), true) = (emitted.as_deref_mut(), mat.emission, front) {
+            *l += beta * le;
         }
         if !front && mat.one_sided {
-            break;
+            return None;
         }
         let n = if front { surf.n } else { -surf.n };
         let albedo = scene.albedo(surf.material, &hit, surf.p);
         let bsdf = shading(scene, mat, &hit, surf.p, front);
         if !bsdf.is_delta() {
-            let estimate =
-                |map: &PhotonMap, x: Vec3A, n: Vec3A, wo: Vec3A, bsdf: &super::super::bsdf::Bsdf, kd| {
-                    map.radiance(bsdf, kd, x, n, wo, ps.radius, ps.k, scene.bounds_radius)
-                };
-            match &maps.caustic {
-                None => l += beta * estimate(&maps.global, surf.p, n, wo, &bsdf, albedo),
-                Some(caustic) => {
-                    l += beta * direct(scene, &bsdf, albedo, surf.p, n, wo, s);
-                    l += beta * estimate(caustic, surf.p, n, wo, &bsdf, albedo);
-                    // One bounce into the global map.
-                    let (u1, u2) = s.next2();
-                    let u3 = if bsdf.needs_third_number() { s.next() } else { 0.0 };
-                    if let Some(b) = bsdf.sample(albedo, n, wo, u1, u2, u3) {
-                        let origin = transport::offset(surf.p, n, b.wi, epsilon(surf.p));
-                        let gathered = gather(scene, settings, maps, Ray { origin, dir: b.wi }, s);
-                        l += beta * b.weight * gathered;
-                    }
-                }
-            }
-            break;
+            return Some(Diffuse { p: surf.p, n, wo, albedo, beta, bsdf });
         }
         let (u1, u2) = s.next2();
-        let Some(b) = bsdf.sample(albedo, n, wo, u1, u2, 0.0) else { break };
+        let b = bsdf.sample(albedo, n, wo, u1, u2, 0.0)?;
         beta *= b.weight;
         ray = Ray { origin: transport::offset(surf.p, n, b.wi, epsilon(surf.p)), dir: b.wi };
     }
-    l
+    None
 }
 
 /// Direct light at x by one light sample (no emitter a BSDF sample finds is counted with it).
-fn direct(
-    scene: &Scene,
-    bsdf: &super::super::bsdf::Bsdf,
-    albedo: Vec3A,
-    x: Vec3A,
-    n: Vec3A,
-    wo: Vec3A,
-    s: &mut Sampler,
-) -> Vec3A {
-    let Some((li, wi, dist, _)) = scene.sample_light(s.next2(), x) else { return Vec3A::ZERO };
-    let cos = n.dot(wi);
-    if !(cos > 0.0 || (cos < 0.0 && bsdf.transmits())) {
+pub fn direct(scene: &Scene, x: &Diffuse, s: &mut Sampler) -> Vec3A {
+    let Some((li, wi, dist, _)) = scene.sample_light(s.next2(), x.p) else { return Vec3A::ZERO };
+    let cos = x.n.dot(wi);
+    if !(cos > 0.0 || (cos < 0.0 && x.bsdf.transmits())) {
         return Vec3A::ZERO;
     }
-    let side = if cos > 0.0 { n } else { -n };
-    if !scene.unoccluded(x + side * epsilon(x), x, wi, dist) {
+    let side = if cos > 0.0 { x.n } else { -x.n };
+    if !scene.unoccluded(x.p + side * epsilon(x.p), x.p, wi, dist) {
         return Vec3A::ZERO;
     }
-    bsdf.eval(albedo, n, wo, wi) * cos.abs() * li
+    x.bsdf.eval(x.albedo, x.n, x.wo, wi) * cos.abs() * li
 }
 
 /// The global map's radiance at the first surface other than a delta one that `ray` reaches
 /// through delta bounces; emitters found on the way are left out (light sampling and the
 /// caustic map counted them).
-fn gather(scene: &Scene, settings: &Settings, maps: &Maps, mut ray: Ray, s: &mut Sampler) -> Vec3A {
+fn gather(scene: &Scene, settings: &Settings, maps: &Maps, ray: Ray, s: &mut Sampler) -> Vec3A {
     let ps = &settings.photon;
-    let mut beta = Vec3A::ONE;
-    for _ in 0..settings.max_depth {
-        let Some(hit) = scene.bvh.intersect(&ray, 0.0, f32::INFINITY) else { break };
-        let surf = scene.surface(&ray, &hit);
-        let mat = &scene.materials[surf.material as usize];
-        let wo = -ray.dir;
-        let front = surf.n.dot(wo) >= 0.0;
-        if !front && mat.one_sided {
-            break;
-        }
-        let n = if front { surf.n } else { -surf.n };
-        let albedo = scene.albedo(surf.material, &hit, surf.p);
-        let bsdf = shading(scene, mat, &hit, surf.p, front);
-        if !bsdf.is_delta() {
-            return beta
-                * maps.global.radiance(&bsdf, albedo, surf.p, n, wo, ps.radius, ps.k, scene.bounds_radius);
-        }
-        let (u1, u2) = s.next2();
-        let Some(b) = bsdf.sample(albedo, n, wo, u1, u2, 0.0) else { break };
-        beta *= b.weight;
-        ray = Ray { origin: transport::offset(surf.p, n, b.wi, epsilon(surf.p)), dir: b.wi };
-    }
-    Vec3A::ZERO
+    first_diffuse(scene, settings.max_depth, ray, s, None).map_or(Vec3A::ZERO, |x| {
+        x.beta * maps.global.radiance(&x.bsdf, x.albedo, x.p, x.n, x.wo, ps.radius, ps.k, scene.bounds_radius)
+    })
 }

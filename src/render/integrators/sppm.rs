@@ -30,14 +30,14 @@
 //! (the render stage's relMSE) instead. With a time budget, passes run until the next would
 //! overrun it.
 
-use super::super::bsdf::Bsdf;
 use super::super::film::Film;
 use super::super::geometry::Ray;
 use super::super::photons::{Index, IndexKind};
 use super::super::sampler::Sampler;
 use super::super::scene::Scene;
-use super::super::transport::{self, epsilon};
-use super::particle::{shading, walk};
+
+use super::particle::walk;
+use super::photon::{direct, first_diffuse, Diffuse};
 use super::{camera_path, Settings};
 use glam::Vec3A;
 use rayon::prelude::*;
@@ -48,17 +48,9 @@ const STREAM: u64 = 0x7370_706d_7068_6f74;
 /// Photon paths a worker traces at a time.
 const CHUNK: u64 = 4096;
 
-/// A pixel's visible point in this pass.
-#[derive(Clone, Copy)]
-struct Visible {
-    p: Vec3A,
-    /// The normal on ωo's side.
-    n: Vec3A,
-    wo: Vec3A,
-    albedo: Vec3A,
-    beta: Vec3A,
-    bsdf: Bsdf,
-}
+/// A pixel's visible point in this pass: its camera path's first surface other than a delta
+/// one.
+type Visible = Diffuse;
 
 /// A pixel's progressive state.
 #[derive(Clone, Copy, Default)]
@@ -180,50 +172,13 @@ pub fn render(scene: &Scene, settings: &Settings, film: &mut Film) {
 }
 
 /// The camera path of a pass: (emission and direct light it gathered, the visible point).
-fn camera(scene: &Scene, settings: &Settings, mut ray: Ray, s: &mut Sampler) -> (Vec3A, Option<Visible>) {
-    let mut beta = Vec3A::ONE;
+fn camera(scene: &Scene, settings: &Settings, ray: Ray, s: &mut Sampler) -> (Vec3A, Option<Visible>) {
     let mut l = Vec3A::ZERO;
-    for _ in 0..settings.max_depth {
-        let Some(hit) = scene.bvh.intersect(&ray, 0.0, f32::INFINITY) else {
-            if let Some((le, _)) = scene.environment(ray.dir) {
-                l += beta * le;
-            }
-            break;
-        };
-        let surf = scene.surface(&ray, &hit);
-        let mat = &scene.materials[surf.material as usize];
-        let wo = -ray.dir;
-        let front = surf.n.dot(wo) >= 0.0;
-        if let Some(le) = mat.emission {
-            if front {
-                l += beta * le;
-            }
-        }
-        if !front && mat.one_sided {
-            break;
-        }
-        let n = if front { surf.n } else { -surf.n };
-        let albedo = scene.albedo(surf.material, &hit, surf.p);
-        let bsdf = shading(scene, mat, &hit, surf.p, front);
-        if !bsdf.is_delta() {
-            // Direct light by one light sample.
-            if let Some((li, wi, dist, _)) = scene.sample_light(s.next2(), surf.p) {
-                let cos = n.dot(wi);
-                if cos > 0.0 || (cos < 0.0 && bsdf.transmits()) {
-                    let side = if cos > 0.0 { n } else { -n };
-                    if scene.unoccluded(surf.p + side * epsilon(surf.p), surf.p, wi, dist) {
-                        l += beta * bsdf.eval(albedo, n, wo, wi) * cos.abs() * li;
-                    }
-                }
-            }
-            return (l, Some(Visible { p: surf.p, n, wo, albedo, beta, bsdf }));
-        }
-        let (u1, u2) = s.next2();
-        let Some(b) = bsdf.sample(albedo, n, wo, u1, u2, 0.0) else { break };
-        beta *= b.weight;
-        ray = Ray { origin: transport::offset(surf.p, n, b.wi, epsilon(surf.p)), dir: b.wi };
+    let visible = first_diffuse(scene, settings.max_depth, ray, s, Some(&mut l));
+    if let Some(v) = &visible {
+        l += v.beta * direct(scene, v, s);
     }
-    (l, None)
+    (l, visible)
 }
 
 /// Two pixel footprints at `p`: twice the width one pixel covers at p's distance from the
