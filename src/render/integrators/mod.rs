@@ -184,22 +184,30 @@ impl Default for PhotonSettings {
 
 impl PhotonSettings {
     /// Checks every value against its range; the message names the setting.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), crate::error::Invalid> {
         if let Some(n) = self.count {
             if !(1..=100_000_000).contains(&n) {
-                return Err(format!("photon count {n}: expected 1 to 10⁸"));
+                return Err(crate::error::Invalid(format!("photon count {n}: expected 1 to 10⁸")));
             }
         }
         if let Some(r) = self.radius {
             if !(r > 0.0 && r <= 1e30) {
-                return Err(format!("photon radius {r}: expected a finite length over 0 (at most 10³⁰)"));
+                return Err(crate::error::Invalid(format!(
+                    "photon radius {r}: expected a finite length over 0 (at most 10³⁰)"
+                )));
             }
         }
         if !(1..=10_000).contains(&self.k) {
-            return Err(format!("photon k {}: expected 1 to 10⁴ photons per estimate", self.k));
+            return Err(crate::error::Invalid(format!(
+                "photon k {}: expected 1 to 10⁴ photons per estimate",
+                self.k
+            )));
         }
         if !(self.alpha > 0.0 && self.alpha < 1.0) {
-            return Err(format!("photon alpha {}: expected a number strictly between 0 and 1", self.alpha));
+            return Err(crate::error::Invalid(format!(
+                "photon alpha {}: expected a number strictly between 0 and 1",
+                self.alpha
+            )));
         }
         Ok(())
     }

@@ -210,7 +210,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
         return Err(field_err(path, "render.spp", "must be at least 1"));
     }
     if let Err(e) = file.render.photon.validate() {
-        return Err(field_err(path, "render.photon", &e));
+        return Err(field_err(path, "render.photon", &e.to_string()));
     }
     if file.render.max_depth == 0 {
         return Err(field_err(path, "render.max_depth", "must be at least 1"));
