@@ -53,6 +53,8 @@ pub enum Error {
     Fit(#[from] fit::FitError),
     #[error(transparent)]
     Sfm(#[from] sfm::Error),
+    #[error(transparent)]
+    Denoise(#[from] image::denoise::Error),
 }
 
 impl Error {
@@ -66,6 +68,7 @@ impl Error {
             Error::Photometric(e) => e.fault(),
             Error::Fit(e) => e.fault(),
             Error::Sfm(e) => e.fault(),
+            Error::Denoise(e) => e.fault(),
         }
     }
 }

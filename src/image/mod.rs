@@ -1,6 +1,7 @@
 //! Linear float images, their file formats, and image metrics.
 
 pub mod colormap;
+pub mod denoise;
 pub mod filter;
 pub mod io;
 pub mod metrics;
