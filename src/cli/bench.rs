@@ -362,3 +362,99 @@ pub fn bench_photons(scene_path: &Path, counts: &str, k: u32, queries: u32) -> R
     }
     Ok(())
 }
+
+/// `lumen bench denoise`: error against time of the denoisers on one scene. At each sample
+/// count n: the raw render and each method on it (rendered as two halves, with the feature
+/// buffers of the same samples; bilateral and nlmeans use the colour only), and the raw
+/// render at 4n and 16n; relMSE against `reference`, and the time of the render plus the
+/// features and the filter. With `out`, writes each n's inputs there (NAME-nSPP.exr, its
+/// .variance, .half_a, .half_b, .feature_*) for other denoisers to run on, and the rows as
+/// denoise.json.
+pub fn bench_denoise(scene_path: &Path, reference: &Path, spp: &str, out: Option<&Path>) -> Result<()> {
+    use lumen::image::denoise::{self, Feature, Input, Method, Settings};
+    use lumen::image::metrics::relmse;
+    let counts: Vec<u32> = spp
+        .split(',')
+        .map(|t| t.trim().parse::<u32>().ok().filter(|&n| n >= 2))
+        .collect::<Option<_>>()
+        .with_context(|| format!("--spp {spp}: expected sample counts of at least 2 separated by commas"))?;
+    let scene = super::scene::load(scene_path, &[])?;
+    let truth = lumen::image::io::read_exr(reference)?;
+    if (truth.width, truth.height, truth.channels) != (scene.camera.width, scene.camera.height, 3) {
+        bail!(
+            "{}: {}×{}×{}, but the scene renders {}×{}×3",
+            reference.display(),
+            truth.width,
+            truth.height,
+            truth.channels,
+            scene.camera.width,
+            scene.camera.height
+        );
+    }
+    let name = scene_path.file_stem().and_then(|s| s.to_str()).unwrap_or("scene");
+    let mut rows: Vec<serde_json::Value> = Vec::new();
+    let mut row = |spp: u32, what: &str, err: f64, secs: f64| {
+        println!("| {spp} | {what} | {err:.3e} | {secs:.2} |");
+        rows.push(serde_json::json!({"spp": spp, "what": what, "relmse": err, "seconds": secs}));
+    };
+    println!("{name}, {}×{}: relMSE against {}\n", scene.camera.width, scene.camera.height, reference.display());
+    println!("| spp | image | relMSE | time (s) |");
+    println!("|---:|---|---:|---:|");
+    for &n in &counts {
+        let mut settings = render::Settings::from_scene(&scene);
+        settings.spp = n;
+        let t = std::time::Instant::now();
+        let (film, halves) = render::integrators::try_render_halves(&scene, &settings)?;
+        let render_secs = t.elapsed().as_secs_f64();
+        let t = std::time::Instant::now();
+        let features = render::features::features(&scene, &settings);
+        let feature_secs = t.elapsed().as_secs_f64();
+        row(n, "raw", relmse(&film.mean, &truth, None), render_secs);
+        for method in Method::ALL {
+            let feats = if method == Method::Feature {
+                features
+                    .named()
+                    .into_iter()
+                    .map(|(name, b)| Feature { name: name.into(), image: &b.mean, variance: Some(&b.variance) })
+                    .collect()
+            } else {
+                Vec::new()
+            };
+            let input =
+                Input { color: &film.mean, variance: Some(&film.variance), halves: Some([&halves[0], &halves[1]]), features: feats };
+            let t = std::time::Instant::now();
+            let d = denoise::denoise(&input, &Settings { method: Some(method), ..Settings::default() })?;
+            let secs = t.elapsed().as_secs_f64() + render_secs + if method == Method::Feature { feature_secs } else { 0.0 };
+            row(n, method.name(), relmse(&d.image, &truth, None), secs);
+        }
+        if let Some(dir) = out {
+            std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+            let base = dir.join(format!("{name}-{n}spp.exr"));
+            let mut images = vec![
+                (base.clone(), &film.mean),
+                (super::render_cmd::sibling(&base, "variance"), &film.variance),
+                (super::render_cmd::sibling(&base, "half_a"), &halves[0]),
+                (super::render_cmd::sibling(&base, "half_b"), &halves[1]),
+            ];
+            for (f, b) in features.named() {
+                images.push((super::render_cmd::sibling(&base, &format!("feature_{f}")), &b.mean));
+                images.push((super::render_cmd::sibling(&base, &format!("feature_{f}.variance")), &b.variance));
+            }
+            for (path, img) in images {
+                lumen::image::io::write_exr(&path, img)?;
+            }
+        }
+        for more in [4, 16] {
+            settings.spp = n * more;
+            let t = std::time::Instant::now();
+            let film = render::try_render(&scene, &settings)?;
+            row(n * more, "raw", relmse(&film.mean, &truth, None), t.elapsed().as_secs_f64());
+        }
+    }
+    if let Some(dir) = out {
+        let path = dir.join(format!("{name}-denoise.json"));
+        std::fs::write(&path, serde_json::to_string_pretty(&rows)?)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(())
+}

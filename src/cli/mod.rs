@@ -3,13 +3,16 @@
 
 mod bench;
 mod color;
+mod denoise;
 mod hdr;
 mod pipeline_cmd;
+mod render_cmd;
 mod scene;
 mod sfm;
 
 use bench::{bench_calibrate, bench_convergence, bench_hdr, bench_render, BenchRender};
 use pipeline_cmd::{merge_cmd, render_share, run_pipeline, slurm_cmd, SlurmArgs};
+use render_cmd::{integrator_parser, render_cmd, RenderArgs};
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
@@ -212,6 +215,9 @@ enum Command {
     /// HDR fusion of an exposure stack: the camera's response (Debevec & Malik or Robertson)
     /// and the merged radiance.
     Hdr(hdr::HdrArgs),
+    /// Denoise a Monte Carlo render with weights from its own noise: bilateral, non-local
+    /// means or feature-guided (albedo, normal, depth), strengths chosen per pixel by SURE.
+    Denoise(denoise::DenoiseArgs),
     /// Structure from motion: cameras and sparse points from overlapping photographs (a
     /// COLMAP text model, a PLY point cloud and a summary).
     Sfm(sfm::SfmArgs),
@@ -220,69 +226,6 @@ enum Command {
         #[command(subcommand)]
         what: Bench,
     },
-}
-
-/// `lumen render`'s flags.
-#[derive(clap::Args)]
-pub struct RenderArgs {
-    /// Scene file: lumen's TOML (e.g. pipelines/scenes/cornell-box.toml) or Mitsuba 3's XML.
-    pub scene: PathBuf,
-    /// Output image: .exr or .png; truth images and the variance go beside it as
-    /// NAME.<aov>.exr.
-    #[arg(long)]
-    pub out: PathBuf,
-    /// Light-transport algorithm (default: the scene's [render] integrator).
-    #[arg(long, value_parser = integrator_parser())]
-    pub integrator: Option<&'static render::integrators::Kind>,
-    /// Samples per pixel (default: the scene's [render] spp; with --time-budget, the most
-    /// to render, unbounded by default). For light tracing, passes of one path per pixel.
-    #[arg(long)]
-    pub spp: Option<u32>,
-    /// Render for this many seconds (over 0, at most 10⁷), in rounds of samples, and write
-    /// what was reached: the sample count is printed. Each round is planned to fit in what is
-    /// left, from the time the rounds before took, and is not cut short.
-    #[arg(long, value_name = "SECONDS", value_parser = parse_time_budget)]
-    pub time_budget: Option<f64>,
-    /// Longest path in segments (default: the scene's max_depth).
-    #[arg(long)]
-    pub max_depth: Option<u32>,
-    /// pm: photons traced in all (default 16 per pixel); sppm: per pass (default one per
-    /// pixel). 1 to 10⁸.
-    #[arg(long)]
-    pub photons: Option<u64>,
-    /// pm: the gather radius in scene units (default: the --k nearest photons); sppm: the
-    /// initial radius (default: two pixel footprints).
-    #[arg(long)]
-    pub radius: Option<f32>,
-    /// pm: photons per density estimate without a radius (default 50).
-    #[arg(long)]
-    pub k: Option<u32>,
-    /// sppm: the share of new photons a pass keeps, between 0 and 1 (default 2/3).
-    #[arg(long)]
-    pub alpha: Option<f32>,
-    /// pm: Jensen's final gather (direct light sampled, caustics from their map, one bounce
-    /// into the global map).
-    #[arg(long)]
-    pub final_gather: bool,
-    /// pm, sppm: how points are found, kdtree or grid (default: the integrator's choice).
-    #[arg(long)]
-    pub photon_index: Option<render::photons::IndexKind>,
-    /// Seed of every random stream (default: the scene's [render] seed).
-    #[arg(long)]
-    pub seed: Option<u64>,
-    /// Worker threads, 1 to 1024 (default: all cores).
-    #[arg(long, value_parser = parse_threads)]
-    pub threads: Option<usize>,
-    /// Truth images to write beside the output, comma-separated: depth, normal,
-    /// normal_camera, albedo, position, id, or variance (of the mean radiance).
-    #[arg(long, value_delimiter = ',')]
-    pub aov: Vec<String>,
-    /// Also write a PNG preview of every EXR written (as `lumen preview` does).
-    #[arg(long)]
-    pub preview: bool,
-    /// A value for a `$NAME` parameter of a Mitsuba scene (repeatable), as Mitsuba's -D.
-    #[arg(short = 'D', long = "define", value_name = "NAME=VALUE", value_parser = scene::parse_define)]
-    pub define: Vec<(String, String)>,
 }
 
 #[derive(Subcommand)]
@@ -348,6 +291,24 @@ enum Bench {
         /// Queries per count (the scan does at most 1000).
         #[arg(long, default_value_t = 200000)]
         queries: u32,
+    },
+    /// Denoisers on one scene: relMSE against a converged reference and time (render,
+    /// features and filter) of every method at each sample count n, beside the raw render at
+    /// n, 4n and 16n.
+    Denoise {
+        /// Scene file (TOML or Mitsuba XML).
+        #[arg(long, default_value = "pipelines/scenes/cornell-box.toml")]
+        scene: PathBuf,
+        /// Converged reference (.exr, linear) of the same scene.
+        #[arg(long)]
+        reference: PathBuf,
+        /// Sample counts, comma-separated, each at least 2.
+        #[arg(long, default_value = "4,16,64")]
+        spp: String,
+        /// Folder to write each sample count's inputs into (for other denoisers) and the rows
+        /// as NAME-denoise.json.
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
     /// Detection and calibration time on a set of photographs; with the `opencv` feature,
     /// OpenCV's findChessboardCorners + cornerSubPix + calibrateCamera on the same images in
@@ -450,6 +411,7 @@ pub fn main() -> i32 {
         }
         Command::Color { what } => color::run(what).map(|_| 0),
         Command::Hdr(args) => hdr::run(&args).map(|_| 0),
+        Command::Denoise(args) => denoise::run(&args).map(|_| 0),
         Command::Sfm(args) => sfm::run(&args).map(|_| 0),
         Command::Bench {
             what: Bench::Render { scene, integrator, spp, max_depth, threads, repeat, sampler, one_path },
@@ -462,6 +424,9 @@ pub fn main() -> i32 {
         }
         Command::Bench { what: Bench::Photons { scene, counts, k, queries } } => {
             bench::bench_photons(&scene, &counts, k, queries).map(|_| 0)
+        }
+        Command::Bench { what: Bench::Denoise { scene, reference, spp, out } } => {
+            bench::bench_denoise(&scene, &reference, &spp, out.as_deref()).map(|_| 0)
         }
         Command::Bench { what: Bench::Calibrate { images, board, repeat } } => {
             bench_calibrate(&images, &board, repeat).map(|_| 0)
@@ -503,180 +468,6 @@ fn fault(e: &anyhow::Error) -> Option<lumen::Fault> {
     })
 }
 
-/// `NAME.ext` → `NAME.<suffix>.exr`.
-fn sibling(out: &Path, suffix: &str) -> PathBuf {
-    let stem = out.file_stem().and_then(|s| s.to_str()).unwrap_or("render");
-    out.with_file_name(format!("{stem}.{suffix}.exr"))
-}
-
-/// `--time-budget`: seconds over 0, at most 10⁷ (about 16 weeks).
-fn parse_time_budget(s: &str) -> Result<f64, String> {
-    match s.parse::<f64>() {
-        Ok(t) if t > 0.0 && t <= 1e7 => Ok(t),
-        Ok(_) => Err(format!("{s} s: expected a number of seconds over 0 and at most 10⁷")),
-        Err(_) => Err(format!("`{s}`: expected a number of seconds")),
-    }
-}
-
-/// `--integrator`: one of `render::integrators::REGISTRY`'s names, listed in the help.
-fn integrator_parser() -> impl clap::builder::TypedValueParser<Value = &'static render::integrators::Kind> {
-    use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
-    let names = render::integrators::REGISTRY.iter().map(|k| PossibleValue::new(k.name).help(k.about));
-    PossibleValuesParser::new(names).try_map(|name| render::integrators::find(&name))
-}
-
-fn render_cmd(a: &RenderArgs) -> Result<()> {
-    let RenderArgs {
-        scene: scene_path,
-        out,
-        integrator,
-        spp,
-        time_budget,
-        max_depth,
-        photons,
-        radius,
-        k,
-        alpha,
-        final_gather,
-        photon_index,
-        seed,
-        threads,
-        aov,
-        preview,
-        define,
-    } = a;
-    let (spp, max_depth, seed, threads) = (*spp, *max_depth, *seed, *threads);
-    let ext = out.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    if ext != "exr" && ext != "png" {
-        bail!("--out {}: expected a file name ending in .exr or .png", out.display());
-    }
-    for a in aov {
-        if a != "variance" && !render::truth::AOV_NAMES.contains(&a.as_str()) {
-            bail!("--aov {a}: expected one of variance, {}", render::truth::AOV_NAMES.join(", "));
-        }
-    }
-    let scene = scene::load(scene_path, define)?;
-    if scene.lights.is_empty() {
-        eprintln!(
-            "warning: {} has no light (or only black emitters): the image is black",
-            scene_path.display()
-        );
-    }
-    let mut settings = render::Settings::from_scene(&scene);
-    settings.integrator = integrator.unwrap_or(settings.integrator);
-    if let Some(s) = spp {
-        if s == 0 {
-            bail!("--spp must be at least 1");
-        }
-        settings.spp = s;
-    }
-    let p = &mut settings.photon;
-    p.count = photons.or(p.count);
-    p.radius = radius.or(p.radius);
-    p.k = k.unwrap_or(p.k);
-    p.alpha = alpha.unwrap_or(p.alpha);
-    p.final_gather |= *final_gather;
-    p.index = photon_index.or(p.index);
-    if let Err(e) = p.validate() {
-        bail!("{e} (--photons, --radius, --k, --alpha)");
-    }
-    if let Some(t) = time_budget {
-        settings.time_budget = Some(*t);
-        if spp.is_none() {
-            settings.spp = u32::MAX;
-        }
-    }
-    if let Some(d) = max_depth {
-        if d == 0 {
-            bail!("--max-depth must be at least 1");
-        }
-        settings.max_depth = d;
-    }
-    settings.seed = seed.unwrap_or(settings.seed);
-    settings.threads = threads;
-    settings.progress = true;
-    let t = std::time::Instant::now();
-    let film = render::try_render(&scene, &settings)?;
-    let secs = t.elapsed().as_secs_f64();
-    // Everything this command writes appears together or not at all.
-    let dir = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let Some(file_name) = out.file_name() else {
-        bail!("--out {}: expected a file name", out.display());
-    };
-    lumen::image::io::write_together(dir, |staged| -> Result<()> {
-        let out = &staged.join(file_name);
-        match (&scene.sensor, ext.as_str()) {
-            (Some(sensor), "png") => {
-                let codes = sensor.expose(&film.mean, settings.seed);
-                lumen::image::io::write_png_raw(
-                    out,
-                    film.mean.width,
-                    film.mean.height,
-                    3,
-                    &codes,
-                    sensor.bits,
-                )?;
-            }
-            _ => lumen::image::io::write(out, &film.mean)?,
-        }
-        let mut written: Vec<PathBuf> = Vec::new();
-        if ext == "exr" {
-            written.push(out.to_path_buf());
-        }
-        if aov.iter().any(|a| a == "variance") {
-            let path = sibling(out, "variance");
-            lumen::image::io::write_exr(&path, &film.variance)?;
-            written.push(path);
-        }
-        let truth_names: Vec<&String> = aov.iter().filter(|a| *a != "variance").collect();
-        if !truth_names.is_empty() {
-            let truth = render::truth(&scene, None);
-            for name in truth_names {
-                if let Some(img) = truth.get(name) {
-                    let path = sibling(out, name);
-                    lumen::image::io::write_exr(&path, img)?;
-                    written.push(path);
-                }
-            }
-            if aov.iter().any(|a| a == "id") {
-                let ids = out.with_file_name(format!(
-                    "{}.ids.json",
-                    out.file_stem().and_then(|s| s.to_str()).unwrap_or("render")
-                ));
-                std::fs::write(&ids, serde_json::to_string_pretty(&scene.object_names)?)
-                    .with_context(|| format!("cannot write {}", ids.display()))?;
-            }
-        }
-        if *preview {
-            write_previews(&written, None)?;
-        }
-        Ok(())
-    })?;
-    let paths = film.mean.width as f64 * film.mean.height as f64 * film.samples as f64;
-    let budget = match settings.time_budget {
-        Some(t) if film.samples < settings.spp => format!(", reached in a time budget of {t} s"),
-        Some(t) => format!(", all of them within a time budget of {t} s"),
-        None => String::new(),
-    };
-    eprintln!(
-        "rendered {} ({}x{}, {} spp{budget}, max depth {}, integrator {}) in {secs:.2} s: {:.2} M paths/s",
-        out.display(),
-        film.mean.width,
-        film.mean.height,
-        film.samples,
-        settings.max_depth,
-        settings.integrator.name,
-        paths / secs / 1e6
-    );
-    if film.dropped_samples > 0 {
-        eprintln!("warning: {} non-finite samples were dropped", film.dropped_samples);
-    }
-    if *preview {
-        eprintln!("wrote a PNG preview beside each EXR");
-    }
-    Ok(())
-}
-
 fn preview_cmd(files: &[PathBuf], kind: Option<&str>) -> Result<()> {
     let kind: Option<lumen::image::preview::Kind> = kind
         .map(|k| k.parse())
@@ -690,7 +481,7 @@ fn preview_cmd(files: &[PathBuf], kind: Option<&str>) -> Result<()> {
 
 /// Writes a PNG preview beside each EXR of `files` (the kind from each name unless given),
 /// reading every file before writing any: a bad file leaves no previews behind.
-fn write_previews(
+pub fn write_previews(
     files: &[PathBuf],
     kind: Option<lumen::image::preview::Kind>,
 ) -> Result<Vec<(PathBuf, lumen::image::preview::Kind)>> {
@@ -717,7 +508,7 @@ fn write_previews(
 }
 
 /// Parses `--threads`: 1 to `pipeline::MAX_THREADS`.
-fn parse_threads(text: &str) -> Result<usize, String> {
+pub fn parse_threads(text: &str) -> Result<usize, String> {
     match text.parse::<usize>() {
         Ok(n) if (1..=pipeline::MAX_THREADS).contains(&n) => Ok(n),
         _ => Err(format!("expected a number of threads from 1 to {}", pipeline::MAX_THREADS)),

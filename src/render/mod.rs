@@ -10,6 +10,7 @@ pub mod bvh;
 pub mod camera_ray;
 pub mod envmap;
 pub mod film;
+pub mod features;
 pub mod filter;
 pub mod geometry;
 pub mod integrators;

@@ -15,8 +15,9 @@
 //! the mean of half the samples), the variance is made robust and the filtering unbiased in
 //! its weights, as RMZ13 do:
 //! - the sample variance's shape is kept and its level set by the two-buffer estimate:
-//!   Var_half = 2·Var · G((A − B)²/2) / G(2·Var), G a Gaussian of σ = 2 px (where there is no
-//!   sample variance, G((A − B)²/2) itself);
+//!   Var_half = G₁(2·Var) · G₂((A − B)²/2) / G₂(2·Var), Gₛ a Gaussian of σ = s px (where
+//!   there is no sample variance, G₂((A − B)²/2) itself). G₁ spreads the variance of a
+//!   pixel's neighbours to a pixel whose few samples happened to agree;
 //! - A is filtered with B's weights and B with A's, and the output is their mean. Each
 //!   filter's weights are then independent of the data it averages.
 //!
@@ -32,9 +33,10 @@
 //! used as blending weights, so no seam shows where the choice changes. Nothing here reads a
 //! reference image.
 //!
-//! **Pixels with zero variance** (every sample equal: background, an unlit wall, a noiseless
-//! input) are known exactly and are passed through unchanged; an input whose variance is 0
-//! everywhere comes back as it went in.
+//! **No noise.** An image whose variance is 0 at every pixel (and no half buffers) is known
+//! exactly: it comes back as it went in. A single pixel of zero variance is not: in a Monte
+//! Carlo render it is most often one whose few samples all missed the light, and it is
+//! filtered like the others.
 //!
 //! Hand-written rather than taken from a crate: no Rust crate has a variance-aware NL-means
 //! or feature-guided filter; OIDN, the peer, is a trained network on another runtime.
@@ -158,8 +160,8 @@ pub struct Output {
     /// The strengths tried, and the share of pixels SURE gave to each.
     pub strengths: Vec<f32>,
     pub chosen: Vec<f64>,
-    /// Pixels passed through because their variance is 0.
-    pub kept: usize,
+    /// Whether the image was passed through unchanged (its variance is 0 everywhere).
+    pub unchanged: bool,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -263,15 +265,22 @@ pub fn denoise(input: &Input, settings: &Settings) -> Result<Output, Error> {
     // Per strength: the filtered image and its SURE map.
     let mut candidates: Vec<(Planes, Vec<f32>)> = Vec::with_capacity(ns);
     let halves = input.halves.is_some();
-    let keep: Vec<bool>;
+    if let (None, Some(v)) = (input.halves, var.as_ref()) {
+        if v.data.iter().all(|&x| x == 0.0) {
+            return Ok(Output {
+                image: color.clone(),
+                method,
+                halves,
+                strengths: settings.strengths.clone(),
+                chosen: vec![0.0; ns],
+                unchanged: true,
+            });
+        }
+    }
     match input.halves {
         Some([a, b]) => {
             let (a, b) = (planes_of(a), planes_of(b));
             let vh = half_variance(&a, &b, var.as_ref());
-            keep = match &var {
-                Some(v) => zero_everywhere(v),
-                None => zero_everywhere(&vh),
-            };
             let fa = kernel::filter(&Guide { color: &b, variance: &vh, features: &features }, &a, &params);
             let fb = kernel::filter(&Guide { color: &a, variance: &vh, features: &features }, &b, &params);
             for ((ya, ca), (yb, cb)) in fa.into_iter().zip(fb) {
@@ -295,7 +304,6 @@ pub fn denoise(input: &Input, settings: &Settings) -> Result<Output, Error> {
                 )
                 .into());
             };
-            keep = zero_everywhere(v);
             for (f, centre) in kernel::filter(&Guide { color: &y, variance: v, features: &features }, &y, &params) {
                 let sure = sure_map(&f, &y, v, &centre);
                 candidates.push((f, sure));
@@ -306,16 +314,11 @@ pub fn denoise(input: &Input, settings: &Settings) -> Result<Output, Error> {
     let (blend, chosen) = choose(&candidates, w, h);
     let mut out = Image::new(color.width, color.height, color.channels);
     for (p, px) in out.data.chunks_exact_mut(c).enumerate() {
-        if keep[p] {
-            px.copy_from_slice(&color.data[p * c..(p + 1) * c]);
-            continue;
-        }
         for (ch, v) in px.iter_mut().enumerate() {
             *v = candidates.iter().zip(&blend).map(|((f, _), b)| b[p] * f.data[ch * w * h + p]).sum();
         }
     }
-    let kept = keep.iter().filter(|&&k| k).count();
-    Ok(Output { image: out, method, halves, strengths: settings.strengths.clone(), chosen, kept })
+    Ok(Output { image: out, method, halves, strengths: settings.strengths.clone(), chosen, unchanged: false })
 }
 
 /// Sizes, channel counts and values: everything the filters assume, checked with the name of
@@ -424,7 +427,8 @@ fn half_variance(a: &Planes, b: &Planes, var: Option<&Planes>) -> Planes {
             Some(v) => {
                 let sample: Vec<f32> = v.plane(ch).iter().map(|x| 2.0 * x).collect();
                 let g_sample = grey(w, h, sample.clone()).blur(2.0).data;
-                out.extend(sample.iter().zip(&g_two).zip(&g_sample).map(|((&s, &t), &gs)| {
+                let spread = grey(w, h, sample).blur(1.0).data;
+                out.extend(spread.iter().zip(&g_two).zip(&g_sample).map(|((&s, &t), &gs)| {
                     if gs > 0.0 {
                         s * t / gs
                     } else {
@@ -436,11 +440,6 @@ fn half_variance(a: &Planes, b: &Planes, var: Option<&Planes>) -> Planes {
         }
     }
     Planes { w, h, c, data: out }
-}
-
-fn zero_everywhere(v: &Planes) -> Vec<bool> {
-    let n = v.w * v.h;
-    (0..n).map(|p| (0..v.c).all(|ch| v.data[ch * n + p] == 0.0)).collect()
 }
 
 /// SURE per pixel (module docs), summed over channels.
@@ -625,7 +624,17 @@ mod tests {
         let out = denoise(&Input { color: &img, variance: Some(&var), halves: None, features: vec![] }, &Settings::default())
             .unwrap();
         assert_eq!(out.image, img);
-        assert_eq!(out.kept, 200);
+        assert!(out.unchanged);
+        // One black pixel of zero variance among noisy ones (all its samples missed the
+        // light) is filtered like the others, not kept black.
+        let (mut img, mut var) = noisy(&constant(20, 10, 0.3), 0.1, 5);
+        let p = 3 * (5 * 20 + 10);
+        img.data[p..p + 3].fill(0.0);
+        var.data[p..p + 3].fill(0.0);
+        let out = denoise(&Input { color: &img, variance: Some(&var), halves: None, features: vec![] }, &Settings::default())
+            .unwrap();
+        assert!(!out.unchanged);
+        assert!(out.image.data[p] > 0.15, "{}", out.image.data[p]);
     }
 
     #[test]

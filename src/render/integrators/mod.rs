@@ -400,50 +400,102 @@ fn render_once(scene: &Scene, settings: &Settings, mean: Image, variance: Image)
 
 /// Renders in rounds for about `seconds` of wall time: a first round of one sample (pass),
 /// then rounds that double while the time measured per sample says the next fits in what is
-/// left, stopping at `settings.spp`. The rounds' films are merged as one render of all their
-/// samples: the means weighted by their sample counts, and each pixel's sum of squares
-/// recovered from its mean and variance of the mean ((n − 1)·n·v + n·m²), so the merged
-/// variance is that of the pooled samples. The film says how many samples it reached.
+/// left, stopping at `settings.spp`. The rounds' films are pooled as one render of all their
+/// samples (`Pool`). The film says how many samples it reached.
 fn render_budgeted(scene: &Scene, settings: &Settings, seconds: f64, mean: Image, variance: Image) -> Film {
     let start = std::time::Instant::now();
-    let len = mean.data.len();
-    let (mut sum, mut sum_sq) = (vec![0.0f64; len], vec![0.0f64; len]);
-    let (mut done, mut round, mut dropped) = (0u32, 1u32, 0u64);
+    let mut pool = Pool::new(mean.data.len());
+    let mut round = 1u32;
     let (mut mean, mut variance) = (mean, variance);
-    while done < settings.spp {
+    while pool.samples < settings.spp {
         let part = Settings {
-            spp: round.min(settings.spp - done),
-            first_sample: settings.first_sample + done,
+            spp: round.min(settings.spp - pool.samples),
+            first_sample: settings.first_sample + pool.samples,
             time_budget: None,
             ..settings.clone()
         };
         let film = render_once(scene, &part, mean, variance);
-        let n = part.spp as f64;
-        for i in 0..len {
-            let (m, v) = (film.mean.data[i] as f64, film.variance.data[i] as f64);
-            sum[i] += n * m;
-            sum_sq[i] += (n - 1.0) * n * v + n * m * m;
-        }
-        dropped += film.dropped_samples;
+        pool.add(&film);
         (mean, variance) = (film.mean, film.variance);
-        done += part.spp;
         let elapsed = start.elapsed().as_secs_f64();
-        let per_sample = elapsed / done as f64;
+        let per_sample = elapsed / pool.samples as f64;
         let fits = ((seconds - elapsed) / per_sample).floor();
         if !(fits >= 1.0) {
             break;
         }
         round = (2 * part.spp).min(fits.min(u32::MAX as f64) as u32);
     }
-    let n = done as f64;
-    for i in 0..len {
-        let m = sum[i] / n;
-        mean.data[i] = m as f32;
-        variance.data[i] =
-            if n > 1.0 { ((sum_sq[i] - n * m * m).max(0.0) / (n - 1.0) / n) as f32 } else { 0.0 };
-    }
     let origin = settings.crop.map_or([0, 0], |c| [c[0], c[1]]);
-    Film { mean, variance, origin, dropped_samples: dropped, samples: done }
+    pool.finish(mean, variance, origin)
+}
+
+/// Films of disjoint sample ranges of one render, pooled as one render of all their samples:
+/// the means weighted by their sample counts, and each pixel's sum of squares recovered from
+/// its mean and variance of the mean ((n − 1)·n·v + n·m²), so the pooled variance is that of
+/// all the samples.
+struct Pool {
+    sum: Vec<f64>,
+    sum_sq: Vec<f64>,
+    samples: u32,
+    dropped: u64,
+}
+
+impl Pool {
+    fn new(len: usize) -> Pool {
+        Pool { sum: vec![0.0; len], sum_sq: vec![0.0; len], samples: 0, dropped: 0 }
+    }
+
+    fn add(&mut self, film: &Film) {
+        let n = film.samples as f64;
+        for i in 0..self.sum.len() {
+            let (m, v) = (film.mean.data[i] as f64, film.variance.data[i] as f64);
+            self.sum[i] += n * m;
+            self.sum_sq[i] += (n - 1.0) * n * v + n * m * m;
+        }
+        self.samples += film.samples;
+        self.dropped += film.dropped_samples;
+    }
+
+    /// The pooled film, written into `mean` and `variance` (of the pooled size).
+    fn finish(self, mut mean: Image, mut variance: Image, origin: [u32; 2]) -> Film {
+        let n = self.samples as f64;
+        for i in 0..self.sum.len() {
+            let m = self.sum[i] / n;
+            mean.data[i] = m as f32;
+            variance.data[i] =
+                if n > 1.0 { ((self.sum_sq[i] - n * m * m).max(0.0) / (n - 1.0) / n) as f32 } else { 0.0 };
+        }
+        Film { mean, variance, origin, dropped_samples: self.dropped, samples: self.samples }
+    }
+}
+
+/// A render of `settings.spp` ≥ 2 samples as two halves of disjoint samples (the first
+/// ⌊spp/2⌋, then the rest): the pooled film, equal to one render of all the samples up to
+/// float rounding, and each half's mean, which the denoiser cross-filters
+/// (`image::denoise`). Refused like `try_render`.
+pub fn try_render_halves(scene: &Scene, settings: &Settings) -> Result<(Film, [Image; 2]), super::Error> {
+    if settings.spp < 2 {
+        return Err(super::Error::Unsupported {
+            what: "half buffers".into(),
+            message: format!("{} sample per pixel cannot be split in two halves: expected at least 2", settings.spp),
+        });
+    }
+    let first = settings.spp / 2;
+    let a = try_render(scene, &Settings { spp: first, time_budget: None, ..settings.clone() })?;
+    let b = try_render(
+        scene,
+        &Settings {
+            spp: settings.spp - first,
+            first_sample: settings.first_sample + first,
+            time_budget: None,
+            ..settings.clone()
+        },
+    )?;
+    let mut pool = Pool::new(a.mean.data.len());
+    pool.add(&a);
+    pool.add(&b);
+    let film = pool.finish(a.mean.clone(), a.variance.clone(), a.origin);
+    Ok((film, [a.mean, b.mean]))
 }
 
 /// Fills the film row by row, rows in parallel: `row(y, x0, x1)` gives the pixels x0..x1 of
