@@ -56,10 +56,10 @@ pub struct DenoiseArgs {
     #[arg(long)]
     pub window_radius: Option<u32>,
     /// Colour sensitivity k: larger smooths more (default 0.45).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub k: Option<f32>,
     /// Feature sensitivity k_f (default 0.6).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub k_feature: Option<f32>,
     /// Strength multipliers of k and k_f tried per pixel and chosen by SURE, comma-separated
     /// (default 0.5,1,2; one value: no choice).
