@@ -100,7 +100,8 @@ fn bad_denoise_input_is_named_and_nothing_is_written() {
         assert!(!err.contains("panicked"), "{err}");
         assert!(!out.exists(), "{args:?} wrote {}", out.display());
     }
-    let (code, err) = lumen(&["denoise", s(&img), "--out", s(&dir.path().join("o.png")), "--variance", s(&var)]);
+    let (code, err) =
+        lumen(&["denoise", s(&img), "--out", s(&dir.path().join("o.png")), "--variance", s(&var)]);
     assert_ne!(code, 0);
     assert!(err.contains("expected a file name ending in .exr"), "{err}");
     // A variance of 0 everywhere: the image comes back unchanged.

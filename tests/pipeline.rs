@@ -613,3 +613,39 @@ fn stress_suite_declares_every_outcome() {
         );
     }
 }
+
+/// A case with `denoise`: the furnace's denoised image keeps its mean (within 4 standard
+/// errors of the render's mean, which noise alone passes but once in 16 000) and is closer
+/// to the closed form than the render; a malformed `denoise` is refused by name.
+#[test]
+fn denoised_case_keeps_the_mean_and_bad_settings_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let text = furnace(0.2, "denoise = true\n")
+        .replace("nonfinite_samples = 0 }", "nonfinite_samples = 0, mean_err_sigmas = 4 }");
+    let (code, err) = run(&text, &out);
+    assert_eq!(code, 0, "{err}");
+    let j: serde_json::Value = read_json(&out.join("report.json"));
+    let value = |j: &serde_json::Value, name: &str| {
+        j["stages"][0]["metrics"].as_array().unwrap().iter().find(|m| m["name"] == name).unwrap()["value"]
+            .as_f64()
+            .unwrap()
+    };
+    let denoised = value(&j, "mean_rel_err");
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.contains("denoised (feature, half buffers cross-filtered)"), "{md}");
+    let (code, err) = run(&furnace(0.2, ""), &out);
+    assert_eq!(code, 0, "{err}");
+    let raw = value(&read_json(&out.join("report.json")), "mean_rel_err");
+    assert!(denoised < raw / 2.0, "denoised mean |error| {denoised} against the render's {raw}");
+    for (bad, says) in [
+        ("denoise = \"yes\"", "expected true, false, or a table of the filter's settings"),
+        ("denoise = { window_radius = 1000 }", "window radius 1000 is above the largest accepted, 50"),
+        ("denoise = { method = \"median\" }", "unknown variant `median`"),
+        ("denoise = { radius = 3 }", "unknown field `radius`"),
+    ] {
+        let (code, err) = run(&furnace(0.2, &format!("{bad}\n")), &out);
+        assert_eq!(code, 1, "{bad}: {err}");
+        assert!(err.contains("denoise") && err.contains(says), "{bad}: {err}");
+    }
+}

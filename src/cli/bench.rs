@@ -371,7 +371,7 @@ pub fn bench_photons(scene_path: &Path, counts: &str, k: u32, queries: u32) -> R
 /// .variance, .half_a, .half_b, .feature_*) for other denoisers to run on, and the rows as
 /// denoise.json.
 pub fn bench_denoise(scene_path: &Path, reference: &Path, spp: &str, out: Option<&Path>) -> Result<()> {
-    use lumen::image::denoise::{self, Feature, Input, Method, Settings};
+    use lumen::image::denoise::{Method, Settings};
     use lumen::image::metrics::relmse;
     let counts: Vec<u32> = spp
         .split(',')
@@ -397,35 +397,34 @@ pub fn bench_denoise(scene_path: &Path, reference: &Path, spp: &str, out: Option
         println!("| {spp} | {what} | {err:.3e} | {secs:.2} |");
         rows.push(serde_json::json!({"spp": spp, "what": what, "relmse": err, "seconds": secs}));
     };
-    println!("{name}, {}×{}: relMSE against {}\n", scene.camera.width, scene.camera.height, reference.display());
+    println!(
+        "{name}, {}×{}: relMSE against {}\n",
+        scene.camera.width,
+        scene.camera.height,
+        reference.display()
+    );
     println!("| spp | image | relMSE | time (s) |");
     println!("|---:|---|---:|---:|");
     for &n in &counts {
         let mut settings = render::Settings::from_scene(&scene);
         settings.spp = n;
-        let t = std::time::Instant::now();
-        let (film, halves) = render::integrators::try_render_halves(&scene, &settings)?;
-        let render_secs = t.elapsed().as_secs_f64();
-        let t = std::time::Instant::now();
-        let features = render::features::features(&scene, &settings);
-        let feature_secs = t.elapsed().as_secs_f64();
-        row(n, "raw", relmse(&film.mean, &truth, None), render_secs);
+        let d = render::denoised::render_denoised(
+            &scene,
+            &settings,
+            &Settings { method: Some(Method::Feature), ..Settings::default() },
+        )?;
+        let (film, halves) = (&d.film, d.halves.as_ref().context("a render of at least 2 spp has halves")?);
+        let features = d.features.as_ref().context("the feature method traces features")?;
+        row(n, "raw", relmse(&film.mean, &truth, None), d.render_seconds);
         for method in Method::ALL {
-            let feats = if method == Method::Feature {
-                features
-                    .named()
-                    .into_iter()
-                    .map(|(name, b)| Feature { name: name.into(), image: &b.mean, variance: Some(&b.variance) })
-                    .collect()
+            let (err, secs) = if method == Method::Feature {
+                (relmse(&d.output.image, &truth, None), d.seconds())
             } else {
-                Vec::new()
+                let filter = Settings { method: Some(method), ..Settings::default() };
+                let (o, secs) = render::denoised::filter_film(film, Some(halves), None, &filter)?;
+                (relmse(&o.image, &truth, None), d.render_seconds + secs)
             };
-            let input =
-                Input { color: &film.mean, variance: Some(&film.variance), halves: Some([&halves[0], &halves[1]]), features: feats };
-            let t = std::time::Instant::now();
-            let d = denoise::denoise(&input, &Settings { method: Some(method), ..Settings::default() })?;
-            let secs = t.elapsed().as_secs_f64() + render_secs + if method == Method::Feature { feature_secs } else { 0.0 };
-            row(n, method.name(), relmse(&d.image, &truth, None), secs);
+            row(n, method.name(), err, secs);
         }
         if let Some(dir) = out {
             std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
@@ -438,7 +437,8 @@ pub fn bench_denoise(scene_path: &Path, reference: &Path, spp: &str, out: Option
             ];
             for (f, b) in features.named() {
                 images.push((super::render_cmd::sibling(&base, &format!("feature_{f}")), &b.mean));
-                images.push((super::render_cmd::sibling(&base, &format!("feature_{f}.variance")), &b.variance));
+                images
+                    .push((super::render_cmd::sibling(&base, &format!("feature_{f}.variance")), &b.variance));
             }
             for (path, img) in images {
                 lumen::image::io::write_exr(&path, img)?;

@@ -116,7 +116,8 @@ pub fn run(a: &DenoiseArgs) -> Result<()> {
         features,
     };
     let t = std::time::Instant::now();
-    let out = denoise::denoise(&input, &settings).with_context(|| format!("cannot denoise {}", a.image.display()))?;
+    let out = denoise::denoise(&input, &settings)
+        .with_context(|| format!("cannot denoise {}", a.image.display()))?;
     let secs = t.elapsed().as_secs_f64();
     io::write_exr(&a.out, &out.image)?;
     eprintln!("{}", summary(&out, secs, &a.out));
@@ -137,7 +138,11 @@ pub fn summary(out: &denoise::Output, secs: f64, path: &Path) -> String {
         if out.halves { ", half buffers cross-filtered" } else { "" },
         secs / mp.max(1e-12),
         shares.join(", "),
-        if out.unchanged { "; the variance is 0 everywhere: the image is unchanged".to_string() } else { String::new() }
+        if out.unchanged {
+            "; the variance is 0 everywhere: the image is unchanged".to_string()
+        } else {
+            String::new()
+        }
     )
 }
 

@@ -93,7 +93,8 @@ pub fn parse_time_budget(s: &str) -> Result<f64, String> {
 }
 
 /// `--integrator`: one of `render::integrators::REGISTRY`'s names, listed in the help.
-pub fn integrator_parser() -> impl clap::builder::TypedValueParser<Value = &'static render::integrators::Kind> {
+pub fn integrator_parser() -> impl clap::builder::TypedValueParser<Value = &'static render::integrators::Kind>
+{
     use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
     let names = render::integrators::REGISTRY.iter().map(|k| PossibleValue::new(k.name).help(k.about));
     PossibleValuesParser::new(names).try_map(|name| render::integrators::find(&name))
@@ -170,35 +171,20 @@ pub fn render_cmd(a: &RenderArgs) -> Result<()> {
     settings.seed = seed.unwrap_or(settings.seed);
     settings.threads = threads;
     settings.progress = true;
-    let t = std::time::Instant::now();
-    let (film, halves) = if *denoise && settings.time_budget.is_none() && settings.spp >= 2 {
-        let (film, halves) = render::integrators::try_render_halves(&scene, &settings)?;
-        (film, Some(halves))
+    // A time budget renders until it is spent: its sample count is not known in advance,
+    // so it has no halves (`render::denoised`).
+    let (film, halves, denoised, secs) = if *denoise {
+        let d = render::denoised::render_denoised(
+            &scene,
+            &settings,
+            &lumen::image::denoise::Settings::default(),
+        )?;
+        let (secs, filter_secs) = (d.render_seconds, d.feature_seconds + d.filter_seconds);
+        (d.film, d.halves, Some((d.output, d.features, filter_secs)), secs)
     } else {
-        (render::try_render(&scene, &settings)?, None)
-    };
-    let secs = t.elapsed().as_secs_f64();
-    let denoised = if *denoise {
         let t = std::time::Instant::now();
-        let features = render::features::features(&scene, &render::Settings { spp: film.samples, ..settings.clone() });
-        let input = lumen::image::denoise::Input {
-            color: &film.mean,
-            variance: Some(&film.variance),
-            halves: halves.as_ref().map(|[a, b]| [a, b]),
-            features: features
-                .named()
-                .into_iter()
-                .map(|(name, b)| lumen::image::denoise::Feature {
-                    name: format!("the {name} feature"),
-                    image: &b.mean,
-                    variance: Some(&b.variance),
-                })
-                .collect(),
-        };
-        let out = lumen::image::denoise::denoise(&input, &lumen::image::denoise::Settings::default())?;
-        Some((out, features, t.elapsed().as_secs_f64()))
-    } else {
-        None
+        let film = render::try_render(&scene, &settings)?;
+        (film, None, None, t.elapsed().as_secs_f64())
     };
     // Everything this command writes appears together or not at all.
     let dir = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
@@ -231,7 +217,7 @@ pub fn render_cmd(a: &RenderArgs) -> Result<()> {
                 images.push(("half_a".into(), a));
                 images.push(("half_b".into(), b));
             }
-            for (name, buffer) in features.named() {
+            for (name, buffer) in features.iter().flat_map(|f| f.named()) {
                 images.push((format!("feature_{name}"), &buffer.mean));
                 images.push((format!("feature_{name}.variance"), &buffer.variance));
             }

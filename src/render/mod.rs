@@ -8,9 +8,10 @@
 pub mod bsdf;
 pub mod bvh;
 pub mod camera_ray;
+pub mod denoised;
 pub mod envmap;
-pub mod film;
 pub mod features;
+pub mod film;
 pub mod filter;
 pub mod geometry;
 pub mod integrators;
@@ -66,6 +67,8 @@ pub enum Error {
     EmptyMesh { path: PathBuf },
     #[error(transparent)]
     Image(#[from] crate::image::io::Error),
+    #[error(transparent)]
+    Denoise(#[from] crate::image::denoise::Error),
     /// The film (or another buffer a render needs) could not be allocated.
     #[error("{what} needs {bytes} bytes ({gib:.2} GiB), which could not be allocated: render fewer pixels (the camera's width and height)", gib = *bytes as f64 / (1u64 << 30) as f64)]
     OutOfMemory { what: String, bytes: u64 },
@@ -80,6 +83,7 @@ impl Error {
             Error::Ply(e) => e.fault(),
             Error::Grid(e) => e.fault(),
             Error::Image(e) => e.fault(),
+            Error::Denoise(e) => e.fault(),
             Error::MitsubaUnsupported { .. } | Error::Unsupported { .. } => Fault::Unsupported,
             Error::Parse { .. }
             | Error::Mitsuba { .. }

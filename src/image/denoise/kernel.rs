@@ -93,9 +93,11 @@ const TILE: usize = 32;
 /// itself is ≤ 0).
 pub fn filter(guide: &Guide, data: &Planes, params: &Params) -> Vec<(Planes, Vec<f32>)> {
     let (w, h) = (data.w, data.h);
-    let tiles: Vec<(usize, usize)> =
-        (0..h.div_ceil(TILE)).flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx * TILE, ty * TILE))).collect();
-    let results: Vec<TileOut> = tiles.par_iter().map(|&(x0, y0)| filter_tile(guide, data, params, x0, y0)).collect();
+    let tiles: Vec<(usize, usize)> = (0..h.div_ceil(TILE))
+        .flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx * TILE, ty * TILE)))
+        .collect();
+    let results: Vec<TileOut> =
+        tiles.par_iter().map(|&(x0, y0)| filter_tile(guide, data, params, x0, y0)).collect();
     let ns = params.strengths.len();
     let mut out: Vec<(Planes, Vec<f32>)> = (0..ns)
         .map(|_| (Planes { w, h, c: data.c, data: vec![0.0; w * h * data.c] }, vec![0.0; w * h]))
@@ -268,7 +270,8 @@ fn filter_tile(guide: &Guide, data: &Planes, params: &Params, x0: usize, y0: usi
                     for c in 0..*fc {
                         let u = &value.data[c * plane_len..(c + 1) * plane_len];
                         let v = &fvar.data[c * plane_len..(c + 1) * plane_len];
-                        let (up, uq, vp, vq) = (&u[p0..p0 + tw], &u[q0..q0 + tw], &v[p0..p0 + tw], &v[q0..q0 + tw]);
+                        let (up, uq, vp, vq) =
+                            (&u[p0..p0 + tw], &u[q0..q0 + tw], &v[p0..p0 + tw], &v[q0..q0 + tw]);
                         for i in 0..tw {
                             let diff = up[i] - uq[i];
                             facc[i] += diff * diff - (vp[i] + vp[i].min(vq[i]));
@@ -320,7 +323,9 @@ pub fn exp_neg(x: f32) -> f32 {
     let p = 1.0
         + fr * (0.693_147_2
             + fr * (0.240_226_5
-                + fr * (0.055_504_11 + fr * (0.009_618_129 + fr * (0.001_333_355_8 + fr * (0.000_154_035_3 + fr * 0.000_015_252_73))))));
+                + fr * (0.055_504_11
+                    + fr * (0.009_618_129
+                        + fr * (0.001_333_355_8 + fr * (0.000_154_035_3 + fr * 0.000_015_252_73))))));
     f32::from_bits(((n as i32 + 127) as u32) << 23) * p
 }
 

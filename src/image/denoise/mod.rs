@@ -79,10 +79,9 @@ impl std::fmt::Display for Method {
 impl std::str::FromStr for Method {
     type Err = Invalid;
     fn from_str(s: &str) -> Result<Method, Invalid> {
-        Method::ALL
-            .into_iter()
-            .find(|m| m.name() == s)
-            .ok_or_else(|| Invalid(format!("`{s}` is not a denoising method: expected bilateral, nlmeans or feature")))
+        Method::ALL.into_iter().find(|m| m.name() == s).ok_or_else(|| {
+            Invalid(format!("`{s}` is not a denoising method: expected bilateral, nlmeans or feature"))
+        })
     }
 }
 
@@ -183,21 +182,29 @@ impl Settings {
     pub fn method_for(&self, features: usize) -> Result<Method, Invalid> {
         let m = self.method.unwrap_or(if features > 0 { Method::Feature } else { Method::Nlmeans });
         if m == Method::Feature && features == 0 {
-            return Err("the feature method needs at least one feature buffer (albedo, normal or depth)".into());
+            return Err(
+                "the feature method needs at least one feature buffer (albedo, normal or depth)".into()
+            );
         }
         Ok(m)
     }
 
     pub fn validate(&self) -> Result<(), Invalid> {
         if self.window_radius > MAX_WINDOW {
-            return Err(format!("window radius {} is above the largest accepted, {MAX_WINDOW}", self.window_radius).into());
+            return Err(format!(
+                "window radius {} is above the largest accepted, {MAX_WINDOW}",
+                self.window_radius
+            )
+            .into());
         }
         if let Some(f) = self.patch_radius {
             if f > MAX_PATCH {
                 return Err(format!("patch radius {f} is above the largest accepted, {MAX_PATCH}").into());
             }
             if f > 0 && self.method == Some(Method::Bilateral) {
-                return Err(format!("patch radius {f}: the bilateral filter compares single pixels (0)").into());
+                return Err(
+                    format!("patch radius {f}: the bilateral filter compares single pixels (0)").into()
+                );
             }
         }
         let positive = |name: &str, v: f32| -> Result<(), Invalid> {
@@ -247,7 +254,9 @@ pub fn denoise(input: &Input, settings: &Settings) -> Result<Output, Error> {
         window: settings.window_radius as usize,
         k: settings.k,
         spatial_sigma: match method {
-            Method::Bilateral => Some(settings.spatial_sigma.unwrap_or((settings.window_radius as f32 / 2.0).max(0.5))),
+            Method::Bilateral => {
+                Some(settings.spatial_sigma.unwrap_or((settings.window_radius as f32 / 2.0).max(0.5)))
+            }
             _ => settings.spatial_sigma,
         },
         strengths: settings.strengths.clone(),
@@ -304,7 +313,9 @@ pub fn denoise(input: &Input, settings: &Settings) -> Result<Output, Error> {
                 )
                 .into());
             };
-            for (f, centre) in kernel::filter(&Guide { color: &y, variance: v, features: &features }, &y, &params) {
+            for (f, centre) in
+                kernel::filter(&Guide { color: &y, variance: v, features: &features }, &y, &params)
+            {
                 let sure = sure_map(&f, &y, v, &centre);
                 candidates.push((f, sure));
             }
@@ -326,7 +337,9 @@ pub fn denoise(input: &Input, settings: &Settings) -> Result<Output, Error> {
 fn check_inputs(input: &Input) -> Result<(), Invalid> {
     let color = input.color;
     if color.width == 0 || color.height == 0 {
-        return Err(format!("the image is {}×{}: expected at least one pixel", color.width, color.height).into());
+        return Err(
+            format!("the image is {}×{}: expected at least one pixel", color.width, color.height).into()
+        );
     }
     if color.channels == 0 || color.channels > 4 {
         return Err(format!("the image has {} channels: expected 1 to 4", color.channels).into());
@@ -341,7 +354,9 @@ fn check_inputs(input: &Input) -> Result<(), Invalid> {
         }
         if !channels.contains(&img.channels) {
             let want: Vec<String> = channels.iter().map(|c| c.to_string()).collect();
-            return Err(format!("{name} has {} channels: expected {}", img.channels, want.join(" or ")).into());
+            return Err(
+                format!("{name} has {} channels: expected {}", img.channels, want.join(" or ")).into()
+            );
         }
         Ok(())
     };
@@ -463,13 +478,13 @@ fn choose(candidates: &[(Planes, Vec<f32>)], w: usize, h: usize) -> (Vec<Vec<f32
     if candidates.len() == 1 {
         return (vec![vec![1.0; n]], vec![1.0]);
     }
-    let smoothed: Vec<Vec<f32>> = candidates.iter().map(|(_, s)| grey(w, h, s.clone()).blur(1.5).data).collect();
+    let smoothed: Vec<Vec<f32>> =
+        candidates.iter().map(|(_, s)| grey(w, h, s.clone()).blur(1.5).data).collect();
     let mut onehot = vec![vec![0.0f32; n]; candidates.len()];
     let mut wins = vec![0usize; candidates.len()];
     for p in 0..n {
-        let best = (0..candidates.len())
-            .min_by(|&i, &j| smoothed[i][p].total_cmp(&smoothed[j][p]))
-            .unwrap_or(0);
+        let best =
+            (0..candidates.len()).min_by(|&i, &j| smoothed[i][p].total_cmp(&smoothed[j][p])).unwrap_or(0);
         onehot[best][p] = 1.0;
         wins[best] += 1;
     }
@@ -575,7 +590,8 @@ mod tests {
         let sigma = 0.1f32;
         let (a, _) = noisy(&truth, sigma, 1);
         let (b, _) = noisy(&truth, sigma, 2);
-        let color = Image { data: a.data.iter().zip(&b.data).map(|(x, y)| 0.5 * (x + y)).collect(), ..a.clone() };
+        let color =
+            Image { data: a.data.iter().zip(&b.data).map(|(x, y)| 0.5 * (x + y)).collect(), ..a.clone() };
         let mut var = truth.clone();
         var.data.fill(sigma * sigma / 2.0);
         let input = Input { color: &color, variance: Some(&var), halves: Some([&a, &b]), features: vec![] };
@@ -621,8 +637,11 @@ mod tests {
     fn zero_variance_is_the_identity() {
         let (img, _) = noisy(&constant(20, 10, 0.3), 0.2, 5);
         let var = Image::new(20, 10, 3);
-        let out = denoise(&Input { color: &img, variance: Some(&var), halves: None, features: vec![] }, &Settings::default())
-            .unwrap();
+        let out = denoise(
+            &Input { color: &img, variance: Some(&var), halves: None, features: vec![] },
+            &Settings::default(),
+        )
+        .unwrap();
         assert_eq!(out.image, img);
         assert!(out.unchanged);
         // One black pixel of zero variance among noisy ones (all its samples missed the
@@ -631,8 +650,11 @@ mod tests {
         let p = 3 * (5 * 20 + 10);
         img.data[p..p + 3].fill(0.0);
         var.data[p..p + 3].fill(0.0);
-        let out = denoise(&Input { color: &img, variance: Some(&var), halves: None, features: vec![] }, &Settings::default())
-            .unwrap();
+        let out = denoise(
+            &Input { color: &img, variance: Some(&var), halves: None, features: vec![] },
+            &Settings::default(),
+        )
+        .unwrap();
         assert!(!out.unchanged);
         assert!(out.image.data[p] > 0.15, "{}", out.image.data[p]);
     }
@@ -642,12 +664,17 @@ mod tests {
         let img = constant(1, 1, 0.7);
         let mut var = img.clone();
         var.data.fill(0.01);
-        let out = denoise(&Input { color: &img, variance: Some(&var), halves: None, features: vec![] }, &Settings::default())
-            .unwrap();
+        let out = denoise(
+            &Input { color: &img, variance: Some(&var), halves: None, features: vec![] },
+            &Settings::default(),
+        )
+        .unwrap();
         assert_eq!(out.image, img);
         let (img, var) = noisy(&constant(9, 7, 0.5), 0.1, 9);
         let settings = Settings { window_radius: 0, patch_radius: Some(0), ..Settings::default() };
-        let out = denoise(&Input { color: &img, variance: Some(&var), halves: None, features: vec![] }, &settings).unwrap();
+        let out =
+            denoise(&Input { color: &img, variance: Some(&var), halves: None, features: vec![] }, &settings)
+                .unwrap();
         assert_eq!(out.image, img);
     }
 

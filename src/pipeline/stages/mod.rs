@@ -335,3 +335,31 @@ impl From<&crate::render::Settings> for SettingsKey {
         SettingsKey { spp: s.spp, max_depth: s.max_depth, seed: s.seed, sampler: s.sampler }
     }
 }
+
+/// An entry's `denoise`: `true` for the default filter, `false` for none, or a table of the
+/// filter's settings (`image::denoise::Settings`: `method`, `window_radius`, `k` …).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Denoise(pub Option<crate::image::denoise::Settings>);
+
+impl<'de> serde::Deserialize<'de> for Denoise {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Denoise, D::Error> {
+        struct Visit;
+        impl<'de> serde::de::Visitor<'de> for Visit {
+            type Value = Denoise;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("true, false, or a table of the filter's settings (method, window_radius, patch_radius, k, k_feature, tau, spatial_sigma, strengths)")
+            }
+            fn visit_bool<E: serde::de::Error>(self, on: bool) -> Result<Denoise, E> {
+                Ok(Denoise(on.then(Default::default)))
+            }
+            fn visit_map<M: serde::de::MapAccess<'de>>(self, map: M) -> Result<Denoise, M::Error> {
+                let s = <crate::image::denoise::Settings as serde::Deserialize>::deserialize(
+                    serde::de::value::MapAccessDeserializer::new(map),
+                )?;
+                s.validate().map_err(|e| serde::de::Error::custom(e.0))?;
+                Ok(Denoise(Some(s)))
+            }
+        }
+        d.deserialize_any(Visit)
+    }
+}

@@ -21,6 +21,11 @@
 //!   any pixel whose square sees an emitter or the environment (`render::truth::emitter_footprint`,
 //!   8×8 rays; the one-pixel margin holds a sliver of emitter the rays pass by): must be 0;
 //! - `nonfinite_samples`: samples that came out NaN or infinite (must be 0);
+//! - `relmse_raw`: with `denoise`, the render's relMSE before the filter (the reference
+//!   metrics above then measure the denoised image; the z-test is skipped, since filtered
+//!   pixels are correlated), and `relmse_gain`, relmse_raw / relmse: what the filter bought
+//!   (below 1, it made the image worse). Skipped for the undenoised cases of a sweep over
+//!   `denoise`, so one entry can bound it;
 //! - `mpaths_per_s`: million camera paths per second (no bound: speed is for benchmarks).
 //!
 //! When the reference files are absent (`../shared` is not beside the checkout) the reference
@@ -63,6 +68,11 @@ pub struct Config {
     pub expect_uniform: Option<[f64; 3]>,
     /// File name (.exr or .png) to save the rendered image under, in the output folder.
     pub save: Option<String>,
+    /// Denoise the render (`render::denoised`): `true` for the default filter or a table of
+    /// its settings. The reference metrics then measure the denoised image, `relmse_raw` the
+    /// render before it, and the case's time includes the features and the filter.
+    #[serde(default)]
+    pub denoise: super::Denoise,
 }
 
 pub struct Input {
@@ -92,6 +102,16 @@ pub struct Truth {
 pub struct Output {
     film: render::Film,
     settings: render::Settings,
+    /// Seconds of the render alone.
+    seconds: f64,
+    denoised: Option<Denoised>,
+}
+
+struct Denoised {
+    image: Image,
+    method: crate::image::denoise::Method,
+    halves: bool,
+    /// Seconds of the feature buffers and the filter.
     seconds: f64,
 }
 
@@ -208,10 +228,21 @@ pub fn clean(p: &std::path::Path) -> PathBuf {
     out
 }
 
-pub fn solve(_c: &Config, input: &Input) -> Result<Output, StageError> {
+pub fn solve(c: &Config, input: &Input) -> Result<Output, StageError> {
+    let settings = input.settings.clone();
+    if let Some(filter) = &c.denoise.0 {
+        let d = render::denoised::render_denoised(&input.scene, &settings, filter)?;
+        let denoised = Denoised {
+            image: d.output.image,
+            method: d.output.method,
+            halves: d.output.halves,
+            seconds: d.feature_seconds + d.filter_seconds,
+        };
+        return Ok(Output { film: d.film, settings, seconds: d.render_seconds, denoised: Some(denoised) });
+    }
     let t = std::time::Instant::now();
-    let film = render::try_render(&input.scene, &input.settings)?;
-    Ok(Output { film, settings: input.settings.clone(), seconds: t.elapsed().as_secs_f64() })
+    let film = render::try_render(&input.scene, &settings)?;
+    Ok(Output { film, settings, seconds: t.elapsed().as_secs_f64(), denoised: None })
 }
 
 pub fn validate(c: &Config, out: &Output, truth: &Truth) -> Findings {
@@ -224,9 +255,23 @@ pub fn validate(c: &Config, out: &Output, truth: &Truth) -> Findings {
         "{}x{} pixels, {} spp, max depth {}, integrator `{}`.",
         film.mean.width, film.mean.height, settings.spp, settings.max_depth, settings.integrator.name
     ));
+    // What the metrics measure: the denoised image when there is one.
+    let image = out.denoised.as_ref().map_or(&film.mean, |d| &d.image);
+    if let Some(d) = &out.denoised {
+        f.notes.push(format!(
+            "denoised ({}{}) in {:.2} s after a render of {:.2} s; the reference metrics measure the denoised image, relmse_raw the render.",
+            d.method,
+            if d.halves { ", half buffers cross-filtered" } else { "" },
+            d.seconds,
+            out.seconds
+        ));
+    }
     let mut reference_metrics = vec!["mean_rel_err_r", "mean_rel_err_g", "mean_rel_err_b", "rmse", "relmse"];
     if c.region.is_some() {
         reference_metrics.push("relmse_region");
+    }
+    if c.denoise.0.is_some() {
+        reference_metrics.extend(["relmse_raw", "relmse_gain"]);
     }
     match &truth.reference {
         Reference::None => {}
@@ -238,7 +283,7 @@ pub fn validate(c: &Config, out: &Output, truth: &Truth) -> Findings {
             f.notes.push(format!("reference {why}: comparison skipped."));
         }
         Reference::Images { path, mean, variance } => {
-            match metrics::agreement(&film.mean, &film.variance, mean, variance, 0.01) {
+            match metrics::agreement(image, &film.variance, mean, variance, 0.01) {
                 Ok(a) => {
                     for (ch, name) in ["r", "g", "b"].iter().enumerate() {
                         f.metrics.push(Metric::new(
@@ -248,30 +293,55 @@ pub fn validate(c: &Config, out: &Output, truth: &Truth) -> Findings {
                             Better::Lower,
                         ));
                     }
-                    f.metrics.push(Metric::new("rmse", metrics::rmse(&film.mean, mean), "", Better::Lower));
+                    f.metrics.push(Metric::new("rmse", metrics::rmse(image, mean), "", Better::Lower));
                     f.metrics.push(Metric::new(
                         "relmse",
-                        metrics::relmse(&film.mean, mean, None),
+                        metrics::relmse(image, mean, None),
                         "",
                         Better::Lower,
                     ));
                     if let Some(region) = c.region {
                         f.metrics.push(Metric::new(
                             "relmse_region",
-                            metrics::relmse(&film.mean, mean, Some(region)),
+                            metrics::relmse(image, mean, Some(region)),
                             "",
                             Better::Lower,
                         ));
                     }
-                    f.metrics.push(Metric::new("z_test_pass_fraction", a.pass_fraction, "", Better::Higher));
-                    f.notes.push(format!(
-                        "z-test against {}: {} of {} pixel channels beyond |z| = {:.2} (Šidák α = {:.2e}).",
-                        clean(path).display(),
-                        a.failed,
-                        a.tested,
-                        a.z_critical,
-                        a.alpha_sidak
-                    ));
+                    if out.denoised.is_some() {
+                        let raw = metrics::relmse(&film.mean, mean, None);
+                        let gain = raw / metrics::relmse(image, mean, None);
+                        f.metrics.push(Metric::new("relmse_raw", raw, "", Better::Lower));
+                        let why = "a noiseless image matching the reference exactly: no error to divide by";
+                        f.metrics.push(Metric::maybe(
+                            "relmse_gain",
+                            gain.is_finite().then_some(gain),
+                            "×",
+                            Better::Higher,
+                            why,
+                        ));
+                        // A filtered pixel is a weighted mean of its neighbours: its error is
+                        // no longer the independent noise the z-test assumes.
+                        let why = "the denoised image's pixels are correlated: no per-pixel z-test";
+                        f.metrics.push(Metric::skipped("z_test_pass_fraction", "", Better::Higher, why));
+                    } else {
+                        let why = "the render is not denoised";
+                        f.metrics.push(Metric::skipped("relmse_gain", "×", Better::Higher, why));
+                        f.metrics.push(Metric::new(
+                            "z_test_pass_fraction",
+                            a.pass_fraction,
+                            "",
+                            Better::Higher,
+                        ));
+                        f.notes.push(format!(
+                            "z-test against {}: {} of {} pixel channels beyond |z| = {:.2} (Šidák α = {:.2e}).",
+                            clean(path).display(),
+                            a.failed,
+                            a.tested,
+                            a.z_critical,
+                            a.alpha_sidak
+                        ));
+                    }
                 }
                 Err(e) => {
                     let why = format!("reference {}: {e}", clean(path).display());
@@ -286,7 +356,7 @@ pub fn validate(c: &Config, out: &Output, truth: &Truth) -> Findings {
     if let Some(e) = truth.uniform {
         let (mut max_rel, mut sum_rel) = (0.0f64, 0.0f64);
         let mut finite = true;
-        for px in film.mean.data.chunks_exact(3) {
+        for px in image.data.chunks_exact(3) {
             for ch in 0..3 {
                 let rel = (px[ch] as f64 - e[ch]).abs() / e[ch];
                 finite &= rel.is_finite();
@@ -295,10 +365,11 @@ pub fn validate(c: &Config, out: &Output, truth: &Truth) -> Findings {
             }
         }
         let why = "the image holds a non-finite pixel";
-        let n = film.mean.data.len().max(1) as f64;
+        let n = image.data.len().max(1) as f64;
         f.metrics.push(Metric::maybe("max_rel_err", finite.then_some(max_rel), "", Better::Lower, why));
         f.metrics.push(Metric::maybe("mean_rel_err", finite.then_some(sum_rel / n), "", Better::Lower, why));
-        f.metrics.push(Metric::maybe("mean_err_sigmas", bias_sigmas(film, e), "σ", Better::Lower, why));
+        let sigmas = bias_sigmas(image, &film.variance, e);
+        f.metrics.push(Metric::maybe("mean_err_sigmas", sigmas, "σ", Better::Lower, why));
     }
     let lit: Vec<bool> = film.mean.data.chunks_exact(3).map(|px| px.iter().any(|&v| v > 0.0)).collect();
     f.metrics.push(Metric::new(
@@ -324,20 +395,22 @@ pub fn validate(c: &Config, out: &Output, truth: &Truth) -> Findings {
         }
     }
     if let Some(name) = &c.save {
-        f.files.push((PathBuf::from(name), Kept::Image(film.mean.clone())));
+        f.files.push((PathBuf::from(name), Kept::Image(image.clone())));
     }
     f
 }
 
 /// The largest over channels of |image mean − expected| over the standard error of the image
-/// mean (pixels are independent, so the variances of their means add); `None` when the film
-/// holds a non-finite value. A noiseless film exactly on the expected value is 0 σ away.
-fn bias_sigmas(film: &render::Film, expected: [f64; 3]) -> Option<f64> {
-    let n = (film.mean.data.len() / 3).max(1) as f64;
+/// mean, from the render's per-pixel variance of the mean (pixels are independent, so their
+/// variances add; a denoiser's weighted means of them keep the image mean's standard error
+/// about the same); `None` when the image holds a non-finite value. A noiseless image exactly
+/// on the expected value is 0 σ away.
+fn bias_sigmas(image: &Image, variance: &Image, expected: [f64; 3]) -> Option<f64> {
+    let n = (image.data.len() / 3).max(1) as f64;
     let mut worst = 0.0f64;
     for (ch, e) in expected.iter().enumerate() {
-        let sum: f64 = film.mean.data.iter().skip(ch).step_by(3).map(|&v| v as f64).sum();
-        let var: f64 = film.variance.data.iter().skip(ch).step_by(3).map(|&v| v as f64).sum();
+        let sum: f64 = image.data.iter().skip(ch).step_by(3).map(|&v| v as f64).sum();
+        let var: f64 = variance.data.iter().skip(ch).step_by(3).map(|&v| v as f64).sum();
         let (diff, se) = ((sum / n - e).abs(), var.sqrt() / n);
         if !(diff.is_finite() && se.is_finite()) {
             return None;

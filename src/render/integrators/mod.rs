@@ -477,7 +477,10 @@ pub fn try_render_halves(scene: &Scene, settings: &Settings) -> Result<(Film, [I
     if settings.spp < 2 {
         return Err(super::Error::Unsupported {
             what: "half buffers".into(),
-            message: format!("{} sample per pixel cannot be split in two halves: expected at least 2", settings.spp),
+            message: format!(
+                "{} sample per pixel cannot be split in two halves: expected at least 2",
+                settings.spp
+            ),
         });
     }
     let first = settings.spp / 2;
