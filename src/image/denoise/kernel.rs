@@ -168,7 +168,34 @@ fn local_plane_set<'a>(
     Local { data }
 }
 
+/// `tile` compiled for the widest vector instructions the processor has, chosen at run time
+/// (AVX-512 or AVX2 with FMA; the baseline x86-64 build has SSE2 only, where `floor` in
+/// `exp_neg` is a library call per element).
 fn filter_tile(guide: &Guide, data: &Planes, params: &Params, x0: usize, y0: usize) -> TileOut {
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[target_feature(enable = "avx512f,fma")]
+        fn avx512(guide: &Guide, data: &Planes, params: &Params, x0: usize, y0: usize) -> TileOut {
+            tile(guide, data, params, x0, y0)
+        }
+        #[target_feature(enable = "avx2,fma")]
+        fn avx2(guide: &Guide, data: &Planes, params: &Params, x0: usize, y0: usize) -> TileOut {
+            tile(guide, data, params, x0, y0)
+        }
+        if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("fma") {
+            // SAFETY: the processor has AVX-512F and FMA.
+            return unsafe { avx512(guide, data, params, x0, y0) };
+        }
+        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+            // SAFETY: the processor has AVX2 and FMA.
+            return unsafe { avx2(guide, data, params, x0, y0) };
+        }
+    }
+    tile(guide, data, params, x0, y0)
+}
+
+#[inline(always)]
+fn tile(guide: &Guide, data: &Planes, params: &Params, x0: usize, y0: usize) -> TileOut {
     let (w, h) = (data.w, data.h);
     let (tw, th) = (TILE.min(w - x0), TILE.min(h - y0));
     let (f, r) = (params.patch, params.window);
@@ -197,6 +224,7 @@ fn filter_tile(guide: &Guide, data: &Planes, params: &Params, x0: usize, y0: usi
     let mut dist = vec![0.0f32; pw * ph];
     let mut hsum = vec![0.0f32; tw * ph];
     let mut patch = vec![0.0f32; tw];
+    let mut vsum = vec![0.0f32; tw * th];
     let mut fdist = vec![0.0f32; tw];
     let mut facc = vec![0.0f32; tw];
     let patch_norm = 1.0 / ((2 * f + 1) * (2 * f + 1) * nc) as f32;
@@ -250,17 +278,26 @@ fn filter_tile(guide: &Guide, data: &Planes, params: &Params, x0: usize, y0: usi
                     acc -= d[i];
                 }
             }
+            // Vertical box sums of height 2f + 1, one running sum down the rows: patch
+            // distance of row y in vsum[y·tw..], clamped at 0.
+            let vacc = &mut patch;
+            vacc.fill(0.0);
+            for j in ya..ya + 2 * f {
+                for (p, &s) in vacc.iter_mut().zip(&hsum[j * tw..(j + 1) * tw]) {
+                    *p += s;
+                }
+            }
             for y in ya..yb {
-                // Vertical box sum for this row (summed afresh: f is small and rows are few).
-                patch.fill(0.0);
-                for j in y..=y + 2 * f {
-                    for (p, &s) in patch.iter_mut().zip(&hsum[j * tw..(j + 1) * tw]) {
-                        *p += s;
-                    }
+                let (add, sub) = (&hsum[(y + 2 * f) * tw..(y + 2 * f + 1) * tw], &hsum[y * tw..(y + 1) * tw]);
+                let out = &mut vsum[y * tw..(y + 1) * tw];
+                for (((o, p), &a), &b) in out.iter_mut().zip(vacc.iter_mut()).zip(add).zip(sub) {
+                    *p += a;
+                    *o = (*p * patch_norm).max(0.0);
+                    *p -= b;
                 }
-                for p in patch.iter_mut() {
-                    *p = (*p * patch_norm).max(0.0);
-                }
+            }
+            for y in ya..yb {
+                let patch = &vsum[y * tw..(y + 1) * tw];
                 // Feature distance, the largest over features.
                 fdist.fill(0.0);
                 for (value, fvar, norm, fc) in &features {
@@ -284,23 +321,24 @@ fn filter_tile(guide: &Guide, data: &Planes, params: &Params, x0: usize, y0: usi
                 }
                 let q0 = ((y + pad) * lw + pad) as isize + offset;
                 let row = y * tw;
+                let n = xb - xa;
+                let (patch, fdist) = (&patch[xa..xb], &fdist[xa..xb]);
+                let guided = !features.is_empty();
                 for (s, &inv) in inv_s2.iter().enumerate() {
-                    let wsum = &mut weight[s][row..row + tw];
+                    let wsum = &mut weight[s][row + xa..row + xb];
                     let mut wrow = [0.0f32; TILE];
-                    for i in xa..xb {
-                        let mut e = patch[i] * inv;
-                        if !features.is_empty() {
-                            e = e.max(fdist[i] * inv);
-                        }
-                        let wt = spatial * exp_neg(e);
-                        wrow[i] = wt;
-                        wsum[i] += wt;
+                    let wrow = &mut wrow[..n];
+                    for (((wt, ws), &pd), &fd) in wrow.iter_mut().zip(wsum.iter_mut()).zip(patch).zip(fdist) {
+                        let e = if guided { pd.max(fd) } else { pd };
+                        *wt = spatial * exp_neg(e * inv);
+                        *ws += *wt;
                     }
                     for c in 0..data.c {
-                        let yq = &values.data[c * plane_len..(c + 1) * plane_len];
-                        let dst = &mut sum[s][c][row..row + tw];
-                        for i in xa..xb {
-                            dst[i] += wrow[i] * yq[(q0 + i as isize) as usize];
+                        let start = (c * plane_len) as isize + q0 + xa as isize;
+                        let yq = &values.data[start as usize..start as usize + n];
+                        let dst = &mut sum[s][c][row + xa..row + xb];
+                        for ((d, &wt), &v) in dst.iter_mut().zip(wrow.iter()).zip(yq) {
+                            *d += wt * v;
                         }
                     }
                 }
