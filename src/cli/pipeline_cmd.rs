@@ -206,7 +206,7 @@ fn summarize(report: &pipeline::report::Report) -> i32 {
             continue;
         }
         let met = s.metrics.iter().filter(|m| m.pass == Some(true)).count();
-        let bounded = s.metrics.iter().filter(|m| m.bound.is_some() && m.skipped.is_none()).count();
+        let bounded = s.metrics.iter().filter(|m| m.bound.is_some() && m.unjudged().is_none()).count();
         eprintln!(
             "  {:<11} {:<width$} {met}/{bounded} bounds met, {:>8.2} s, {} rendered, {} reused",
             s.stage,

@@ -98,6 +98,7 @@ fn summary(s: &mut String, cases: &[&StageReport]) {
                 m.bound.map_or("—".into(), |b| b.text()),
                 match (m.pass, &m.expected_miss, &m.skipped) {
                     (_, _, Some(_)) => "skipped",
+                    _ if m.not_applicable.is_some() => "n/a",
                     (Some(true), _, _) => "pass",
                     (Some(false), Some(_), _) => "declared miss",
                     (Some(false), None, _) => "**MISS**",

@@ -33,6 +33,10 @@ pub struct Metric {
     /// Not measured on purpose (its data are absent, e.g. `../shared`): no verdict, no miss.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub skipped: Option<String>,
+    /// Not measured because it has no meaning for this case (a per-pixel z-test on a denoised
+    /// image, a denoising gain on a raw render): no verdict, no miss, and nothing is absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub not_applicable: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub expected_miss: Option<String>,
 }
@@ -57,6 +61,16 @@ impl Metric {
         Metric { skipped: Some(why.into()), ..Metric::empty(name, unit, better) }
     }
 
+    /// A quantity that has no meaning for this case, with the reason (shown as n/a).
+    pub fn not_applicable(name: &str, unit: &str, better: Better, why: impl Into<String>) -> Metric {
+        Metric { not_applicable: Some(why.into()), ..Metric::empty(name, unit, better) }
+    }
+
+    /// Why the metric gets no verdict on purpose: skipped or not applicable.
+    pub fn unjudged(&self) -> Option<&str> {
+        self.skipped.as_deref().or(self.not_applicable.as_deref())
+    }
+
     /// No value, bound or verdict yet.
     fn empty(name: &str, unit: &str, better: Better) -> Metric {
         Metric {
@@ -68,6 +82,7 @@ impl Metric {
             pass: None,
             missing: None,
             skipped: None,
+            not_applicable: None,
             expected_miss: None,
         }
     }

@@ -300,8 +300,8 @@ fn report_case(
 }
 
 /// Attaches each metric's bound and verdict. A bound or expected miss that names a metric the
-/// stage did not produce is an error, so a typo cannot silently disable a check; a skipped
-/// metric keeps its bound but gets no verdict.
+/// stage did not produce is an error, so a typo cannot silently disable a check; a skipped or
+/// not applicable metric keeps its bound but gets no verdict.
 fn apply_bounds(mut metrics: Vec<Metric>, common: &file::Common) -> Result<Vec<Metric>, Invalid> {
     for name in common.bounds.keys().chain(common.expected_miss.keys()) {
         if !metrics.iter().any(|m| &m.name == name) {
@@ -316,7 +316,7 @@ fn apply_bounds(mut metrics: Vec<Metric>, common: &file::Common) -> Result<Vec<M
         if let Some(&b) = common.bounds.get(&m.name) {
             let b = b.resolve(m.better);
             m.bound = Some(b);
-            if m.skipped.is_none() {
+            if m.unjudged().is_none() {
                 m.pass = Some(m.meets(b));
             }
         }

@@ -196,7 +196,7 @@ impl Report {
         }
         let mut verdicts: Vec<((&str, &str, &str), bool)> = Vec::new();
         for s in self.stages.iter().filter(|s| s.skipped.is_none()) {
-            for m in s.metrics.iter().filter(|m| m.expected_miss.is_some() && m.skipped.is_none()) {
+            for m in s.metrics.iter().filter(|m| m.expected_miss.is_some() && m.unjudged().is_none()) {
                 let key = (s.stage.as_str(), s.group.as_str(), m.name.as_str());
                 let met = m.pass == Some(true);
                 match verdicts.iter_mut().find(|(k, _)| *k == key) {
@@ -262,7 +262,7 @@ impl Report {
         let now_met_all = self.misses_now_met();
         let whole_entry_met = |st: &StageReport, name: &str| entry_meets(&now_met_all, st, name);
         for st in &self.stages {
-            let bounded = st.metrics.iter().filter(|m| m.bound.is_some() && m.skipped.is_none()).count();
+            let bounded = st.metrics.iter().filter(|m| m.bound.is_some() && m.unjudged().is_none()).count();
             let met = st.metrics.iter().filter(|m| m.pass == Some(true)).count();
             let declared =
                 st.metrics.iter().filter(|m| m.pass == Some(false) && m.expected_miss.is_some()).count();
@@ -384,6 +384,7 @@ pub fn case_section(s: &mut String, st: &StageReport, now_met: &[(String, String
         let whole = whole_entry_met(st, &m.name);
         let verdict = match (m.pass, &m.expected_miss, &m.skipped) {
             (_, _, Some(why)) => format!("skipped: {why}"),
+            _ if m.not_applicable.is_some() => format!("n/a: {}", m.not_applicable.as_deref().unwrap_or_default()),
             (Some(true), Some(why), _) if whole => {
                 format!("**DECLARED MISS NOW MET** (declared: {why})")
             }
@@ -537,7 +538,7 @@ pub fn plot_svg(group: &str, cases: &[&StageReport]) -> String {
 pub fn value_text(m: &Metric) -> String {
     match (m.value, &m.missing) {
         (Some(v), _) => fmt_value(v),
-        (None, Some(why)) if m.skipped.is_none() => format!("— ({why})"),
+        (None, Some(why)) if m.unjudged().is_none() => format!("— ({why})"),
         _ => "—".into(),
     }
 }

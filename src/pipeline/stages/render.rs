@@ -323,10 +323,10 @@ pub fn validate(c: &Config, out: &Output, truth: &Truth) -> Findings {
                         // A filtered pixel is a weighted mean of its neighbours: its error is
                         // no longer the independent noise the z-test assumes.
                         let why = "the denoised image's pixels are correlated: no per-pixel z-test";
-                        f.metrics.push(Metric::skipped("z_test_pass_fraction", "", Better::Higher, why));
+                        f.metrics.push(Metric::not_applicable("z_test_pass_fraction", "", Better::Higher, why));
                     } else {
                         let why = "the render is not denoised";
-                        f.metrics.push(Metric::skipped("relmse_gain", "×", Better::Higher, why));
+                        f.metrics.push(Metric::not_applicable("relmse_gain", "×", Better::Higher, why));
                         f.metrics.push(Metric::new(
                             "z_test_pass_fraction",
                             a.pass_fraction,
