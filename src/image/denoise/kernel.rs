@@ -223,7 +223,7 @@ fn tile(guide: &Guide, data: &Planes, params: &Params, x0: usize, y0: usize) -> 
     let (pw, ph) = (tw + 2 * f, th + 2 * f);
     let mut dist = vec![0.0f32; pw * ph];
     let mut hsum = vec![0.0f32; tw * ph];
-    let mut patch = vec![0.0f32; tw];
+    let mut patch = vec![0.0f64; tw];
     let mut vsum = vec![0.0f32; tw * th];
     let mut fdist = vec![0.0f32; tw];
     let mut facc = vec![0.0f32; tw];
@@ -271,29 +271,32 @@ fn tile(guide: &Guide, data: &Planes, params: &Params, x0: usize, y0: usize) -> 
             for j in 0..ph {
                 let d = &dist[j * pw..(j + 1) * pw];
                 let hs = &mut hsum[j * tw..(j + 1) * tw];
-                let mut acc: f32 = d[..2 * f].iter().sum();
+                let mut acc: f64 = d[..2 * f].iter().map(|&x| x as f64).sum();
                 for i in 0..tw {
-                    acc += d[i + 2 * f];
-                    hs[i] = acc;
-                    acc -= d[i];
+                    acc += d[i + 2 * f] as f64;
+                    hs[i] = acc as f32;
+                    acc -= d[i] as f64;
                 }
             }
             // Vertical box sums of height 2f + 1, one running sum down the rows: patch
-            // distance of row y in vsum[y·tw..], clamped at 0.
+            // distance of row y in vsum[y·tw..], clamped at 0. Both running sums are kept in
+            // f64: where the variance is near zero a distance across an edge reaches 10⁸ and
+            // more, and an f32 sum that adds and later subtracts it would leave a residue
+            // larger than the distances of the flat patches after it.
             let vacc = &mut patch;
             vacc.fill(0.0);
             for j in ya..ya + 2 * f {
                 for (p, &s) in vacc.iter_mut().zip(&hsum[j * tw..(j + 1) * tw]) {
-                    *p += s;
+                    *p += s as f64;
                 }
             }
             for y in ya..yb {
                 let (add, sub) = (&hsum[(y + 2 * f) * tw..(y + 2 * f + 1) * tw], &hsum[y * tw..(y + 1) * tw]);
                 let out = &mut vsum[y * tw..(y + 1) * tw];
                 for (((o, p), &a), &b) in out.iter_mut().zip(vacc.iter_mut()).zip(add).zip(sub) {
-                    *p += a;
-                    *o = (*p * patch_norm).max(0.0);
-                    *p -= b;
+                    *p += a as f64;
+                    *o = (*p as f32 * patch_norm).max(0.0);
+                    *p -= b as f64;
                 }
             }
             for y in ya..yb {

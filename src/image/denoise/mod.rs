@@ -234,7 +234,6 @@ impl Settings {
 pub fn denoise(input: &Input, settings: &Settings) -> Result<Output, Error> {
     settings.validate()?;
     let method = settings.method_for(input.features.len())?;
-    check_inputs(input)?;
     let color = input.color;
     let (w, h, c) = (color.width as usize, color.height as usize, color.channels as usize);
     let ns = settings.strengths.len();
@@ -246,6 +245,7 @@ pub fn denoise(input: &Input, settings: &Settings) -> Result<Output, Error> {
     if Vec::<u8>::new().try_reserve_exact(bytes as usize).is_err() {
         return Err(Error::Memory { width: color.width, height: color.height, bytes });
     }
+    check_inputs(input)?;
     let params = Params {
         patch: match method {
             Method::Bilateral => 0,
@@ -632,6 +632,43 @@ mod tests {
         }
     }
 
+    /// A stripe a thousand times brighter than the rest, with a noise far below the step: the
+    /// patch distances across its edge reach 10¹⁰, and the pixels whose window never reaches
+    /// it must come out as they do without the stripe (no residue of those distances in the
+    /// running box sums along rows and columns).
+    #[test]
+    fn a_far_edge_leaves_no_residue() {
+        let (w, h) = (64u32, 48u32);
+        let (plain, var) = noisy(&constant(w, h, 0.5), 0.01, 11);
+        let mut striped = plain.clone();
+        for y in 0..h {
+            for x in 0..w {
+                if x < 8 || y < 8 {
+                    striped.pixel_mut(x, y).fill(1000.0);
+                }
+            }
+        }
+        for method in Method::ALL {
+            let settings = Settings { method: Some(method), ..Settings::default() };
+            let run = |img: &Image| {
+                let mut features = vec![];
+                if method == Method::Feature {
+                    features.push(Feature { name: "albedo".into(), image: &var, variance: None });
+                }
+                let input = Input { color: img, variance: Some(&var), halves: None, features };
+                denoise(&input, &settings).unwrap().image
+            };
+            let (a, b) = (run(&plain), run(&striped));
+            let reach = 8 + settings.window_radius + settings.patch_radius.unwrap_or(3);
+            for y in reach..h {
+                for x in reach..w {
+                    let (p, q) = (a.pixel(x, y)[0], b.pixel(x, y)[0]);
+                    assert!((p - q).abs() < 1e-6, "{method}: pixel ({x}, {y}): {q} beside the stripe, {p} without");
+                }
+            }
+        }
+    }
+
     /// A variance of zero everywhere means no noise: the image comes back as it went in.
     #[test]
     fn zero_variance_is_the_identity() {
@@ -676,6 +713,34 @@ mod tests {
             denoise(&Input { color: &img, variance: Some(&var), halves: None, features: vec![] }, &settings)
                 .unwrap();
         assert_eq!(out.image, img);
+    }
+
+    /// A 16384 × 16384 image under an 8 GB address-space limit: refused with the size and the
+    /// memory it would need, before any filtering. The check runs in a child process of this
+    /// test binary, so the limit binds only it.
+    #[test]
+    fn a_16k_image_under_a_memory_limit_is_refused() {
+        const CHILD: &str = "LUMEN_DENOISE_MEMORY_LIMIT_CHILD";
+        if std::env::var_os(CHILD).is_none() {
+            let name = "image::denoise::tests::a_16k_image_under_a_memory_limit_is_refused";
+            let out = std::process::Command::new(std::env::current_exe().unwrap())
+                .args([name, "--exact", "--nocapture", "--test-threads", "1"])
+                .env(CHILD, "1")
+                .output()
+                .unwrap();
+            let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+            assert!(out.status.success() && text.contains("1 passed"), "{text}");
+            return;
+        }
+        let limit = libc::rlimit { rlim_cur: 8 << 30, rlim_max: 8 << 30 };
+        assert_eq!(unsafe { libc::setrlimit(libc::RLIMIT_AS, &limit) }, 0);
+        // Zeroed allocations: the pages are not touched until read.
+        let img = Image::new(16384, 16384, 3);
+        let var = Image::new(16384, 16384, 3);
+        let input = Input { color: &img, variance: Some(&var), halves: None, features: vec![] };
+        let e = denoise(&input, &Settings::default()).unwrap_err().to_string();
+        assert!(e.starts_with("denoising 16384×16384 pixels needs about"), "{e}");
+        assert!(e.contains("which could not be allocated"), "{e}");
     }
 
     #[test]
