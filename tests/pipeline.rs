@@ -653,3 +653,104 @@ fn denoised_case_keeps_the_mean_and_bad_settings_are_named() {
         assert!(err.contains("denoise") && err.contains(says), "{bad}: {err}");
     }
 }
+
+/// Truth renders made at few samples and denoised must not bias what a stage measures. Each
+/// stage runs on the same renders unfiltered and denoised (same seed, same samples), so any
+/// difference is the filter's; it must stay within three standard errors of the stage's own
+/// headline error: the mean angular error over the mask's n pixels (relative standard error
+/// at most 1/√n: a Rayleigh-like error has a coefficient of variation near 0.5), the corner
+/// RMS over n corners (1/√(2n)), and the colour patches' χ² per degree of freedom (√(2/dof)).
+#[test]
+fn denoised_truth_renders_leave_stage_metrics_unbiased() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let scenes = common::root().join("pipelines/scenes");
+    let text = format!(
+        r#"name = "t"
+seed = 1
+[[stages]]
+stage = "photometric"
+case = "blob"
+scene = "{0}/ps-blob.toml"
+lights = 24
+model = "blinn-phong"
+spp = 16
+sweep = {{ denoise = [false, true] }}
+[[stages]]
+stage = "calibrate"
+case = "board"
+scene = "{0}/calib-board.toml"
+views = 4
+spp = 4
+sweep = {{ denoise = [false, true] }}
+[[stages]]
+stage = "color"
+case = "chart"
+scene = "{0}/color-chart.toml"
+model = "root-poly-2"
+spp = 2
+sweep = {{ denoise = [false, true] }}
+"#,
+        scenes.display()
+    );
+    let (code, err) = run(&text, &out);
+    assert_eq!(code, 0, "{err}");
+    let j: serde_json::Value = read_json(&out.join("report.json"));
+    let stage = |case: &str| {
+        j["stages"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|s| s["case"] == case)
+            .unwrap_or_else(|| panic!("{case}"))
+            .clone()
+    };
+    let value = |s: &serde_json::Value, name: &str| {
+        s["metrics"].as_array().unwrap().iter().find(|m| m["name"] == name).unwrap()["value"]
+            .as_f64()
+            .unwrap()
+    };
+    let notes = |s: &serde_json::Value| {
+        s["notes"].as_array().unwrap().iter().map(|n| n.as_str().unwrap().to_string()).collect::<Vec<_>>()
+    };
+    // The number just before `marker` in the stage's first note.
+    let count_before = |s: &serde_json::Value, marker: &str| -> f64 {
+        let n = &notes(s)[0];
+        let head = &n[..n.find(marker).unwrap_or_else(|| panic!("{marker} in {n}"))];
+        head.split_whitespace().last().unwrap().parse().unwrap()
+    };
+    for case in ["blob", "board", "chart"] {
+        let raw = stage(&format!("{case}[denoise=false]"));
+        let dn = stage(&format!("{case}[denoise=true]"));
+        assert!(
+            notes(&dn).iter().any(|n| n.contains("denoised (feature filter")),
+            "{case}: {:?}",
+            notes(&dn)
+        );
+        assert!(!notes(&raw).iter().any(|n| n.contains("denoised")), "{case}");
+        let (name, a, b, allowed) = match case {
+            "blob" => {
+                let n = count_before(&raw, " object pixels in the mask");
+                let m = value(&raw, "mean_angular_error_deg");
+                ("mean_angular_error_deg", m, value(&dn, "mean_angular_error_deg"), 3.0 * m / n.sqrt())
+            }
+            "board" => {
+                // The default board: 9 × 6 inner corners per view.
+                let n = count_before(&raw, " views of") * 54.0;
+                let m = value(&raw, "corner_rms_px");
+                ("corner_rms_px", m, value(&dn, "corner_rms_px"), 3.0 * m / (2.0 * n).sqrt())
+            }
+            _ => {
+                let dof = 3.0 * value(&raw, "used_patches");
+                (
+                    "patch_rgb_chi2",
+                    value(&raw, "patch_rgb_chi2"),
+                    value(&dn, "patch_rgb_chi2"),
+                    3.0 * (2.0 / dof).sqrt(),
+                )
+            }
+        };
+        assert!(b - a <= allowed, "{case}: {name} {b} denoised against {a} unfiltered (allowed +{allowed})");
+        assert!(b.is_finite() && b >= 0.0, "{case}: {name} {b}");
+    }
+}

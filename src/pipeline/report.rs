@@ -384,7 +384,9 @@ pub fn case_section(s: &mut String, st: &StageReport, now_met: &[(String, String
         let whole = whole_entry_met(st, &m.name);
         let verdict = match (m.pass, &m.expected_miss, &m.skipped) {
             (_, _, Some(why)) => format!("skipped: {why}"),
-            _ if m.not_applicable.is_some() => format!("n/a: {}", m.not_applicable.as_deref().unwrap_or_default()),
+            _ if m.not_applicable.is_some() => {
+                format!("n/a: {}", m.not_applicable.as_deref().unwrap_or_default())
+            }
             (Some(true), Some(why), _) if whole => {
                 format!("**DECLARED MISS NOW MET** (declared: {why})")
             }

@@ -663,7 +663,10 @@ mod tests {
             for y in reach..h {
                 for x in reach..w {
                     let (p, q) = (a.pixel(x, y)[0], b.pixel(x, y)[0]);
-                    assert!((p - q).abs() < 1e-6, "{method}: pixel ({x}, {y}): {q} beside the stripe, {p} without");
+                    assert!(
+                        (p - q).abs() < 1e-6,
+                        "{method}: pixel ({x}, {y}): {q} beside the stripe, {p} without"
+                    );
                 }
             }
         }
@@ -728,7 +731,8 @@ mod tests {
                 .env(CHILD, "1")
                 .output()
                 .unwrap();
-            let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+            let text =
+                format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
             assert!(out.status.success() && text.contains("1 passed"), "{text}");
             return;
         }

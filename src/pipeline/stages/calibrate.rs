@@ -57,6 +57,10 @@ pub struct Config {
     pub views: usize,
     /// Samples per pixel (default: the scene's).
     pub spp: Option<u32>,
+    /// Denoise the truth renders (before the sensor; `stages::truth_render`): `true` or the
+    /// filter's settings.
+    #[serde(default)]
+    pub denoise: super::Denoise,
     /// Range of the board's tilt away from the line of sight to its centre, in degrees
     /// (default [30, 40]); boards centred in the image (`spread = 0`) and tilted by less than a
     /// few degrees leave the focal length unobservable, boards beyond about 80° are nearly
@@ -318,21 +322,21 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<calib::Input, T
             product: "calibrate-grey",
             scene: &digest,
             t_world_cam: pose,
-            settings: SettingsKey::from(&settings),
+            settings: SettingsKey::denoised(&settings, &c.denoise),
             sensor: sensor.is_some(),
         };
         let grey = ctx.cache.images(ctx.case, &name, &recipe, || {
-            let film = render::try_render(&scene, &settings)?;
+            let radiance = super::truth_render(&scene, &settings, &c.denoise)?;
             let grey = match &sensor {
                 Some(sn) => {
-                    let codes = sn.expose(&film.mean, settings.seed);
+                    let codes = sn.expose(&radiance, settings.seed);
                     let max = sn.max_code() as f32;
                     codes
                         .chunks_exact(3)
                         .map(|c| (c[0] as f32 + c[1] as f32 + c[2] as f32) / (3.0 * max))
                         .collect()
                 }
-                None => Grey::from_image(&film.mean).data,
+                None => Grey::from_image(&radiance).data,
             };
             Ok::<_, StageError>(vec![Image {
                 width: camera.width,
@@ -376,6 +380,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<calib::Input, T
         settings.spp,
         if sensor.is_some() { "on" } else { "off" }
     ));
+    found.notes.extend(super::denoise_note(&c.denoise, settings.spp));
     Ok(Some((calib::Input { images }, Truth { camera, corners }, found)))
 }
 

@@ -72,6 +72,10 @@ pub struct Config {
     pub full_well: Option<f64>,
     /// Samples per pixel (default: the scene's).
     pub spp: Option<u32>,
+    /// Denoise the truth render of each wavelength band (`stages::truth_render`): `true` or
+    /// the filter's settings.
+    #[serde(default)]
+    pub denoise: super::Denoise,
     /// Keep the exposed chart image as `<case>.exr` in the output folder (full scale = 1), so
     /// `lumen color fit` can be run on it; its corners are in the report's notes.
     #[serde(default)]
@@ -254,10 +258,10 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<color::Input, T
             scene: &digest,
             patches: patches.clone(),
             irradiance,
-            settings: SettingsKey::from(&settings),
+            settings: SettingsKey::denoised(&settings, &c.denoise),
         };
         let film = ctx.cache.images(ctx.case, &format!("wavelengths {}", b), &recipe, || {
-            Ok::<_, StageError>(vec![render::try_render(&scene, &settings)?.mean])
+            Ok::<_, StageError>(vec![super::truth_render(&scene, &settings, &c.denoise)?])
         })?;
         let Some(film) = film else { continue };
         let Some(img) = film.first().filter(|f: &&Image| f.data.len() == 3 * w * h) else {
@@ -356,6 +360,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<color::Input, T
         c.reference,
         corner_text.join(",")
     )];
+    notes.extend(super::denoise_note(&c.denoise, settings.spp));
     let mut files = Vec::new();
     if c.save_image {
         let name = format!("{}.exr", crate::pipeline::names::file_stem(ctx.case));

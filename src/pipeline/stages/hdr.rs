@@ -98,6 +98,9 @@ pub struct Config {
     pub weights: String,
     /// Samples per pixel (default: the scene's).
     pub spp: Option<u32>,
+    /// Denoise the truth render (`stages::truth_render`): `true` or the filter's settings.
+    #[serde(default)]
+    pub denoise: super::Denoise,
 }
 
 fn default_exposures() -> usize {
@@ -182,9 +185,13 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<hdr::Input, Tru
     let mut settings = render::Settings::from_scene(&scene);
     apply_overrides(&mut settings, c.spp, None)?;
     settings.seed = ctx.seed;
-    let recipe = FilmRecipe { product: "hdr-film", scene: &digest, settings: SettingsKey::from(&settings) };
+    let recipe = FilmRecipe {
+        product: "hdr-film",
+        scene: &digest,
+        settings: SettingsKey::denoised(&settings, &c.denoise),
+    };
     let film = ctx.cache.images(ctx.case, "radiance", &recipe, || {
-        Ok::<_, StageError>(vec![render::try_render(&scene, &settings)?.mean])
+        Ok::<_, StageError>(vec![super::truth_render(&scene, &settings, &c.denoise)?])
     })?;
     let Some(film) = film else { return Ok(None) };
     let Some(radiance) = film.into_iter().next() else {
@@ -241,7 +248,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<hdr::Input, Tru
     };
     let (floor_radiance, _) = hdr::merge::merge(&codes, &times, &true_curve, floor_weights);
     let (lo, hi) = luminance_range.unwrap_or((0.0, 0.0));
-    let notes = vec![format!(
+    let mut notes = vec![format!(
         "{}: {}×{} px, {} spp, luminance from {lo:.3e} to {hi:.3e}; {} exposures {} stops apart from 1 s, sensor {} bits, response {:?}, full well {} e⁻, read noise {} e⁻.",
         c.scene,
         radiance.width,
@@ -254,6 +261,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<hdr::Input, Tru
         c.full_well,
         c.read_noise
     )];
+    notes.extend(super::denoise_note(&c.denoise, settings.spp));
     let mut truth = Truth {
         radiance,
         response: c.response,

@@ -321,19 +321,53 @@ pub fn apply_overrides(
     Ok(())
 }
 
-/// The render settings a cache key depends on.
+/// The render settings a cache key depends on, and the filter a denoised truth render went
+/// through (absent from the key of an unfiltered one, so those keys are as they always were).
 #[derive(serde::Serialize)]
 pub struct SettingsKey {
     pub spp: u32,
     pub max_depth: u32,
     pub seed: u64,
     pub sampler: crate::render::sampler::SamplerKind,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub denoise: Option<crate::image::denoise::Settings>,
 }
 
 impl From<&crate::render::Settings> for SettingsKey {
     fn from(s: &crate::render::Settings) -> SettingsKey {
-        SettingsKey { spp: s.spp, max_depth: s.max_depth, seed: s.seed, sampler: s.sampler }
+        SettingsKey { spp: s.spp, max_depth: s.max_depth, seed: s.seed, sampler: s.sampler, denoise: None }
     }
+}
+
+impl SettingsKey {
+    /// The key of a truth render made by `truth_render` with `denoise`.
+    pub fn denoised(s: &crate::render::Settings, denoise: &Denoise) -> SettingsKey {
+        SettingsKey { denoise: denoise.0.clone(), ..SettingsKey::from(s) }
+    }
+}
+
+/// A stage's truth render: the film's mean, or with `denoise` that film filtered
+/// (`render::denoised`: the halves cross-filtered, guided by the features of the same camera
+/// samples), so fewer samples can give the noise of more.
+pub fn truth_render(
+    scene: &crate::render::Scene,
+    settings: &crate::render::Settings,
+    denoise: &Denoise,
+) -> Result<crate::image::Image, crate::render::Error> {
+    match &denoise.0 {
+        None => Ok(crate::render::try_render(scene, settings)?.mean),
+        Some(filter) => Ok(crate::render::denoised::render_denoised(scene, settings, filter)?.output.image),
+    }
+}
+
+/// The report's note on a stage whose truth renders were denoised.
+pub fn denoise_note(denoise: &Denoise, spp: u32) -> Option<String> {
+    let f = denoise.0.as_ref()?;
+    Some(format!(
+        "truth renders at {spp} spp, denoised ({} filter, half buffers cross-filtered, strengths {:?} chosen by SURE).",
+        f.method.map_or("feature".to_string(), |m| m.to_string()),
+        f.strengths
+    ))
 }
 
 /// An entry's `denoise`: `true` for the default filter, `false` for none, or a table of the

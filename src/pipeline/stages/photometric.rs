@@ -63,6 +63,9 @@ pub struct Config {
     /// Longest path (default: the scene's); 2 renders direct light only, without
     /// interreflections.
     pub max_depth: Option<u32>,
+    /// Denoise each light's render (`stages::truth_render`): `true` or the filter's settings.
+    #[serde(default)]
+    pub denoise: super::Denoise,
     /// `lambertian`, `robust` or `blinn-phong` (default robust).
     #[serde(default = "default_model")]
     pub model: String,
@@ -296,10 +299,10 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<photometric::In
             albedo_scale: c.albedo_scale,
             to_light: to_light.to_array(),
             irradiance: c.irradiance,
-            settings: SettingsKey::from(&settings),
+            settings: SettingsKey::denoised(&settings, &c.denoise),
         };
         let film = ctx.cache.images(ctx.case, &format!("light {j}"), &recipe, || {
-            Ok::<_, StageError>(vec![render::try_render(&scene, &settings)?.mean])
+            Ok::<_, StageError>(vec![super::truth_render(&scene, &settings, &c.denoise)?])
         })?;
         let Some(film) = film else { continue };
         let Some(img) = film.first().filter(|f: &&Image| f.data.len() == 3 * w * h) else {
@@ -319,7 +322,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<photometric::In
     if ctx.renders_only() {
         return Ok(None);
     }
-    let notes = vec![format!(
+    let mut notes = vec![format!(
         "{} lights at {e0}°–{e1}° elevation, {} object pixels in the mask ({} more left out: their \
          footprint straddles an occlusion edge or crease), {}x{} px, {} spp, model {}.",
         c.lights,
@@ -330,6 +333,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<photometric::In
         settings.spp,
         model.name()
     )];
+    notes.extend(super::denoise_note(&c.denoise, settings.spp));
     let input = photometric::Input {
         width: w,
         height: h,

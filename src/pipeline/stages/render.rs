@@ -22,9 +22,9 @@
 //!   8×8 rays; the one-pixel margin holds a sliver of emitter the rays pass by): must be 0;
 //! - `nonfinite_samples`: samples that came out NaN or infinite (must be 0);
 //! - `relmse_raw`: with `denoise`, the render's relMSE before the filter (the reference
-//!   metrics above then measure the denoised image; the z-test is skipped, since filtered
+//!   metrics above then measure the denoised image; the z-test is n/a, since filtered
 //!   pixels are correlated), and `relmse_gain`, relmse_raw / relmse: what the filter bought
-//!   (below 1, it made the image worse). Skipped for the undenoised cases of a sweep over
+//!   (below 1, it made the image worse). n/a for the undenoised cases of a sweep over
 //!   `denoise`, so one entry can bound it;
 //! - `mpaths_per_s`: million camera paths per second (no bound: speed is for benchmarks).
 //!
@@ -323,7 +323,12 @@ pub fn validate(c: &Config, out: &Output, truth: &Truth) -> Findings {
                         // A filtered pixel is a weighted mean of its neighbours: its error is
                         // no longer the independent noise the z-test assumes.
                         let why = "the denoised image's pixels are correlated: no per-pixel z-test";
-                        f.metrics.push(Metric::not_applicable("z_test_pass_fraction", "", Better::Higher, why));
+                        f.metrics.push(Metric::not_applicable(
+                            "z_test_pass_fraction",
+                            "",
+                            Better::Higher,
+                            why,
+                        ));
                     } else {
                         let why = "the render is not denoised";
                         f.metrics.push(Metric::not_applicable("relmse_gain", "×", Better::Higher, why));
