@@ -7,6 +7,13 @@
 //! as in the colour, and the variance says where a pixel straddles two surfaces. A ray that
 //! misses gives 0 in every feature.
 //!
+//! Through smooth glass, mirrors and null surfaces the albedo and normal are those of the
+//! first surface that is not a delta one, found along each delta surface's more likely lobe
+//! (refraction unless Fresnel reflection exceeds one half), the albedo tinted by the colours
+//! passed: what the camera sees through a glass sphere is the room behind it, and features of
+//! the sphere's smooth surface would tell the filter nothing about where that image has edges.
+//! The depth stays the first hit's, the distance along the line of sight.
+//!
 //! | buffer  | channels | value at the first hit                                   |
 //! |---------|----------|----------------------------------------------------------|
 //! | albedo  | R G B    | the material's albedo (its reflectance colour)           |
@@ -15,6 +22,8 @@
 
 use super::film::pixel_stats;
 use super::integrators::{camera_path, Settings};
+use super::geometry::Ray;
+use super::transport::{self, epsilon};
 use super::scene::Scene;
 use crate::image::Image;
 use glam::{DVec3, Vec3A};
@@ -96,8 +105,35 @@ fn first_hit(
         return [Vec3A::ZERO; 3];
     };
     let s = scene.surface(&ray, &hit);
-    let n = if s.n.dot(ray.dir) > 0.0 { -s.n } else { s.n };
     let p = DVec3::from(s.p.to_array().map(f64::from));
     let z = cam_from_world.transform_point(p).z as f32;
-    [scene.albedo(s.material, &hit, s.p), n, Vec3A::new(z, 0.0, 0.0)]
+    let (mut ray, mut hit, mut s) = (ray, hit, s);
+    let mut tint = Vec3A::ONE;
+    for _ in 0..MAX_DELTA_BOUNCES {
+        let mat = &scene.materials[s.material as usize];
+        let wo = -ray.dir;
+        let front = s.n.dot(wo) >= 0.0;
+        if !mat.bsdf.is_delta() || mat.roughness.is_some() || mat.emission.is_some() {
+            break;
+        }
+        let n = if front { s.n } else { -s.n };
+        let albedo = scene.albedo(s.material, &hit, s.p);
+        let Some(next) = mat.bsdf.facing(front).sample(albedo, n, wo, 0.5, 0.5, 0.5) else {
+            break;
+        };
+        let origin = transport::offset(s.p, n, next.wi, epsilon(s.p));
+        let next_ray = Ray { origin, dir: next.wi };
+        let Some(next_hit) = scene.bvh.intersect(&next_ray, 0.0, f32::INFINITY) else {
+            // Out to the environment: no surface to describe.
+            return [Vec3A::ZERO, Vec3A::ZERO, Vec3A::new(z, 0.0, 0.0)];
+        };
+        tint *= albedo;
+        s = scene.surface(&next_ray, &next_hit);
+        (ray, hit) = (next_ray, next_hit);
+    }
+    let n = if s.n.dot(ray.dir) > 0.0 { -s.n } else { s.n };
+    [tint * scene.albedo(s.material, &hit, s.p), n, Vec3A::new(z, 0.0, 0.0)]
 }
+
+/// Delta surfaces followed before the features stop at whatever surface is reached.
+const MAX_DELTA_BOUNCES: usize = 8;
