@@ -21,10 +21,10 @@
 //! | depth   | Y        | camera-frame z (scene units)                              |
 
 use super::film::pixel_stats;
-use super::integrators::{camera_path, Settings};
 use super::geometry::Ray;
-use super::transport::{self, epsilon};
+use super::integrators::{camera_path, Settings};
 use super::scene::Scene;
+use super::transport::{self, epsilon};
 use crate::image::Image;
 use glam::{DVec3, Vec3A};
 use rayon::prelude::*;
@@ -137,3 +137,37 @@ fn first_hit(
 
 /// Delta surfaces followed before the features stop at whatever surface is reached.
 const MAX_DELTA_BOUNCES: usize = 8;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::bsdf::Bsdf;
+
+    /// Through the glass sphere of the Cornell box the albedo and normal are the room's, not
+    /// the sphere's; the depth stays the first hit's. The same scene with the glass made
+    /// Lambertian (same colour) gives the sphere's own: they must differ on the sphere's
+    /// pixels, and only there.
+    #[test]
+    fn features_see_through_smooth_glass() {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("pipelines/scenes/cornell-glass.toml");
+        let glass = crate::render::load(&path).unwrap();
+        let mut opaque = crate::render::load(&path).unwrap();
+        for m in &mut opaque.materials {
+            if m.bsdf.is_delta() {
+                m.bsdf = Bsdf::Lambertian;
+            }
+        }
+        let settings = Settings { spp: 1, crop: None, ..Settings::from_scene(&glass) };
+        let (a, b) = (features(&glass, &settings), features(&opaque, &settings));
+        assert_eq!(a.depth.mean, b.depth.mean);
+        let pixels = a.normal.mean.data.len() / 3;
+        let differ = (0..pixels)
+            .filter(|&i| {
+                (0..3).any(|c| (a.normal.mean.data[3 * i + c] - b.normal.mean.data[3 * i + c]).abs() > 1e-3)
+            })
+            .count();
+        // The sphere covers a few per cent of the image.
+        assert!(differ > pixels / 100 && differ < pixels / 4, "{differ} of {pixels} pixels");
+    }
+}
