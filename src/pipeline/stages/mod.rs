@@ -364,8 +364,9 @@ pub fn truth_render(
 pub fn denoise_note(denoise: &Denoise, spp: u32) -> Option<String> {
     let f = denoise.0.as_ref()?;
     Some(format!(
-        "truth renders at {spp} spp, denoised ({} filter, half buffers cross-filtered, strengths {:?} chosen by SURE).",
+        "truth renders at {spp} spp, denoised ({} filter{}, strengths {:?} chosen by SURE).",
         f.method.map_or("feature".to_string(), |m| m.to_string()),
+        if spp >= 2 { ", half buffers cross-filtered" } else { "" },
         f.strengths
     ))
 }
