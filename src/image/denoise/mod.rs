@@ -28,7 +28,10 @@
 //!   SURE(p) = Σᵢ (Fᵢ(p) − yᵢ(p))² + 2·Varᵢ(p)·∂Fᵢ(p)/∂yᵢ(p) − Varᵢ(p),   ∂F(p)/∂y(p) = w(p,p)/Σ_q w(p,q)
 //!
 //! The derivative is exact for cross-filtered halves (the weights do not depend on the data
-//! they average) and a first-order approximation otherwise. SURE maps are smoothed (Gaussian,
+//! they average) and a first-order approximation otherwise. The unfiltered image is one more
+//! candidate (F = y: its risk is Var), so a pixel that every strength would move further
+//! than its noise allows is kept as it was: a quiet pixel beside fireflies, whose spread
+//! variance lets the weights take in their light. SURE maps are smoothed (Gaussian,
 //! σ = 1.5 px) before the choice, and the one-hot choice maps are smoothed (σ = 1 px) and
 //! used as blending weights, so no seam shows where the choice changes. Nothing here reads a
 //! reference image.
@@ -322,6 +325,22 @@ pub fn denoise(input: &Input, settings: &Settings) -> Result<Output, Error> {
         }
     }
 
+    // The unfiltered image as one more candidate (SURE = its variance): where every strength
+    // moves a pixel further than its noise allows, SURE keeps the pixel as it was.
+    let identity_var = match (input.halves, var.as_ref()) {
+        (Some([a, b]), v) => Some(half_variance(&planes_of(a), &planes_of(b), v)),
+        (None, v) => v.cloned(),
+    };
+    if let Some(v) = identity_var {
+        let n = w * h;
+        let mut sure = vec![0.0f32; n];
+        for ch in 0..c {
+            for (s, &x) in sure.iter_mut().zip(v.plane(ch)) {
+                *s += if input.halves.is_some() { 2.0 * x } else { x };
+            }
+        }
+        candidates.push((y.clone(), sure));
+    }
     let (blend, chosen) = choose(&candidates, w, h);
     let mut out = Image::new(color.width, color.height, color.channels);
     for (p, px) in out.data.chunks_exact_mut(c).enumerate() {
