@@ -26,7 +26,9 @@
 //!   pixels are correlated), and `relmse_gain`, relmse_raw / relmse: what the filter bought
 //!   (below 1, it made the image worse). n/a for the undenoised cases of a sweep over
 //!   `denoise`, so one entry can bound it;
-//! - `mpaths_per_s`: million camera paths per second (no bound: speed is for benchmarks).
+//! - `mpaths_per_s`: million camera paths per second (no bound: speed is for benchmarks);
+//! - `denoise_s_per_megapixel`: with `denoise`, the seconds of the feature buffers and the
+//!   filter per megapixel (no bound either).
 //!
 //! When the reference files are absent (`../shared` is not beside the checkout) the reference
 //! metrics are reported as skipped, with the missing file named.
@@ -258,6 +260,13 @@ pub fn validate(c: &Config, out: &Output, truth: &Truth) -> Findings {
     // What the metrics measure: the denoised image when there is one.
     let image = out.denoised.as_ref().map_or(&film.mean, |d| &d.image);
     if let Some(d) = &out.denoised {
+        let megapixels = film.mean.width as f64 * film.mean.height as f64 / 1e6;
+        f.metrics.push(Metric::new(
+            "denoise_s_per_megapixel",
+            d.seconds / megapixels.max(1e-12),
+            "s/MP",
+            Better::Lower,
+        ));
         f.notes.push(format!(
             "denoised ({}{}) in {:.2} s after a render of {:.2} s; the reference metrics measure the denoised image, relmse_raw the render.",
             d.method,
