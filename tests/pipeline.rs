@@ -696,15 +696,6 @@ sweep = {{ denoise = [false, true] }}
     let (code, err) = run(&text, &out);
     assert_eq!(code, 0, "{err}");
     let j: serde_json::Value = read_json(&out.join("report.json"));
-    let stage = |case: &str| {
-        j["stages"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|s| s["case"] == case)
-            .unwrap_or_else(|| panic!("{case}"))
-            .clone()
-    };
     let value = |s: &serde_json::Value, name: &str| {
         s["metrics"].as_array().unwrap().iter().find(|m| m["name"] == name).unwrap()["value"]
             .as_f64()
@@ -719,38 +710,37 @@ sweep = {{ denoise = [false, true] }}
         let head = &n[..n.find(marker).unwrap_or_else(|| panic!("{marker} in {n}"))];
         head.split_whitespace().last().unwrap().parse().unwrap()
     };
-    for case in ["blob", "board", "chart"] {
-        let raw = stage(&format!("{case}[denoise=false]"));
-        let dn = stage(&format!("{case}[denoise=true]"));
-        assert!(
-            notes(&dn).iter().any(|n| n.contains("denoised (feature filter")),
-            "{case}: {:?}",
-            notes(&dn)
-        );
-        assert!(!notes(&raw).iter().any(|n| n.contains("denoised")), "{case}");
-        let (name, a, b, allowed) = match case {
+    for name in ["blob", "board", "chart"] {
+        let raw = case(&j, &format!("{name}[denoise=false]"));
+        let dn = case(&j, &format!("{name}[denoise=true]"));
+        assert!(notes(dn).iter().any(|n| n.contains("denoised (feature filter")), "{name}: {:?}", notes(dn));
+        assert!(!notes(raw).iter().any(|n| n.contains("denoised")), "{name}");
+        let (metric, a, b, allowed) = match name {
             "blob" => {
-                let n = count_before(&raw, " object pixels in the mask");
-                let m = value(&raw, "mean_angular_error_deg");
-                ("mean_angular_error_deg", m, value(&dn, "mean_angular_error_deg"), 3.0 * m / n.sqrt())
+                let n = count_before(raw, " object pixels in the mask");
+                let m = value(raw, "mean_angular_error_deg");
+                ("mean_angular_error_deg", m, value(dn, "mean_angular_error_deg"), 3.0 * m / n.sqrt())
             }
             "board" => {
                 // The default board: 9 × 6 inner corners per view.
-                let n = count_before(&raw, " views of") * 54.0;
-                let m = value(&raw, "corner_rms_px");
-                ("corner_rms_px", m, value(&dn, "corner_rms_px"), 3.0 * m / (2.0 * n).sqrt())
+                let n = count_before(raw, " views of") * 54.0;
+                let m = value(raw, "corner_rms_px");
+                ("corner_rms_px", m, value(dn, "corner_rms_px"), 3.0 * m / (2.0 * n).sqrt())
             }
             _ => {
-                let dof = 3.0 * value(&raw, "used_patches");
+                let dof = 3.0 * value(raw, "used_patches");
                 (
                     "patch_rgb_chi2",
-                    value(&raw, "patch_rgb_chi2"),
-                    value(&dn, "patch_rgb_chi2"),
+                    value(raw, "patch_rgb_chi2"),
+                    value(dn, "patch_rgb_chi2"),
                     3.0 * (2.0 / dof).sqrt(),
                 )
             }
         };
-        assert!(b - a <= allowed, "{case}: {name} {b} denoised against {a} unfiltered (allowed +{allowed})");
-        assert!(b.is_finite() && b >= 0.0, "{case}: {name} {b}");
+        assert!(
+            b - a <= allowed,
+            "{name}: {metric} {b} denoised against {a} unfiltered (allowed +{allowed})"
+        );
+        assert!(b.is_finite() && b >= 0.0, "{name}: {metric} {b}");
     }
 }

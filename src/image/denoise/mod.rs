@@ -308,6 +308,8 @@ pub fn denoise(input: &Input, settings: &Settings) -> Result<Output, Error> {
                 };
                 candidates.push((mean, sure));
             }
+            // Each half's SURE was summed: so is the unfiltered candidate's.
+            candidates.push(unfiltered(&y, &vh, 2.0));
         }
         None => {
             let Some(v) = var.as_ref() else {
@@ -322,24 +324,8 @@ pub fn denoise(input: &Input, settings: &Settings) -> Result<Output, Error> {
                 let sure = sure_map(&f, &y, v, &centre);
                 candidates.push((f, sure));
             }
+            candidates.push(unfiltered(&y, v, 1.0));
         }
-    }
-
-    // The unfiltered image as one more candidate (SURE = its variance): where every strength
-    // moves a pixel further than its noise allows, SURE keeps the pixel as it was.
-    let identity_var = match (input.halves, var.as_ref()) {
-        (Some([a, b]), v) => Some(half_variance(&planes_of(a), &planes_of(b), v)),
-        (None, v) => v.cloned(),
-    };
-    if let Some(v) = identity_var {
-        let n = w * h;
-        let mut sure = vec![0.0f32; n];
-        for ch in 0..c {
-            for (s, &x) in sure.iter_mut().zip(v.plane(ch)) {
-                *s += if input.halves.is_some() { 2.0 * x } else { x };
-            }
-        }
-        candidates.push((y.clone(), sure));
     }
     let (blend, chosen) = choose(&candidates, w, h);
     let mut out = Image::new(color.width, color.height, color.channels);
@@ -488,6 +474,17 @@ fn sure_map(f: &Planes, y: &Planes, var: &Planes, centre: &[f32]) -> Vec<f32> {
         }
     }
     out
+}
+
+/// The unfiltered image as a candidate, its SURE `halves` × its variance (F = y, ∂F/∂y = 1):
+/// where every strength moves a pixel further than its noise allows, SURE keeps the pixel as
+/// it was.
+fn unfiltered(y: &Planes, var: &Planes, halves: f32) -> (Planes, Vec<f32>) {
+    let mut sure = sure_map(y, y, var, &vec![1.0; y.w * y.h]);
+    for s in &mut sure {
+        *s *= halves;
+    }
+    (y.clone(), sure)
 }
 
 /// Per-pixel blending weights of the candidates from their smoothed SURE maps, and the share
