@@ -13,6 +13,10 @@ pub enum Color {
     /// patch values in a CSV); writes the model and its report (per-patch ΔE2000, mean, max,
     /// leave-one-out mean) as JSON.
     Fit(FitArgs),
+    /// Find a ColorChecker Classic 24 in a photograph by itself: writes the four outer corners
+    /// of its 6×4 cell grid (in --corners's order: corner 0 by patch 1 "dark skin"), the 24
+    /// patches' values sampled as `color fit` samples them, and a confidence, as JSON.
+    Detect(DetectArgs),
     /// Apply a fitted model to an image: camera RGB to linear sRGB (D65, Bradford-adapted
     /// from the model's white) or to XYZ.
     Apply {
@@ -51,6 +55,7 @@ pub enum Color {
 pub fn run(cmd: Color) -> Result<()> {
     match cmd {
         Color::Fit(args) => fit(&args),
+        Color::Detect(args) => detect(&args),
         Color::Apply { ccm, space, linear, input, output } => apply(&ccm, &space, linear, &input, &output),
         Color::Spectral { camera, illuminant, out } => spectral(&camera, &illuminant, &out),
     }
@@ -64,8 +69,9 @@ pub struct FitArgs {
     image: Option<PathBuf>,
     /// The outer corners of the 6×4 cell grid, x1,y1,x2,y2,x3,y3,x4,y4: top-left,
     /// top-right, bottom-right, bottom-left (the corner by patch 1 "dark skin" first),
-    /// pixel centres at integer coordinates.
-    #[arg(long, required_unless_present = "patches", allow_hyphen_values = true)]
+    /// pixel centres at integer coordinates. Without it the chart is found in the image
+    /// (as `lumen color detect` finds it).
+    #[arg(long, allow_hyphen_values = true)]
     corners: Option<String>,
     /// Patch values instead of an image: CSV with the header patch,R,G,B (linear).
     #[arg(long)]
@@ -95,6 +101,94 @@ pub struct FitArgs {
     /// Output JSON: the model, its white and the report.
     #[arg(long)]
     out: PathBuf,
+}
+
+/// `lumen color detect`'s flags.
+#[derive(clap::Args)]
+pub struct DetectArgs {
+    /// Photograph: .jpg/.png/.tif (sRGB-encoded unless --linear; EXIF orientation honoured)
+    /// or .exr (linear).
+    #[arg(long)]
+    image: PathBuf,
+    /// Read a PNG/TIFF's code values as linear (raw sensor data), not sRGB-encoded.
+    #[arg(long)]
+    linear: bool,
+    /// The level at which a channel clips, in the image's units (flags clipped patches).
+    #[arg(long, default_value_t = 1.0)]
+    saturation: f64,
+    /// Also write an overlay PNG: the found grid, the sampled squares and the patch numbers.
+    #[arg(long)]
+    debug: Option<PathBuf>,
+    /// Output JSON.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+/// What `lumen color detect` writes.
+#[derive(serde::Serialize)]
+struct DetectFile {
+    image: String,
+    /// How the values were read: a JPEG or PNG is the camera's sRGB-encoded rendering.
+    encoding: String,
+    corners: [[f64; 2]; 4],
+    confidence: f64,
+    patches: Vec<DetectedPatch>,
+    detection: color::detect::Detection,
+    seconds: f64,
+}
+
+#[derive(serde::Serialize)]
+struct DetectedPatch {
+    name: String,
+    /// Linear RGB, sampled as `color fit` samples it.
+    rgb: [f64; 3],
+    flag: Option<color::Flag>,
+}
+
+fn detect(a: &DetectArgs) -> Result<()> {
+    if !(a.saturation.is_finite() && a.saturation > 0.0) {
+        bail!("--saturation {}: expected a positive number", a.saturation);
+    }
+    let (img, how) = read_linear(&a.image, a.linear)?;
+    let t = std::time::Instant::now();
+    let d = color::detect::detect(&img, true).map_err(|m| anyhow::anyhow!("{}: {m}", a.image.display()))?;
+    let seconds = t.elapsed().as_secs_f64();
+    let samples = color::chart::sample(&img, d.corners, a.saturation)
+        .map_err(|m| anyhow::anyhow!("{}: {m}", a.image.display()))?;
+    let names = spectra::chart().into_iter().map(|(n, _)| n);
+    let patches = samples
+        .iter()
+        .zip(names)
+        .map(|(s, name)| DetectedPatch { name, rgb: s.rgb, flag: s.flag })
+        .collect();
+    let file = DetectFile {
+        image: a.image.display().to_string(),
+        encoding: how.to_string(),
+        corners: d.corners,
+        confidence: d.confidence,
+        patches,
+        detection: d.clone(),
+        seconds,
+    };
+    if let Some(path) = &a.debug {
+        let (w, h, rgb) = color::detect::overlay::draw(&img, true, &d);
+        image::io::write_png_bytes(path, w, h, 3, &rgb)?;
+    }
+    let json = serde_json::to_string_pretty(&file)?;
+    image::io::write_atomically(&a.out, |tmp| std::fs::write(tmp, json))?;
+    let c: Vec<String> = d.corners.iter().map(|p| format!("({:.1}, {:.1})", p[0], p[1])).collect();
+    eprintln!(
+        "{}: chart found in {:.3} s, corners {}, confidence {:.2} ({} of 24 cells seen as squares, colour residual {:.3}{}); {how}; wrote {}",
+        a.image.display(),
+        seconds,
+        c.join(" "),
+        d.confidence,
+        d.cells_found,
+        d.colour_residual,
+        if d.refined { format!(", edges {:.2} px RMS", d.edge_rms_px.unwrap_or(f64::NAN)) } else { ", edges not refined".into() },
+        a.out.display()
+    );
+    Ok(())
 }
 
 /// Reads an image as linear RGB: EXR as stored, PNG/TIFF sRGB-decoded unless `linear`.
@@ -144,19 +238,27 @@ fn fit(a: &FitArgs) -> Result<()> {
     }
     let (samples, how): (Vec<([f64; 3], Option<color::Flag>)>, String) = match (&a.image, &a.patches) {
         (Some(path), _) => {
-            let corners_text = a.corners.as_deref().unwrap_or("");
-            let c = color::parse_numbers::<8>(corners_text, "--corners").map_err(anyhow::Error::msg)?;
-            let corners = [[c[0], c[1]], [c[2], c[3]], [c[4], c[5]], [c[6], c[7]]];
             let (img, how) = read_linear(path, a.linear)?;
+            let (corners, found) = match &a.corners {
+                Some(text) => {
+                    let c = color::parse_numbers::<8>(text, "--corners").map_err(anyhow::Error::msg)?;
+                    ([[c[0], c[1]], [c[2], c[3]], [c[4], c[5]], [c[6], c[7]]], "corners given")
+                }
+                None => {
+                    let d = color::detect::detect(&img, true)
+                        .map_err(|m| anyhow::anyhow!("{}: {m}", path.display()))?;
+                    (d.corners, "corners found in the image (confidence shown by `lumen color detect`)")
+                }
+            };
             let s = color::chart::sample(&img, corners, a.saturation)
                 .map_err(|m| anyhow::anyhow!("{}: {m}", path.display()))?;
-            (s.into_iter().map(|p| (p.rgb, p.flag)).collect(), format!("{}: {how}", path.display()))
+            (s.into_iter().map(|p| (p.rgb, p.flag)).collect(), format!("{}: {how}; {found}", path.display()))
         }
         (None, Some(path)) => {
             let rgb = color::read_patch_rgb(path).context("--patches")?;
             (rgb.into_iter().map(|c| (c, None)).collect(), format!("{}: patch values", path.display()))
         }
-        (None, None) => bail!("give --image with --corners, or --patches"),
+        (None, None) => bail!("give --image (with --corners, or without to find the chart), or --patches"),
     };
     let input = Input {
         patches: samples

@@ -18,6 +18,7 @@
 use crate::error::Invalid;
 pub mod chart;
 pub mod delta_e;
+pub mod detect;
 pub mod models;
 pub mod spectra;
 

@@ -60,6 +60,11 @@ fn glyph(c: char) -> [u8; 5] {
 /// Draws `text` in white into an RGB8 buffer of width `w` with its top-left at (x, y), each
 /// font pixel `s`×`s`.
 fn draw_text(rgb: &mut [u8], w: usize, x: usize, y: usize, s: usize, text: &str) {
+    draw_text_in(rgb, w, x, y, s, text, [255; 3]);
+}
+
+/// Draws `text` in `colour` (digits and the signs of `glyph`), as `draw_text` does.
+pub(crate) fn draw_text_in(rgb: &mut [u8], w: usize, x: usize, y: usize, s: usize, text: &str, colour: [u8; 3]) {
     let h = rgb.len() / (3 * w);
     for (k, c) in text.chars().enumerate() {
         for (row, bits) in glyph(c).iter().enumerate() {
@@ -71,7 +76,7 @@ fn draw_text(rgb: &mut [u8], w: usize, x: usize, y: usize, s: usize, text: &str)
                     for dx in 0..s {
                         let (px, py) = (x + (4 * k + col) * s + dx, y + row * s + dy);
                         if px < w && py < h {
-                            rgb[3 * (py * w + px)..3 * (py * w + px) + 3].copy_from_slice(&[255; 3]);
+                            rgb[3 * (py * w + px)..3 * (py * w + px) + 3].copy_from_slice(&colour);
                         }
                     }
                 }

@@ -241,7 +241,8 @@ fn color_type(channels: u32, sixteen: bool) -> Option<image::ExtendedColorType> 
     })
 }
 
-fn write_png_bytes(path: &Path, w: u32, h: u32, c: u32, bytes: &[u8]) -> Result<(), Error> {
+/// Writes 8-bit code values as they are (1, 3 or 4 channels).
+pub fn write_png_bytes(path: &Path, w: u32, h: u32, c: u32, bytes: &[u8]) -> Result<(), Error> {
     let ct = color_type(c, false)
         .ok_or_else(|| Error::Write { path: path.into(), message: format!("{c} channels") })?;
     write_atomically(path, |tmp| {
@@ -281,22 +282,31 @@ pub fn write_png_raw(path: &Path, w: u32, h: u32, c: u32, values: &[u16], bits: 
 /// (512 MB of decoded bytes) alone let a 16384² grey PNG through, to several GB of copies.
 pub const MAX_PIXELS: u64 = 1 << 27;
 
-/// Opens a PNG, JPEG or TIFF, refusing from its header one above `MAX_PIXELS`.
+/// Opens a PNG, JPEG or TIFF, refusing from its header one above `MAX_PIXELS`, and turned as
+/// its EXIF orientation says (as OpenCV's `imread` and every photo viewer show it), so a
+/// phone's portrait photograph stored sideways is read upright.
 pub fn open_limited(path: &Path) -> Result<image::DynamicImage, Error> {
+    use image::ImageDecoder;
     let err = |message: String| Error::Decode { path: path.to_path_buf(), message };
     let unreadable = |e: std::io::Error| Error::Read { path: path.to_path_buf(), message: e.to_string() };
+    let decode = |e: image::ImageError| match e {
+        image::ImageError::IoError(e) => unreadable(e),
+        e => err(e.to_string()),
+    };
     let reader = image::ImageReader::open(path).and_then(|r| r.with_guessed_format()).map_err(unreadable)?;
-    let (w, h) = reader.into_dimensions().map_err(|e| err(e.to_string()))?;
+    let mut decoder = reader.into_decoder().map_err(decode)?;
+    let (w, h) = decoder.dimensions();
     if w as u64 * h as u64 > MAX_PIXELS {
         return Err(err(format!(
             "{w}×{h} pixels, above the limit of {} million ({MAX_PIXELS} pixels)",
             MAX_PIXELS / 1_000_000
         )));
     }
-    image::open(path).map_err(|e| match e {
-        image::ImageError::IoError(e) => unreadable(e),
-        e => err(e.to_string()),
-    })
+    // An unreadable EXIF block leaves the pixels as stored rather than refusing the image.
+    let orientation = decoder.orientation().unwrap_or(image::metadata::Orientation::NoTransforms);
+    let mut img = image::DynamicImage::from_decoder(decoder).map_err(decode)?;
+    img.apply_orientation(orientation);
+    Ok(img)
 }
 
 /// Reads a PNG or JPEG as linear floats in [0, 1] without any transfer function (raw code
