@@ -47,8 +47,7 @@ fn line_value(p: &Point, half: [f64; 2]) -> f64 {
 }
 
 /// Signed distance (px) of x from the image of the chart line {axis = value} under h.
-fn distance(h: &Matrix3<f64>, hinv_t: &Matrix3<f64>, x: [f64; 2], axis: usize, value: f64) -> f64 {
-    let _ = h;
+fn distance(hinv_t: &Matrix3<f64>, x: [f64; 2], axis: usize, value: f64) -> f64 {
     let g = if axis == 0 { nalgebra::Vector3::new(1.0, 0.0, -value) } else { nalgebra::Vector3::new(0.0, 1.0, -value) };
     let l = hinv_t * g;
     (l[0] * x[0] + l[1] * x[1] + l[2]) / (l[0] * l[0] + l[1] * l[1]).sqrt()
@@ -69,14 +68,16 @@ fn search(img: &Encoded, h: &Matrix3<f64>, half: [f64; 2], reach: f64) -> Vec<Po
                     let at = |s: f64| if axis == 0 { [value + s, along] } else { [along, value + s] };
                     let (a, b) = (apply(h, at(-reach)), apply(h, at(reach)));
                     let len = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
-                    if !(len.is_finite() && len >= 2.0) {
+                    if !(len.is_finite() && len >= 1.0) {
                         continue;
                     }
                     let inside = |p: [f64; 2]| p[0] >= 1.0 && p[1] >= 1.0 && p[0] <= w - 2.0 && p[1] <= hh - 2.0;
                     if !(inside(a) && inside(b)) {
                         continue;
                     }
-                    let n = (2.0 * len).ceil() as usize;
+                    // Quarter-pixel steps, and at least 8, so a short segment (a small chart)
+                    // still has a peak away from its ends.
+                    let n = ((4.0 * len).ceil() as usize).max(8);
                     let profile: Vec<[f32; 3]> = (0..=n)
                         .map(|i| {
                             let f = i as f64 / n as f64;
@@ -121,7 +122,7 @@ fn residuals(h0: &Matrix3<f64>, p: &SVector<f64, 10>, points: &[Point]) -> Optio
     let h = perturbed(h0, &p.as_slice()[..8]);
     let hinv_t = h.try_inverse()?.transpose();
     let half = [p[8], p[9]];
-    Some(points.iter().map(|q| distance(&h, &hinv_t, q.x, q.axis, line_value(q, half))).collect())
+    Some(points.iter().map(|q| distance(&hinv_t, q.x, q.axis, line_value(q, half))).collect())
 }
 
 /// Gauss–Newton with Huber weights over Δ and the half sides.
@@ -174,13 +175,17 @@ pub fn refine(img: &Encoded, h: &Matrix3<f64>, half: [f64; 2]) -> Option<Refined
     let (mut h, mut half) = (*h, half);
     let mut last = None;
     for reach in REACH {
+        // A segment of at least 1.2 px each way, so a small chart's edges are still searched;
+        // never beyond the first round's reach, which stays short of the neighbour's edge.
+        let pitch = super::lattice::cell_area(&h, [3.0, 2.0]).sqrt();
+        let reach = reach.max(1.2 / pitch).min(REACH[0]);
         let points = search(img, &h, half, reach);
         if points.len() < MIN_POINTS {
-            return None;
+            break;
         }
-        let (hn, halfn, rms) = fit(&h, half, &points)?;
+        let Some((hn, halfn, rms)) = fit(&h, half, &points) else { break };
         if !(halfn.iter().all(|v| (0.2..0.5).contains(v)) && hn.iter().all(|v| v.is_finite())) {
-            return None;
+            break;
         }
         h = hn;
         half = halfn;

@@ -10,7 +10,8 @@ use nalgebra::Matrix3;
 /// The overlay as RGB8 (width, height, bytes).
 pub fn draw(image: &Image, linear: bool, det: &Detection) -> (u32, u32, Vec<u8>) {
     let (w, h) = (image.width as usize, image.height as usize);
-    let enc = super::regions::Encoded::new(image, linear);
+    let exposure = if linear { super::regions::exposures(image).first().copied() } else { None };
+    let enc = super::regions::Encoded::new(image, exposure);
     let mut rgb = Vec::with_capacity(w * h * 3);
     for y in 0..h {
         for x in 0..w {

@@ -72,7 +72,7 @@ impl Work {
 }
 
 /// The full-resolution photograph as sRGB-encoded RGB: code values as they are for an
-/// encoded file, a linear image scaled so its brightest patch is near full scale and encoded.
+/// encoded file, a linear image multiplied by an exposure and encoded.
 pub struct Encoded<'a> {
     pub width: usize,
     pub height: usize,
@@ -81,26 +81,51 @@ pub struct Encoded<'a> {
     linear_scale: Option<f32>,
 }
 
-impl<'a> Encoded<'a> {
-    pub fn new(image: &'a Image, linear: bool) -> Encoded<'a> {
-        let linear_scale = linear.then(|| {
-            // The 99.5th percentile of the brightest channel: a specular glint or a lamp in view
-            // does not darken the chart, and a white patch lands near full scale.
-            let mut m: Vec<f32> = image
-                .data
-                .chunks_exact(image.channels as usize)
-                .map(|p| p[..3].iter().fold(0f32, |a, &v| if v.is_finite() { a.max(v) } else { a }))
-                .collect();
-            let k = ((m.len() as f64) * 0.995) as usize;
-            let k = k.min(m.len().saturating_sub(1));
-            let (_, top, _) = m.select_nth_unstable_by(k, f32::total_cmp);
-            if *top > 0.0 {
-                1.0 / *top
-            } else {
-                1.0
+/// The exposures a linear image is tried at, most likely first: its brightest 0.5 % at full
+/// scale (a chart filling much of the frame), its brightest 0.01 % (a chart small in a dark
+/// frame, where the 0.5 % is background), and its brightest 4 × 4 block (a few specular
+/// pixels aside). Exposures within a factor 1.5 of one tried already are left out.
+pub fn exposures(image: &Image) -> Vec<f32> {
+    let c = image.channels as usize;
+    let (w, h) = (image.width as usize, image.height as usize);
+    let bright = |p: &[f32]| p[..3].iter().fold(0f32, |a, &v| if v.is_finite() { a.max(v) } else { a });
+    let mut m: Vec<f32> = image.data.chunks_exact(c).map(bright).collect();
+    let mut quantile = |q: f64| {
+        let k = (((m.len() as f64) * q) as usize).min(m.len().saturating_sub(1));
+        *m.select_nth_unstable_by(k, f32::total_cmp).1
+    };
+    let mut levels = vec![quantile(0.995), quantile(0.9999)];
+    let mut block = 0f32;
+    for by in 0..h / 4 {
+        for bx in 0..w / 4 {
+            let mut s = 0f32;
+            for y in 4 * by..4 * by + 4 {
+                for x in 4 * bx..4 * bx + 4 {
+                    s += bright(&image.data[c * (y * w + x)..c * (y * w + x) + c]);
+                }
             }
-        });
-        Encoded { width: image.width as usize, height: image.height as usize, image, linear_scale }
+            block = block.max(s / 16.0);
+        }
+    }
+    levels.push(block);
+    let mut out: Vec<f32> = Vec::new();
+    for l in levels.into_iter().filter(|l| *l > 0.0 && l.is_finite()) {
+        let s = 1.0 / l;
+        if out.iter().all(|&o| (o / s).max(s / o) > 1.5) {
+            out.push(s);
+        }
+    }
+    if out.is_empty() {
+        out.push(1.0);
+    }
+    out
+}
+
+impl<'a> Encoded<'a> {
+    /// `exposure`: `None` for sRGB-encoded code values, else the factor a linear image is
+    /// multiplied by before encoding (`exposures`).
+    pub fn new(image: &'a Image, exposure: Option<f32>) -> Encoded<'a> {
+        Encoded { width: image.width as usize, height: image.height as usize, image, linear_scale: exposure }
     }
 
     pub fn pixel(&self, x: usize, y: usize) -> [f32; 3] {

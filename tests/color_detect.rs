@@ -1,0 +1,242 @@
+//! Finding a ColorChecker by itself (`color::detect`, `lumen color detect`): on renders of the
+//! colour stage's chart at random poses against the projected truth, on the ten real chart
+//! photographs against hand-checked corners, and on inputs that hold no chart, two, a cut one
+//! or another make's.
+
+mod common;
+
+use glam::DVec3;
+use lumen::color::detect::{self, Detection};
+use lumen::image::Image;
+use lumen::math::{CameraModel, CameraToWorld};
+use lumen::render;
+use rand::{Rng, SeedableRng};
+
+/// The chart scene's cell grid: origin (0, 0, 0), 6 × 4 cells of 40 mm in z = 0.
+const GRID: [[f64; 3]; 4] = [[0.0, 0.0, 0.0], [0.24, 0.0, 0.0], [0.24, 0.16, 0.0], [0.0, 0.16, 0.0]];
+
+/// A pose of the chart: `turn` about its normal, `tilt` away from the line of sight, the chart
+/// spanning `share` of the image's width, its centre moved by `shift` (a share of the room
+/// left in the image).
+struct View {
+    turn_deg: f64,
+    tilt_deg: f64,
+    share: f64,
+    shift: [f64; 2],
+}
+
+fn camera_for(camera: &CameraModel, v: &View) -> CameraToWorld {
+    let centre = DVec3::new(0.12, 0.08, 0.0);
+    let f = camera.intrinsics.fx;
+    let (t, a) = (v.tilt_deg.to_radians(), (v.turn_deg + 37.0).to_radians());
+    // The camera sits on the side the patches face (−z), tilted about an in-chart axis.
+    let dir = DVec3::new(t.sin() * a.cos(), t.sin() * a.sin(), -t.cos());
+    let turn = v.turn_deg.to_radians();
+    let up = DVec3::new(turn.sin(), -turn.cos(), 0.0);
+    // Start where the chart's 0.24 m width spans `share` of the image seen square-on, and step
+    // back until the whole card (12 mm beyond the grid) is in the frame.
+    let mut d = 0.24 * f / (v.share * camera.width as f64);
+    loop {
+        let eye = centre + d * dir;
+        // Shift the line of sight so the chart sits off centre, within the room it leaves.
+        let room = (1.0 - v.share).max(0.0) * 0.5 * d * camera.width as f64 / f;
+        let base = CameraToWorld::look_at(eye, centre, up).unwrap();
+        let (x, y) = (base.0.rotation.col(0), base.0.rotation.col(1));
+        let aspect = camera.height as f64 / camera.width as f64;
+        let target = centre + 0.8 * room * (v.shift[0] * x + v.shift[1] * aspect * y);
+        let pose = CameraToWorld::look_at(eye, target, up).unwrap();
+        let card = [[-0.012, -0.012], [0.252, -0.012], [0.252, 0.172], [-0.012, 0.172]];
+        let inside = card.iter().all(|c| {
+            let p = camera.project(pose.inverse().0.transform_point(DVec3::new(c[0], c[1], 0.0)));
+            p.is_some_and(|p| p.x > 2.0 && p.y > 2.0 && p.x < camera.width as f64 - 3.0 && p.y < camera.height as f64 - 3.0)
+        });
+        if inside {
+            return pose;
+        }
+        d *= 1.05;
+    }
+}
+
+/// Renders the chart (its scene file, 960 × 720, 16 spp) from `view`: the linear image and
+/// the projected grid corners.
+fn render_view(view: &View, seed: u64) -> (Image, [[f64; 2]; 4]) {
+    let mut scene = render::load(&common::root().join("pipelines/scenes/color-chart.toml")).unwrap();
+    scene.camera = CameraModel::centred(960, 720, 1100.0);
+    scene.t_world_cam = camera_for(&scene.camera, view);
+    let mut settings = common::settings(&scene, 16, 2);
+    settings.seed = seed;
+    let image = render::try_render(&scene, &settings).unwrap().mean;
+    let to_cam = scene.t_world_cam.inverse();
+    let corners = GRID.map(|p| {
+        let q = scene.camera.project(to_cam.0.transform_point(DVec3::from_array(p))).unwrap();
+        [q.x, q.y]
+    });
+    (image, corners)
+}
+
+fn worst_corner(d: &Detection, truth: &[[f64; 2]; 4]) -> f64 {
+    d.corners.iter().zip(truth).map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1])).fold(0.0, f64::max)
+}
+
+/// Random poses over the ranges a user's photographs span: any turn of the chart in the
+/// frame, 0–60° out of plane, 8–80 % of the image's width. Every chart is found, the right
+/// way round, its corners within 0.5 px of the projected truth. 0.5 px is the figure
+/// for renders; the renders' noise (16 spp) moves an edge point by about 0.05 px.
+#[test]
+fn rendered_charts_are_found_within_half_a_pixel() {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(0xc4a87);
+    let mut worst: f64 = 0.0;
+    // The ends of the ranges first: small, steep, both, large; then random poses.
+    let ends = [(90.0, 0.0, 0.06), (30.0, 60.0, 0.3), (200.0, 58.0, 0.1), (0.0, 0.0, 0.8)];
+    for k in 0..14 {
+        let mut u = || rng.gen::<f64>();
+        let (turn_deg, tilt_deg, share) = match ends.get(k) {
+            Some(&e) => e,
+            None => (360.0 * u(), 60.0 * u(), 0.05 + 0.75 * u()),
+        };
+        let view = View { turn_deg, tilt_deg, share, shift: [2.0 * u() - 1.0, 2.0 * u() - 1.0] };
+        let k = k as u64;
+        let (image, truth) = render_view(&view, k + 1);
+        let found = detect::detect(&image, true)
+            .unwrap_or_else(|e| panic!("view {k} (turn {:.0}°, tilt {:.0}°, {:.0} % of the width): {e}", view.turn_deg, view.tilt_deg, 100.0 * view.share));
+        let err = worst_corner(&found, &truth);
+        let (lo, hi) = truth.iter().fold((f64::MAX, f64::MIN), |(l, h), c| (l.min(c[0]), h.max(c[0])));
+        eprintln!(
+            "view {k}: turn {:.0}°, tilt {:.0}°, {:.0} % of the width: worst corner {err:.3} px, {} cells, edges {:?} px RMS",
+            view.turn_deg,
+            view.tilt_deg,
+            100.0 * (hi - lo) / 960.0,
+            found.cells_found,
+            found.edge_rms_px
+        );
+        worst = worst.max(err);
+    }
+    assert!(worst < 0.5, "worst corner {worst:.3} px");
+}
+
+/// The hand-checked corners of the ten shared photographs (tests/data/chart-photos).
+fn photo_truth() -> Vec<(String, [[f64; 2]; 4])> {
+    let text = std::fs::read_to_string(common::root().join("tests/data/chart-photos/corners.csv")).unwrap();
+    text.lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            let v: Vec<f64> = f[1..].iter().map(|s| s.parse().unwrap()).collect();
+            (f[0].to_string(), [[v[0], v[1]], [v[2], v[3]], [v[4], v[5]], [v[6], v[7]]])
+        })
+        .collect()
+}
+
+/// A photograph as `lumen color fit` reads it: sRGB-decoded to linear.
+fn read_photo(path: &std::path::Path) -> Image {
+    let mut img = lumen::image::io::read(path).unwrap();
+    img.data.iter_mut().for_each(|v| *v = lumen::image::srgb_decode(*v));
+    img
+}
+
+/// All ten chart photographs: the chart found, patch 1 at corner 0, every corner within 1.5 %
+/// of the chart's diagonal of the hand-checked truth (the figure; OpenCV's mcc misses
+/// it on four of the ten, `tools/chart_detect_peers.py`), and every patch's sampled value
+/// within 2 % of the value sampled inside the truth's corners.
+#[test]
+fn the_ten_chart_photographs_are_found() {
+    let Some(data) = common::shared_data() else { return };
+    for (name, truth) in photo_truth() {
+        let img = read_photo(&data.join("color/photos").join(&name));
+        let found = detect::detect(&img, true).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let diagonal = (truth[0][0] - truth[2][0]).hypot(truth[0][1] - truth[2][1]);
+        let err = worst_corner(&found, &truth);
+        eprintln!("{name}: worst corner {err:.1} px ({:.2} % of the diagonal), confidence {:.2}", 100.0 * err / diagonal, found.confidence);
+        assert!(err < 0.015 * diagonal, "{name}: worst corner {err:.1} px, diagonal {diagonal:.0} px");
+        let at_truth = lumen::color::chart::sample(&img, truth, 1.0).unwrap();
+        let at_found = lumen::color::chart::sample(&img, found.corners, 1.0).unwrap();
+        // Per patch, the colour's change over its size (a channel near zero, the blue patch's
+        // red, is a code value or two, far below any relative bound).
+        for (k, (a, b)) in at_truth.iter().zip(&at_found).enumerate() {
+            let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            let rel = norm([0, 1, 2].map(|c| a.rgb[c] - b.rgb[c])) / norm(a.rgb);
+            assert!(rel < 0.02, "{name}: patch {}: {:?} at the truth, {:?} found", k + 1, a.rgb, b.rgb);
+        }
+    }
+}
+
+/// Herz-Jesu's facade holds no chart: a refusal that says what was seen.
+#[test]
+fn a_photograph_without_a_chart_is_refused() {
+    let Some(data) = common::shared_data() else { return };
+    let dir = data.join("sfm/herz-jesu-p8/images");
+    let mut files: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().path()).collect();
+    files.sort();
+    let img = read_photo(&files[0]);
+    let e = detect::detect(&img, true).expect_err("no chart on a church facade").to_string();
+    assert!(e.contains("no chart found") || e.contains("match a ColorChecker"), "{e}");
+}
+
+/// Two charts side by side: refused, both named by position. The same photograph cut so half
+/// the chart is outside: refused as cut, never read as a chart the wrong way round.
+#[test]
+fn two_charts_and_a_cut_chart_are_refused() {
+    let Some(data) = common::shared_data() else { return };
+    let img = read_photo(&data.join("color/photos/arcu-01.jpg"));
+    let (w, h) = (img.width as usize, img.height as usize);
+    // Two copies at half size, side by side.
+    let (hw, hh) = (w / 2, h / 2);
+    let mut two = Image::new(2 * hw as u32, hh as u32, 3);
+    for y in 0..hh {
+        for x in 0..hw {
+            for c in 0..3 {
+                let mut s = 0.0;
+                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                    s += img.data[3 * ((2 * y + dy) * w + 2 * x + dx) + c];
+                }
+                two.data[3 * (y * 2 * hw + x) + c] = s / 4.0;
+                two.data[3 * (y * 2 * hw + hw + x) + c] = s / 4.0;
+            }
+        }
+    }
+    let e = detect::detect(&two, true).expect_err("two charts").to_string();
+    assert!(e.contains("2 charts found"), "{e}");
+    // The left 900 columns: the chart spans about x = 380 to 1190.
+    let cw = 900;
+    let mut cut = Image::new(cw as u32, h as u32, 3);
+    for y in 0..h {
+        cut.data[3 * y * cw..3 * (y + 1) * cw].copy_from_slice(&img.data[3 * y * w..3 * (y * w + cw)]);
+    }
+    let e = detect::detect(&cut, true).expect_err("a cut chart").to_string();
+    assert!(e.contains("cut by the frame"), "{e}");
+}
+
+/// A 6 × 4 chart of other colours (the ColorChecker's patches in another order) is a grid but
+/// not a ColorChecker Classic in any orientation.
+#[test]
+fn a_chart_of_another_make_is_refused() {
+    let text = std::fs::read_to_string(common::root().join("pipelines/scenes/color-chart.toml")).unwrap();
+    // Swap the patch materials' names in a fixed shuffle: the grid stays, the layout goes.
+    let order = [13, 2, 21, 8, 17, 5, 24, 10, 1, 19, 6, 15, 3, 22, 11, 18, 9, 4, 23, 14, 7, 20, 12, 16];
+    let mut shuffled = text.clone();
+    for (k, o) in order.iter().enumerate() {
+        shuffled = shuffled.replace(&format!("material = \"patch-{:02}\"", k + 1), &format!("material = \"tmp-{o:02}\""));
+    }
+    let shuffled = shuffled.replace("material = \"tmp-", "material = \"patch-");
+    let dir = tempfile::tempdir().unwrap();
+    let mut scene = common::scene(&shuffled, dir.path()).unwrap();
+    scene.camera = CameraModel::centred(960, 720, 1100.0);
+    scene.t_world_cam = camera_for(&scene.camera, &View { turn_deg: 10.0, tilt_deg: 20.0, share: 0.5, shift: [0.0, 0.0] });
+    let image = render::try_render(&scene, &common::settings(&scene, 8, 2)).unwrap().mean;
+    let e = detect::detect(&image, true).expect_err("another make").to_string();
+    assert!(e.contains("match a ColorChecker Classic's in no orientation"), "{e}");
+}
+
+/// Images that cannot hold a chart: a clear answer, never a panic.
+#[test]
+fn tiny_grey_and_empty_images_are_refused() {
+    let e = detect::detect(&Image::new(1, 1, 3), true).expect_err("1×1").to_string();
+    assert!(e.contains("1×1") && e.contains("too small"), "{e}");
+    let e = detect::detect(&Image::new(640, 480, 1), true).expect_err("grey").to_string();
+    assert!(e.contains("1 channel"), "{e}");
+    let e = detect::detect(&Image::new(640, 480, 3), true).expect_err("black").to_string();
+    assert!(e.contains("no chart found: 0 candidate squares"), "{e}");
+    let mut nan = Image::new(640, 480, 3);
+    nan.data.iter_mut().enumerate().for_each(|(i, v)| *v = if i % 7 == 0 { f32::NAN } else { f32::INFINITY });
+    assert!(detect::detect(&nan, true).is_err());
+}
