@@ -134,6 +134,7 @@ struct DetectFile {
     confidence: f64,
     patches: Vec<DetectedPatch>,
     detection: color::detect::Detection,
+    /// The detection's time, decoding the file excluded.
     seconds: f64,
 }
 
@@ -149,10 +150,7 @@ fn detect(a: &DetectArgs) -> Result<()> {
     if !(a.saturation.is_finite() && a.saturation > 0.0) {
         bail!("--saturation {}: expected a positive number", a.saturation);
     }
-    let (img, how) = read_linear(&a.image, a.linear)?;
-    let t = std::time::Instant::now();
-    let d = color::detect::detect(&img, true).map_err(|m| anyhow::anyhow!("{}: {m}", a.image.display()))?;
-    let seconds = t.elapsed().as_secs_f64();
+    let (img, d, how, seconds) = read_and_detect_timed(&a.image, a.linear)?;
     let samples = color::chart::sample(&img, d.corners, a.saturation)
         .map_err(|m| anyhow::anyhow!("{}: {m}", a.image.display()))?;
     let names = spectra::chart().into_iter().map(|(n, _)| n);
@@ -194,16 +192,47 @@ fn detect(a: &DetectArgs) -> Result<()> {
 /// Reads an image as linear RGB: EXR as stored, PNG/TIFF sRGB-decoded unless `linear`.
 /// Returns the image and how it was read.
 fn read_linear(path: &Path, linear: bool) -> Result<(Image, &'static str)> {
-    let mut img = image::io::read(path)?;
+    let (img, _, how) = read_both(path, linear)?;
+    Ok((img, how))
+}
+
+/// Reads an image as linear RGB (as `read_linear`), finds the chart in it and returns both;
+/// an sRGB-encoded file is searched in its own code values, with no decoding and re-encoding.
+fn read_and_detect(path: &Path, linear: bool) -> Result<(Image, color::detect::Detection, &'static str)> {
+    let (img, found, how, _) = read_and_detect_timed(path, linear)?;
+    Ok((img, found, how))
+}
+
+/// `read_and_detect`, with the detection's own time (decoding excluded) in seconds.
+fn read_and_detect_timed(path: &Path, linear: bool) -> Result<(Image, color::detect::Detection, &'static str, f64)> {
+    let (img, encoded, how) = read_both(path, linear)?;
+    let t = std::time::Instant::now();
+    let found = match &encoded {
+        Some(codes) => color::detect::detect(codes, false),
+        None => color::detect::detect(&img, true),
+    };
+    let seconds = t.elapsed().as_secs_f64();
+    let found = found.map_err(|m| anyhow::anyhow!("{}: {m}", path.display()))?;
+    Ok((img, found, how, seconds))
+}
+
+/// The linear image, the code values when the file is sRGB-encoded, and how it was read.
+fn read_both(path: &Path, linear: bool) -> Result<(Image, Option<Image>, &'static str)> {
+    let img = image::io::read(path)?;
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_lowercase();
     if ext == "exr" {
-        return Ok((img, "linear (EXR)"));
+        return Ok((img, None, "linear (EXR)"));
     }
     if linear {
-        return Ok((img, "code values read as linear (--linear)"));
+        return Ok((img, None, "code values read as linear (--linear)"));
     }
-    img.data.iter_mut().for_each(|v| *v = image::srgb_decode(*v));
-    Ok((img, "sRGB-decoded (pass --linear for raw sensor data)"))
+    let mut lin = img.clone();
+    lin.data.iter_mut().for_each(|v| *v = image::srgb_decode(*v));
+    Ok((
+        lin,
+        Some(img),
+        "sRGB-decoded: a JPEG or PNG is the camera's rendering, not linear sensor data, so ΔE measures that rendering (pass --linear for raw-derived files)",
+    ))
 }
 
 fn fit(a: &FitArgs) -> Result<()> {
@@ -238,16 +267,16 @@ fn fit(a: &FitArgs) -> Result<()> {
     }
     let (samples, how): (Vec<([f64; 3], Option<color::Flag>)>, String) = match (&a.image, &a.patches) {
         (Some(path), _) => {
-            let (img, how) = read_linear(path, a.linear)?;
-            let (corners, found) = match &a.corners {
+            let (img, corners, found, how) = match &a.corners {
                 Some(text) => {
                     let c = color::parse_numbers::<8>(text, "--corners").map_err(anyhow::Error::msg)?;
-                    ([[c[0], c[1]], [c[2], c[3]], [c[4], c[5]], [c[6], c[7]]], "corners given")
+                    let (img, how) = read_linear(path, a.linear)?;
+                    (img, [[c[0], c[1]], [c[2], c[3]], [c[4], c[5]], [c[6], c[7]]], "corners given".to_string(), how)
                 }
                 None => {
-                    let d = color::detect::detect(&img, true)
-                        .map_err(|m| anyhow::anyhow!("{}: {m}", path.display()))?;
-                    (d.corners, "corners found in the image (confidence shown by `lumen color detect`)")
+                    let (img, d, how) = read_and_detect(path, a.linear)?;
+                    let c: Vec<String> = d.corners.iter().map(|p| format!("{:.1},{:.1}", p[0], p[1])).collect();
+                    (img, d.corners, format!("corners found in the image: {} (confidence {:.2})", c.join(","), d.confidence), how)
                 }
             };
             let s = color::chart::sample(&img, corners, a.saturation)
@@ -284,6 +313,7 @@ fn fit(a: &FitArgs) -> Result<()> {
         fitted: result.fitted.clone(),
         white,
         report: Some(result.clone()),
+        source: Some(how.clone()),
     };
     let json = serde_json::to_string_pretty(&file)?;
     image::io::write_atomically(out, |tmp| std::fs::write(tmp, json))?;

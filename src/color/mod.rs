@@ -425,6 +425,11 @@ pub struct CcmFile {
     /// The fit's report (absent when written by hand).
     #[serde(default)]
     pub report: Option<Output>,
+    /// Where the patch values came from: the file, how its values were read (an sRGB JPEG
+    /// is the camera's rendering, not linear data), and whether the chart's corners were
+    /// given or found.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source: Option<String>,
 }
 
 pub const CCM_FORMAT: &str = "lumen-ccm";
