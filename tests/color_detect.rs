@@ -240,3 +240,84 @@ fn tiny_grey_and_empty_images_are_refused() {
     nan.data.iter_mut().enumerate().for_each(|(i, v)| *v = if i % 7 == 0 { f32::NAN } else { f32::INFINITY });
     assert!(detect::detect(&nan, true).is_err());
 }
+
+/// Corners `lumen color detect` writes for `image`, or its error message.
+fn detect_cli(image: &std::path::Path, out: &std::path::Path) -> Result<[[f64; 2]; 4], String> {
+    let (code, stderr) = common::lumen(&["color", "detect", "--image", image.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    if code != 0 {
+        return Err(stderr);
+    }
+    let j: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out).unwrap()).unwrap();
+    assert_eq!(j["patches"].as_array().unwrap().len(), 24);
+    assert_eq!(j["patches"][0]["name"], "dark skin");
+    Ok(serde_json::from_value(j["corners"].clone()).unwrap())
+}
+
+/// A phone's portrait photograph stored sideways with an EXIF orientation (6: turn 90°
+/// clockwise to view) is read upright, and a 16-bit TIFF of the same photograph is read too:
+/// both give the corners the JPEG gives, within the re-encoding's effect.
+#[test]
+fn exif_orientation_and_16_bit_tiff_are_honoured() {
+    let Some(data) = common::shared_data() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let photo = data.join("color/photos/arcu-01.jpg");
+    let reference = detect_cli(&photo, &dir.path().join("ref.json")).unwrap();
+    let upright = image::open(&photo).unwrap().to_rgb8();
+    // Stored turned a quarter counter-clockwise, with the tag that turns it back.
+    let stored = image::imageops::rotate270(&upright);
+    let mut jpeg = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 95).encode_image(&stored).unwrap();
+    let tiff_ifd: [u8; 26] = [
+        b'I', b'I', 0x2a, 0, 8, 0, 0, 0, // little-endian TIFF header, IFD0 at 8
+        1, 0, // one entry
+        0x12, 0x01, 3, 0, 1, 0, 0, 0, 6, 0, 0, 0, // Orientation (0x0112), SHORT, 1 value: 6
+        0, 0, 0, 0, // no next IFD
+    ];
+    let mut app1 = vec![0xff, 0xe1, 0, 34];
+    app1.extend_from_slice(b"Exif\0\0");
+    app1.extend_from_slice(&tiff_ifd);
+    let mut tagged = jpeg[..2].to_vec();
+    tagged.extend_from_slice(&app1);
+    tagged.extend_from_slice(&jpeg[2..]);
+    let turned = dir.path().join("turned.jpg");
+    std::fs::write(&turned, tagged).unwrap();
+    let read = lumen::image::io::read(&turned).unwrap();
+    assert_eq!((read.width, read.height), (upright.width(), upright.height()), "the EXIF turn was not applied");
+    let found = detect_cli(&turned, &dir.path().join("turned.json")).unwrap();
+    // 16 bits per channel, the same code values.
+    let wide = image::ImageBuffer::<image::Rgb<u16>, Vec<u16>>::from_fn(upright.width(), upright.height(), |x, y| {
+        let p = upright.get_pixel(x, y).0;
+        image::Rgb(p.map(|v| v as u16 * 257))
+    });
+    let tiff = dir.path().join("wide.tif");
+    wide.save(&tiff).unwrap();
+    let from_tiff = detect_cli(&tiff, &dir.path().join("tiff.json")).unwrap();
+    for (name, corners, tol) in [("EXIF-turned JPEG", found, 1.5), ("16-bit TIFF", from_tiff, 0.05)] {
+        for (a, b) in corners.iter().zip(&reference) {
+            let d = (a[0] - b[0]).hypot(a[1] - b[1]);
+            assert!(d < tol, "{name}: corner {a:?} against {b:?} from the JPEG");
+        }
+    }
+}
+
+/// `color fit` without `--corners` finds the chart and says so; a photograph without a chart
+/// gets the detector's refusal, naming the file, and no output.
+#[test]
+fn color_fit_finds_the_chart_itself() {
+    let Some(data) = common::shared_data() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("ccm.json");
+    let photo = data.join("color/photos/arcu-06.jpg");
+    let (code, stderr) = common::lumen(&["color", "fit", "--image", photo.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert_eq!(code, 0, "{stderr}");
+    let j: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let source = j["source"].as_str().unwrap();
+    assert!(source.contains("corners found in the image") && source.contains("not linear"), "{source}");
+    let mut files: Vec<_> = std::fs::read_dir(data.join("sfm/herz-jesu-p8/images")).unwrap().map(|e| e.unwrap().path()).collect();
+    files.sort();
+    let out2 = dir.path().join("none.json");
+    let (code, stderr) = common::lumen(&["color", "fit", "--image", files[0].to_str().unwrap(), "--out", out2.to_str().unwrap()]);
+    assert_ne!(code, 0);
+    assert!(stderr.contains(files[0].file_name().unwrap().to_str().unwrap()) && stderr.contains("chart"), "{stderr}");
+    assert!(!out2.exists());
+}

@@ -11,6 +11,16 @@ Usage (the peers' virtual environment, ../shared/tools/peers-venv.sh):
 
 Prints, per method, colour-science's mean ΔE2000 and leave-one-out mean on lumen's patch
 values, lumen's, and the largest per-patch difference of the two fits' ΔE2000.
+
+On photographs, with the patch values `lumen color fit` sampled (the chart found by itself):
+    for f in ../shared/data/color/photos/*.jpg; do
+        for m in linear-3x3 root-poly-2 root-poly-3; do
+            target/release/lumen color fit --image $f --model $m --out out/photos/$(basename $f .jpg)/$m.json
+        done
+    done
+    $PEERS_PY tools/color_vs_colour_science.py --photos out/photos
+Prints, per photograph and method, colour-science's leave-one-out mean ΔE2000 on the same
+sampled values and reference, and lumen's, then the median and largest of each.
 """
 import json
 import sys
@@ -25,6 +35,46 @@ import colour  # noqa: E402
 def table(path):
     rows = [l for l in open(path) if l.strip() and not l.startswith("#")][1:]
     return np.array([[float(v) for v in r.split(",")[1:]] for r in rows])
+
+
+METHODS = {
+    "linear-3x3": dict(method="Cheung 2004", terms=3),
+    "root-poly-2": dict(method="Finlayson 2015", degree=2),
+    "root-poly-3": dict(method="Finlayson 2015", degree=3),
+}
+
+
+def loo_mean(rgb, xyz, lab, kw):
+    loo = []
+    for i in range(len(rgb)):
+        keep = np.arange(len(rgb)) != i
+        p = colour.colour_correction(rgb[i], rgb[keep], xyz[keep], **kw)
+        loo.append(colour.delta_E(lab(p), lab(xyz[i]), method="CIE 2000"))
+    return float(np.mean(loo))
+
+
+def photos(root):
+    import os
+    rows = {m: [] for m in METHODS}
+    print(f"{'photograph':<12} " + " ".join(f"{m + ' cs':>16} {m + ' lumen':>18}" for m in METHODS))
+    for name in sorted(os.listdir(root)):
+        line = f"{name:<12} "
+        for m, kw in METHODS.items():
+            j = json.load(open(f"{root}/{name}/{m}.json"))
+            used = [p for p in j["report"]["patches"] if p["used"]]
+            rgb = np.array([p["rgb"] for p in used])
+            xyz = np.array([p["reference_xyz"] for p in used])
+            xy = colour.XYZ_to_xy(np.array(j["white"]))
+            lab = lambda v: colour.XYZ_to_Lab(v, illuminant=xy)  # noqa: E731
+            cs = loo_mean(rgb, xyz, lab, kw)
+            ours = j["report"]["loo_mean_de2000"]
+            rows[m].append((cs, ours))
+            line += f"{cs:16.3f} {ours:18.3f} "
+        print(line)
+    for m, r in rows.items():
+        r = np.array(r)
+        print(f"{m}: leave-one-out mean ΔE2000 over the photographs, median / largest: "
+              f"colour-science {np.median(r[:, 0]):.3f} / {r[:, 0].max():.3f}, lumen {np.median(r[:, 1]):.3f} / {r[:, 1].max():.3f}")
 
 
 def main(folder):
@@ -71,4 +121,7 @@ def main(folder):
     print(f"largest |XYZ(colour-science sd_to_XYZ) - XYZ(lumen)| over the 24 patches: {worst:.2e}")
 
 if __name__ == "__main__":
-    main(sys.argv[1] if len(sys.argv) > 1 else "out/spectral-d65")
+    if len(sys.argv) > 2 and sys.argv[1] == "--photos":
+        photos(sys.argv[2])
+    else:
+        main(sys.argv[1] if len(sys.argv) > 1 else "out/spectral-d65")

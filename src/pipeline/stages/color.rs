@@ -121,7 +121,7 @@ struct BandRecipe<'a> {
 
 /// The chart's cell grid in the world, from the scene file's patch quads: its top-left
 /// corner and the steps of one cell along a row and down a column.
-fn chart_grid(scene_path: &std::path::Path) -> Result<(DVec3, DVec3, DVec3, DVec3), StageError> {
+pub(super) fn chart_grid(scene_path: &std::path::Path) -> Result<(DVec3, DVec3, DVec3, DVec3), StageError> {
     let text = std::fs::read_to_string(scene_path).map_err(|e| {
         StageError::Render(render::Error::Io { path: scene_path.into(), message: e.to_string() })
     })?;

@@ -16,6 +16,7 @@
 //! stage is one file here and one line in `REGISTRY`.
 
 pub mod calibrate;
+pub mod chart;
 pub mod color;
 pub mod hdr;
 pub mod photometric;
@@ -94,6 +95,8 @@ pub const REGISTRY: &[Kind] = &[
     },
     Kind { stage: "photometric", marked_by: None, real_data: None, parse: parse::<photometric::Config> },
     Kind { stage: "color", marked_by: None, real_data: None, parse: parse::<color::Config> },
+    Kind { stage: "chart", marked_by: Some("photos"), real_data: Some("photos"), parse: parse::<chart::PhotoConfig> },
+    Kind { stage: "chart", marked_by: None, real_data: None, parse: parse::<chart::Config> },
     Kind { stage: "hdr", marked_by: Some("list"), real_data: Some("list"), parse: parse::<hdr::DataConfig> },
     Kind { stage: "hdr", marked_by: None, real_data: None, parse: parse::<hdr::Config> },
     Kind { stage: "sfm", marked_by: Some("scene"), real_data: None, parse: parse::<sfm::RenderConfig> },
