@@ -56,7 +56,7 @@ fn run(line: &str, dir: &Path, photos: &Path) -> (bool, String) {
 #[test]
 fn readme_tour_writes_what_it_says() {
     let lines = tour_commands();
-    assert_eq!(lines.len(), 10, "the tour's commands: {lines:?}");
+    assert_eq!(lines.len(), 11, "the tour's commands: {lines:?}");
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let shared = common::root().join("../shared/data");
@@ -121,10 +121,15 @@ fn readme_tour_writes_what_it_says() {
     assert!(d.join("out/undistorted.png").is_file());
     let (ok, err) = run(&lines[8], d, &photos);
     assert!(ok, "{err}");
+    for f in ["chart.json", "chart.png"] {
+        assert!(d.join("out").join(f).is_file(), "{f} missing after: {err}");
+    }
+    let (ok, err) = run(&lines[9], d, &photos);
+    assert!(ok, "{err}");
     for f in ["radiance.exr", "response.csv", "response.svg", "mask.png", "preview.png", "summary.json"] {
         assert!(d.join("out/memorial").join(f).is_file(), "memorial/{f} missing");
     }
-    let (ok, err) = run(&lines[9], d, &photos);
+    let (ok, err) = run(&lines[10], d, &photos);
     assert!(ok, "{err}");
     for f in ["cameras.txt", "images.txt", "points3D.txt", "points.ply", "summary.json"] {
         assert!(d.join("out/herz-jesu").join(f).is_file(), "herz-jesu/{f} missing");
