@@ -8,67 +8,32 @@ mod common;
 use glam::DVec3;
 use lumen::color::detect::{self, Detection};
 use lumen::image::Image;
-use lumen::math::{CameraModel, CameraToWorld};
+use lumen::math::CameraModel;
+use lumen::pipeline::stages::chart::{camera_for, ChartView as View, Grid};
 use lumen::render;
 use rand::{Rng, SeedableRng};
 
-/// The chart scene's cell grid: origin (0, 0, 0), 6 × 4 cells of 40 mm in z = 0.
-const GRID: [[f64; 3]; 4] = [[0.0, 0.0, 0.0], [0.24, 0.0, 0.0], [0.24, 0.16, 0.0], [0.0, 0.16, 0.0]];
+/// The chart scene's cell grid: origin (0, 0, 0), 6 × 4 cells of 40 mm in z = 0, the patches
+/// facing −z.
+const GRID: Grid = Grid {
+    origin: DVec3::ZERO,
+    step_u: DVec3::new(0.04, 0.0, 0.0),
+    step_v: DVec3::new(0.0, 0.04, 0.0),
+    normal: DVec3::new(0.0, 0.0, 1.0),
+};
 
-/// A pose of the chart: `turn` about its normal, `tilt` away from the line of sight, the chart
-/// spanning `share` of the image's width, its centre moved by `shift` (a share of the room
-/// left in the image).
-struct View {
-    turn_deg: f64,
-    tilt_deg: f64,
-    share: f64,
-    shift: [f64; 2],
-}
-
-fn camera_for(camera: &CameraModel, v: &View) -> CameraToWorld {
-    let centre = DVec3::new(0.12, 0.08, 0.0);
-    let f = camera.intrinsics.fx;
-    let (t, a) = (v.tilt_deg.to_radians(), (v.turn_deg + 37.0).to_radians());
-    // The camera sits on the side the patches face (−z), tilted about an in-chart axis.
-    let dir = DVec3::new(t.sin() * a.cos(), t.sin() * a.sin(), -t.cos());
-    let turn = v.turn_deg.to_radians();
-    let up = DVec3::new(turn.sin(), -turn.cos(), 0.0);
-    // Start where the chart's 0.24 m width spans `share` of the image seen square-on, and step
-    // back until the whole card (12 mm beyond the grid) is in the frame.
-    let mut d = 0.24 * f / (v.share * camera.width as f64);
-    loop {
-        let eye = centre + d * dir;
-        // Shift the line of sight so the chart sits off centre, within the room it leaves.
-        let room = (1.0 - v.share).max(0.0) * 0.5 * d * camera.width as f64 / f;
-        let base = CameraToWorld::look_at(eye, centre, up).unwrap();
-        let (x, y) = (base.0.rotation.col(0), base.0.rotation.col(1));
-        let aspect = camera.height as f64 / camera.width as f64;
-        let target = centre + 0.8 * room * (v.shift[0] * x + v.shift[1] * aspect * y);
-        let pose = CameraToWorld::look_at(eye, target, up).unwrap();
-        let card = [[-0.012, -0.012], [0.252, -0.012], [0.252, 0.172], [-0.012, 0.172]];
-        let inside = card.iter().all(|c| {
-            let p = camera.project(pose.inverse().0.transform_point(DVec3::new(c[0], c[1], 0.0)));
-            p.is_some_and(|p| p.x > 2.0 && p.y > 2.0 && p.x < camera.width as f64 - 3.0 && p.y < camera.height as f64 - 3.0)
-        });
-        if inside {
-            return pose;
-        }
-        d *= 1.05;
-    }
-}
-
-/// Renders the chart (its scene file, 960 × 720, 16 spp) from `view`: the linear image and
-/// the projected grid corners.
+/// Renders the chart (its scene file, 960 × 720, 16 spp) from `view` (the `chart` stage's
+/// poses): the linear image and the projected grid corners.
 fn render_view(view: &View, seed: u64) -> (Image, [[f64; 2]; 4]) {
     let mut scene = render::load(&common::root().join("pipelines/scenes/color-chart.toml")).unwrap();
     scene.camera = CameraModel::centred(960, 720, 1100.0);
-    scene.t_world_cam = camera_for(&scene.camera, view);
+    scene.t_world_cam = camera_for(&scene.camera, &GRID, view);
     let mut settings = common::settings(&scene, 16, 2);
     settings.seed = seed;
     let image = render::try_render(&scene, &settings).unwrap().mean;
     let to_cam = scene.t_world_cam.inverse();
-    let corners = GRID.map(|p| {
-        let q = scene.camera.project(to_cam.0.transform_point(DVec3::from_array(p))).unwrap();
+    let corners = [(0.0, 0.0), (6.0, 0.0), (6.0, 4.0), (0.0, 4.0)].map(|(u, v)| {
+        let q = scene.camera.project(to_cam.0.transform_point(GRID.point(u, v))).unwrap();
         [q.x, q.y]
     });
     (image, corners)
@@ -221,7 +186,7 @@ fn a_chart_of_another_make_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let mut scene = common::scene(&shuffled, dir.path()).unwrap();
     scene.camera = CameraModel::centred(960, 720, 1100.0);
-    scene.t_world_cam = camera_for(&scene.camera, &View { turn_deg: 10.0, tilt_deg: 20.0, share: 0.5, shift: [0.0, 0.0] });
+    scene.t_world_cam = camera_for(&scene.camera, &GRID, &View { turn_deg: 10.0, tilt_deg: 20.0, share: 0.5, shift: [0.0, 0.0] });
     let image = render::try_render(&scene, &common::settings(&scene, 8, 2)).unwrap().mean;
     let e = detect::detect(&image, true).expect_err("another make").to_string();
     assert!(e.contains("match a ColorChecker Classic's in no orientation"), "{e}");
@@ -320,4 +285,37 @@ fn color_fit_finds_the_chart_itself() {
     assert_ne!(code, 0);
     assert!(stderr.contains(files[0].file_name().unwrap().to_str().unwrap()) && stderr.contains("chart"), "{stderr}");
     assert!(!out2.exists());
+}
+
+/// HDR, then colour: a bracketed stack of the rendered chart (three exposures two stops apart
+/// through a gamma-2.2 response, 8 bits) merged by `lumen hdr`, and the chart found in the
+/// merged radiance (linear EXR, of arbitrary scale) by `lumen color detect`, within 0.5 px.
+#[test]
+fn a_chart_is_found_in_a_merged_radiance_map() {
+    let view = View { turn_deg: 20.0, tilt_deg: 30.0, share: 0.5, shift: [0.2, -0.1] };
+    let (radiance, truth) = render_view(&view, 7);
+    let dir = tempfile::tempdir().unwrap();
+    let mut args: Vec<String> = vec!["hdr".into(), "--images".into()];
+    let times = [0.25f32, 1.0, 4.0];
+    for (k, t) in times.iter().enumerate() {
+        let path = dir.path().join(format!("e{k}.png"));
+        let img = image::RgbImage::from_fn(radiance.width, radiance.height, |x, y| {
+            let i = 3 * (y * radiance.width + x) as usize;
+            image::Rgb([0, 1, 2].map(|c| ((t * radiance.data[i + c]).clamp(0.0, 1.0).powf(1.0 / 2.2) * 255.0).round() as u8))
+        });
+        img.save(&path).unwrap();
+        args.push(path.to_str().unwrap().into());
+    }
+    args.push("--times".into());
+    args.extend(times.iter().map(|t| t.to_string()));
+    let merged = dir.path().join("hdr/radiance.exr");
+    args.extend(["--out".into(), merged.to_str().unwrap().into()]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let (code, stderr) = common::lumen(&args);
+    assert_eq!(code, 0, "{stderr}");
+    let corners = detect_cli(&merged, &dir.path().join("chart.json")).unwrap();
+    for (a, b) in corners.iter().zip(&truth) {
+        let d = (a[0] - b[0]).hypot(a[1] - b[1]);
+        assert!(d < 0.5, "corner {a:?} against the truth {b:?}");
+    }
 }
