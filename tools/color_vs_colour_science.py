@@ -18,9 +18,11 @@ On photographs, with the patch values `lumen color fit` sampled (the chart found
             target/release/lumen color fit --image $f --model $m --out out/photos/$(basename $f .jpg)/$m.json
         done
     done
-    $PEERS_PY tools/color_vs_colour_science.py --photos out/photos
+    $PEERS_PY tools/color_vs_colour_science.py --photos out/photos [--csv tests/data/chart-photos/colour-science.csv]
 Prints, per photograph and method, colour-science's leave-one-out mean ΔE2000 on the same
-sampled values and reference, and lumen's, then the median and largest of each.
+sampled values and reference, and lumen's, then the median and largest of each; --csv also
+writes colour-science's figures (image,model,loo_mean_de2000), which the pipeline's `chart`
+cases on the photographs show beside lumen's.
 """
 import json
 import sys
@@ -53,9 +55,10 @@ def loo_mean(rgb, xyz, lab, kw):
     return float(np.mean(loo))
 
 
-def photos(root):
+def photos(root, csv_path=None):
     import os
     rows = {m: [] for m in METHODS}
+    csv_rows = []
     print(f"{'photograph':<12} " + " ".join(f"{m + ' cs':>16} {m + ' lumen':>18}" for m in METHODS))
     for name in sorted(os.listdir(root)):
         line = f"{name:<12} "
@@ -69,12 +72,17 @@ def photos(root):
             cs = loo_mean(rgb, xyz, lab, kw)
             ours = j["report"]["loo_mean_de2000"]
             rows[m].append((cs, ours))
+            csv_rows.append(f"{name}.jpg,{m},{cs:.4f}")
             line += f"{cs:16.3f} {ours:18.3f} "
         print(line)
     for m, r in rows.items():
         r = np.array(r)
         print(f"{m}: leave-one-out mean ΔE2000 over the photographs, median / largest: "
               f"colour-science {np.median(r[:, 0]):.3f} / {r[:, 0].max():.3f}, lumen {np.median(r[:, 1]):.3f} / {r[:, 1].max():.3f}")
+    if csv_path:
+        with open(csv_path, "w") as f:
+            f.write("# colour-science 0.4.7 colour_correction on the patch values lumen color fit sampled\n")
+            f.write("image,model,loo_mean_de2000\n" + "\n".join(csv_rows) + "\n")
 
 
 def main(folder):
@@ -122,6 +130,6 @@ def main(folder):
 
 if __name__ == "__main__":
     if len(sys.argv) > 2 and sys.argv[1] == "--photos":
-        photos(sys.argv[2])
+        photos(sys.argv[2], sys.argv[4] if len(sys.argv) > 4 and sys.argv[3] == "--csv" else None)
     else:
         main(sys.argv[1] if len(sys.argv) > 1 else "out/spectral-d65")

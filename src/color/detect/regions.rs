@@ -316,7 +316,7 @@ mod tests {
     /// moments are those of a square far larger than its area).
     #[test]
     fn a_square_is_a_candidate_and_a_ring_is_not() {
-        let square = work_of(60, 60, |x, y| {
+        let square = work_of(120, 120, |x, y| {
             if (20..40).contains(&x) && (10..30).contains(&y) {
                 [0.8, 0.5, 0.2]
             } else {
@@ -328,7 +328,7 @@ mod tests {
         assert_eq!(inner.len(), 1, "{:?}", r.candidates);
         let c = inner[0];
         assert!((c.centre[0] - 29.5).abs() < 0.01 && (c.centre[1] - 19.5).abs() < 0.01, "{:?}", c.centre);
-        let ring = work_of(60, 60, |x, y| {
+        let ring = work_of(120, 120, |x, y| {
             let d = (x as i32 - 30).abs().max((y as i32 - 30).abs());
             if (12..18).contains(&d) {
                 [0.8; 3]

@@ -17,7 +17,8 @@
 //! with hand-checked corners in a CSV (`image,x1,y1,…,x4,y4`). Each is detected, sampled as
 //! `lumen color fit` samples it (sRGB-decoded) and fitted with `model` against the chart's
 //! published values; the report gives per photograph the corner error as a share of the
-//! chart's diagonal and the fit's leave-one-out mean ΔE2000. Those ΔE measure the phone's
+//! chart's diagonal and the fit's leave-one-out mean ΔE2000, with a peer's figure on the same
+//! sampled values beside it (`peer`: colour-science's). Those ΔE measure the phone's
 //! rendering of the colours (its tone curve and saturation), not a linear camera: the JPEGs
 //! are not raw data.
 
@@ -86,6 +87,10 @@ pub struct PhotoConfig {
     /// The colour model fitted on each photograph (default root-poly-2).
     #[serde(default = "default_model")]
     pub model: String,
+    /// A peer's leave-one-out mean ΔE2000 on the same sampled values, shown beside lumen's: CSV
+    /// `image,model,loo_mean_de2000` (`#` comments), as `tools/color_vs_colour_science.py
+    /// --photos … --csv` writes colour-science's. For a model the peer lacks, its best.
+    pub peer: Option<String>,
 }
 
 fn default_model() -> String {
@@ -368,7 +373,31 @@ fn read_truth(path: &std::path::Path) -> Result<Vec<(String, [[f64; 2]; 4])>, St
     Ok(out)
 }
 
-pub fn read(c: &PhotoConfig, ctx: &Context) -> Result<(Vec<Photo>, (), Findings), StageError> {
+/// A peer's figures per photograph: (model, leave-one-out mean ΔE2000).
+pub type Peer = std::collections::BTreeMap<String, Vec<(String, f64)>>;
+
+fn read_peer(path: &std::path::Path) -> Result<Peer, StageError> {
+    let text = std::fs::read_to_string(path).map_err(|e| StageError::Config(format!("{}: {e}", path.display())))?;
+    let mut out = Peer::new();
+    for (i, line) in text.lines().enumerate().filter(|(_, l)| !l.starts_with('#') && !l.trim().is_empty()).skip(1) {
+        let f: Vec<&str> = line.split(',').map(str::trim).collect();
+        match (f.as_slice(), f.get(2).and_then(|v| v.parse::<f64>().ok())) {
+            ([image, model, _], Some(v)) if v.is_finite() => {
+                out.entry(image.to_string()).or_default().push((model.to_string(), v))
+            }
+            _ => {
+                return Err(StageError::Config(format!(
+                    "{} line {}: expected image,model,loo_mean_de2000",
+                    path.display(),
+                    i + 1
+                )))
+            }
+        }
+    }
+    Ok(out)
+}
+
+pub fn read(c: &PhotoConfig, ctx: &Context) -> Result<(Vec<Photo>, Peer, Findings), StageError> {
     let dir = dataset_path(ctx, &c.photos)?;
     let truth_path = ctx.dir.join(&c.truth);
     let mut photos = Vec::new();
@@ -384,16 +413,23 @@ pub fn read(c: &PhotoConfig, ctx: &Context) -> Result<(Vec<Photo>, (), Findings)
         c.photos,
         c.truth
     );
-    Ok((photos, (), Findings { notes: vec![note], ..Default::default() }))
+    let peer = match &c.peer {
+        Some(p) => read_peer(&ctx.dir.join(p))?,
+        None => Peer::new(),
+    };
+    Ok((photos, peer, Findings { notes: vec![note], ..Default::default() }))
 }
 
 /// Per photograph: the detection (or why not), its time, and the fit on its sampled patches.
-pub type PhotoResults = Vec<(String, [[f64; 2]; 4], Result<(detect::Detection, color::Output), String>, f64)>;
+pub struct PhotoResults {
+    model: String,
+    photos: Vec<(String, [[f64; 2]; 4], Result<(detect::Detection, color::Output), String>, f64)>,
+}
 
 pub fn solve_photos(c: &PhotoConfig, photos: &[Photo]) -> Result<PhotoResults, StageError> {
     let model: color::Model = c.model.parse()?;
     let (reference, white) = color::published_reference();
-    Ok(photos
+    let photos = photos
         .iter()
         .map(|p| {
             let t = std::time::Instant::now();
@@ -420,15 +456,23 @@ pub fn solve_photos(c: &PhotoConfig, photos: &[Photo]) -> Result<PhotoResults, S
             });
             (p.name.clone(), p.truth, result, secs)
         })
-        .collect())
+        .collect();
+    Ok(PhotoResults { model: c.model.clone(), photos })
 }
 
-pub fn validate_photos(out: &PhotoResults, _truth: &()) -> Findings {
+pub fn validate_photos(out: &PhotoResults, peer: &Peer) -> Findings {
     let mut f = Findings::default();
     let mut shares = Vec::new();
     let mut loo = Vec::new();
-    let mut times: Vec<f64> = out.iter().map(|r| r.3).collect();
-    for (name, truth, result, secs) in out {
+    let mut times: Vec<f64> = out.photos.iter().map(|r| r.3).collect();
+    // The peer's figure for this model, or its best where it lacks the model.
+    let beside = |name: &str| {
+        let rows = peer.get(name)?;
+        let same = rows.iter().find(|(m, _)| *m == out.model);
+        let (m, v) = same.or_else(|| rows.iter().min_by(|a, b| a.1.total_cmp(&b.1)))?;
+        Some(format!("; peer {m}: {v:.2}"))
+    };
+    for (name, truth, result, secs) in &out.photos {
         let diagonal = (truth[0][0] - truth[2][0]).hypot(truth[0][1] - truth[2][1]);
         match result {
             Ok((d, fit)) => {
@@ -438,17 +482,18 @@ pub fn validate_photos(out: &PhotoResults, _truth: &()) -> Findings {
                     loo.push(l);
                 }
                 f.notes.push(format!(
-                    "{name}: found in {secs:.3} s, worst corner {e:.1} px ({:.2} % of the diagonal), confidence {:.2}; mean ΔE00 {:.2}, leave-one-out {}.",
+                    "{name}: found in {secs:.3} s, worst corner {e:.1} px ({:.2} % of the diagonal), confidence {:.2}; mean ΔE00 {:.2}, leave-one-out {}{}.",
                     100.0 * e / diagonal,
                     d.confidence,
                     fit.mean_de2000,
-                    fit.loo_mean_de2000.map_or("none".into(), |v| format!("{v:.2}"))
+                    fit.loo_mean_de2000.map_or("none".into(), |v| format!("{v:.2}")),
+                    beside(name).unwrap_or_default()
                 ));
             }
             Err(e) => f.notes.push(format!("{name}: {e}")),
         }
     }
-    let n = out.len();
+    let n = out.photos.len();
     let found = shares.iter().filter(|&&s| s <= 0.015).count();
     let m = &mut f.metrics;
     m.push(Metric::new("photos_found", found as f64, "photos", Better::Higher));
