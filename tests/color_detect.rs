@@ -189,6 +189,7 @@ fn a_chart_of_another_make_is_refused() {
     scene.t_world_cam = camera_for(&scene.camera, &GRID, &View { turn_deg: 10.0, tilt_deg: 20.0, share: 0.5, shift: [0.0, 0.0] });
     let image = render::try_render(&scene, &common::settings(&scene, 8, 2)).unwrap().mean;
     let e = detect::detect(&image, true).expect_err("another make").to_string();
+    eprintln!("{e}");
     assert!(e.contains("match a ColorChecker Classic's in no orientation"), "{e}");
 }
 
@@ -317,5 +318,22 @@ fn a_chart_is_found_in_a_merged_radiance_map() {
     for (a, b) in corners.iter().zip(&truth) {
         let d = (a[0] - b[0]).hypot(a[1] - b[1]);
         assert!(d < 0.5, "corner {a:?} against the truth {b:?}");
+    }
+}
+
+/// Under tungsten light (the render tinted 1 : 0.62 : 0.32, Planck at 2856 K over D65 in
+/// linear sRGB), a stop and a half under, and overexposed until the light patches clip: the
+/// chart is found the right way round each time (the colour match takes an affine map, so the
+/// light's colour and the exposure do not matter, and clipped patches stay flat regions).
+#[test]
+fn tungsten_and_exposure_do_not_hide_the_chart() {
+    let view = View { turn_deg: 200.0, tilt_deg: 25.0, share: 0.4, shift: [-0.3, 0.2] };
+    let (radiance, truth) = render_view(&view, 11);
+    for (name, gain) in [("tungsten", [1.0f32, 0.62, 0.32]), ("under", [0.35; 3]), ("over", [3.0; 3])] {
+        let mut img = radiance.clone();
+        img.data.chunks_exact_mut(3).for_each(|p| (0..3).for_each(|c| p[c] = (p[c] * gain[c]).min(1.0)));
+        let found = detect::detect(&img, true).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let err = worst_corner(&found, &truth);
+        assert!(err < 0.5, "{name}: worst corner {err:.3} px");
     }
 }
