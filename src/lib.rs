@@ -33,6 +33,7 @@ pub mod photometric;
 pub mod pipeline;
 pub mod render;
 pub mod sfm;
+pub mod surface;
 
 pub use error::Fault;
 
@@ -55,6 +56,8 @@ pub enum Error {
     Sfm(#[from] sfm::Error),
     #[error(transparent)]
     Denoise(#[from] image::denoise::Error),
+    #[error(transparent)]
+    Surface(#[from] surface::Error),
 }
 
 impl Error {
@@ -69,6 +72,7 @@ impl Error {
             Error::Fit(e) => e.fault(),
             Error::Sfm(e) => e.fault(),
             Error::Denoise(e) => e.fault(),
+            Error::Surface(e) => e.fault(),
         }
     }
 }

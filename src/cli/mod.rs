@@ -9,6 +9,7 @@ mod pipeline_cmd;
 mod render_cmd;
 mod scene;
 mod sfm;
+mod surface;
 
 use bench::{bench_calibrate, bench_convergence, bench_hdr, bench_render, BenchRender};
 use pipeline_cmd::{merge_cmd, render_share, run_pipeline, slurm_cmd, SlurmArgs};
@@ -221,6 +222,10 @@ enum Command {
     /// Structure from motion: cameras and sparse points from overlapping photographs (a
     /// COLMAP text model, a PLY point cloud and a summary).
     Sfm(sfm::SfmArgs),
+    /// A closed mesh from a point cloud (PLY): point-set surfaces by algebraic spheres (APSS)
+    /// or moving least squares, normals estimated and oriented when absent, meshed by
+    /// marching tetrahedra near the points.
+    Surface(surface::SurfaceArgs),
     /// Benchmarks.
     Bench {
         #[command(subcommand)]
@@ -412,6 +417,7 @@ pub fn main() -> i32 {
         Command::Color { what } => color::run(what).map(|_| 0),
         Command::Hdr(args) => hdr::run(&args).map(|_| 0),
         Command::Denoise(args) => denoise::run(&args).map(|_| 0),
+        Command::Surface(args) => surface::run(&args).map(|_| 0),
         Command::Sfm(args) => sfm::run(&args).map(|_| 0),
         Command::Bench {
             what: Bench::Render { scene, integrator, spp, max_depth, threads, repeat, sampler, one_path },

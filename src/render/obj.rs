@@ -30,6 +30,9 @@ impl ObjError {
 #[derive(Clone, Debug, Default)]
 pub struct ObjMesh {
     pub positions: Vec<DVec3>,
+    /// Per-vertex normals, one per position when the file gives them (PLY's `nx ny nz`), else
+    /// empty.
+    pub normals: Vec<DVec3>,
     pub uvs: Vec<DVec2>,
     /// Triangles: position indices and (optional) uv indices.
     pub triangles: Vec<ObjTriangle>,

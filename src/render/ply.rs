@@ -253,6 +253,10 @@ pub fn parse(bytes: &[u8], name: &str) -> Result<ObjMesh, PlyError> {
     for e in &h.elements {
         let index = |n: &str| e.properties.iter().position(|p| p.name == n && p.list.is_none());
         let (ix, iy, iz) = (index("x"), index("y"), index("z"));
+        let normal_at = match (index("nx"), index("ny"), index("nz")) {
+            (Some(a), Some(b), Some(c)) if e.name == "vertex" => Some([a, b, c]),
+            _ => None,
+        };
         let iu = index("u").or(index("s")).or(index("texture_u"));
         let iv = index("v").or(index("t")).or(index("texture_v"));
         let faces = e
@@ -295,6 +299,9 @@ pub fn parse(bytes: &[u8], name: &str) -> Result<ObjMesh, PlyError> {
             if e.name == "vertex" {
                 let (x, y, z) = (values[ix.unwrap()], values[iy.unwrap()], values[iz.unwrap()]);
                 mesh.positions.push(DVec3::new(x, y, z));
+                if let Some([a, b, c]) = normal_at {
+                    mesh.normals.push(DVec3::new(values[a], values[b], values[c]));
+                }
                 if uvs_present {
                     mesh.uvs.push(DVec2::new(values[iu.unwrap()], values[iv.unwrap()]));
                 }
