@@ -76,13 +76,13 @@ pub struct Config {
     pub radius: Option<f64>,
     /// Grid cells across the points' longest extent (default 128).
     pub resolution: usize,
-    /// Neighbours a normal is estimated from (default 12).
+    /// Neighbours a normal is estimated from (default 24).
     pub k: usize,
 }
 
 impl Default for Config {
     fn default() -> Config {
-        Config { method: Method::Apss, radius: None, resolution: 128, k: 12 }
+        Config { method: Method::Apss, radius: None, resolution: 128, k: 24 }
     }
 }
 
@@ -221,10 +221,15 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     // Outliers: points whose spacing is over `OUTLIER_SPACING` times the median. A surface
     // sampled with density varying tenfold varies √10 ≈ 3.2× in spacing; a point scattered
     // off the surface is far sparser than that.
-    // Points with neighbours scattered in all three directions rather than along a surface
-    // (`OUTLIER_FLATNESS`) are outliers too: scattered points are near each other.
-    let keep: Vec<bool> =
-        spacing.iter().zip(&flatness).map(|(&s, &f)| s <= OUTLIER_SPACING * median && f <= OUTLIER_FLATNESS).collect();
+    // Points sparser than twice the median whose neighbours scatter in all three directions
+    // rather than along a surface (`OUTLIER_FLATNESS`) are outliers too: scattered points can
+    // be near each other. (A dense cloud with noise looks three-dimensional at the scale of
+    // 8 neighbours, hence the spacing condition.)
+    let keep: Vec<bool> = spacing
+        .iter()
+        .zip(&flatness)
+        .map(|(&s, &f)| s <= OUTLIER_SPACING * median && !(f > OUTLIER_FLATNESS && s > 2.0 * median))
+        .collect();
     let outliers = keep.iter().filter(|k| !**k).count();
     let (points, given_normals, spacing): (Vec<DVec3>, Vec<DVec3>, Vec<f64>) = if outliers > 0 {
         let pick = |v: &[DVec3]| v.iter().zip(&keep).filter(|(_, k)| **k).map(|(p, _)| *p).collect::<Vec<_>>();

@@ -25,6 +25,23 @@ pub fn estimate(cloud: &Cloud, k: usize) -> Vec<DVec3> {
         })
         .collect();
     orient(cloud, &neighbours, &mut normals);
+    // A point the tree turned against most of its neighbours (where noise made two tangent
+    // planes disagree along the tree) is turned back by them, twice over.
+    for _ in 0..2 {
+        let flip: Vec<bool> = neighbours
+            .iter()
+            .enumerate()
+            .map(|(i, nb)| {
+                let against = nb.iter().filter(|&&j| j as usize != i && normals[j as usize].dot(normals[i]) < 0.0).count();
+                2 * against > nb.len().saturating_sub(1)
+            })
+            .collect();
+        for (n, f) in normals.iter_mut().zip(flip) {
+            if f {
+                *n = -*n;
+            }
+        }
+    }
     normals
 }
 
