@@ -7,7 +7,7 @@ mod common;
 use std::path::Path;
 use std::process::Command;
 
-/// The tour's `lumen render|preview|calibrate|ps|undistort|color|hdr|sfm` lines, from the README's tour block.
+/// The tour's `lumen render|preview|calibrate|ps|undistort|color|hdr|sfm|surface` lines, from the README's tour block.
 fn tour_commands() -> Vec<String> {
     let readme = std::fs::read_to_string(common::root().join("README.md")).unwrap();
     let tour = readme.split("## A tour of the command line").nth(1).expect("the README has a tour");
@@ -25,6 +25,7 @@ fn tour_commands() -> Vec<String> {
                 "lumen color ",
                 "lumen hdr ",
                 "lumen sfm ",
+                "lumen surface ",
             ]
             .iter()
             .any(|p| l.starts_with(p))
@@ -56,7 +57,7 @@ fn run(line: &str, dir: &Path, photos: &Path) -> (bool, String) {
 #[test]
 fn readme_tour_writes_what_it_says() {
     let lines = tour_commands();
-    assert_eq!(lines.len(), 11, "the tour's commands: {lines:?}");
+    assert_eq!(lines.len(), 12, "the tour's commands: {lines:?}");
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let shared = common::root().join("../shared/data");
@@ -132,6 +133,11 @@ fn readme_tour_writes_what_it_says() {
     let (ok, err) = run(&lines[10], d, &photos);
     assert!(ok, "{err}");
     for f in ["cameras.txt", "images.txt", "points3D.txt", "points.ply", "summary.json"] {
+        assert!(d.join("out/herz-jesu").join(f).is_file(), "herz-jesu/{f} missing");
+    }
+    let (ok, err) = run(&lines[11], d, &photos);
+    assert!(ok, "{err}");
+    for f in ["surface.ply", "surface.json"] {
         assert!(d.join("out/herz-jesu").join(f).is_file(), "herz-jesu/{f} missing");
     }
     // Nothing outside out/.
