@@ -31,6 +31,12 @@ const RIDGE: f64 = 0.05;
 /// f(x) (module docs), or `None` where too few points are in reach or x is farther than 0.7 of
 /// the radius from every point.
 pub fn value(cloud: &Cloud, method: Method, x: DVec3) -> Option<f64> {
+    fit(cloud, method, x).map(|(f, _)| f)
+}
+
+/// f(x) and its gradient there, the local fit held fixed (the sphere's or the height field's
+/// own gradient, as MLS projections take it): one fit where finite differences take seven.
+pub fn fit(cloud: &Cloud, method: Method, x: DVec3) -> Option<(f64, DVec3)> {
     let nearest = cloud.nearest(x, 1).first().copied()? as usize;
     let r = cloud.radius[nearest].max(cloud.floor);
     // Farther than 0.7 of the radius from every point is off the surface's band: a fit there
@@ -60,7 +66,7 @@ pub fn value(cloud: &Cloud, method: Method, x: DVec3) -> Option<f64> {
     }
 }
 
-fn apss(cloud: &Cloud, idx: &[usize], w: &[f64], x: DVec3) -> Option<f64> {
+fn apss(cloud: &Cloud, idx: &[usize], w: &[f64], x: DVec3) -> Option<(f64, DVec3)> {
     let sw: f64 = w.iter().sum();
     // Work relative to x: the fit is translation-invariant, and small coordinates keep
     // |p|² from swamping the sums far from the origin.
@@ -85,17 +91,19 @@ fn apss(cloud: &Cloud, idx: &[usize], w: &[f64], x: DVec3) -> Option<f64> {
     }
     if u4.abs() * (spp / sw).sqrt() < 1e-6 * grad {
         // A plane: the distance is s / |∇s|.
-        return (grad > 0.0).then(|| u0 / grad);
+        return (grad > 0.0).then(|| (u0 / grad, u / grad));
     }
     let c = -u / (2.0 * u4);
     let r2 = c.length_squared() - u0 / u4;
     if r2 <= 0.0 {
-        return (grad > 0.0).then(|| u0 / grad);
+        return (grad > 0.0).then(|| (u0 / grad, u / grad));
     }
-    Some(u4.signum() * (c.length() - r2.sqrt()))
+    // x is the origin: the distance is sign(u₄)(|c| − R), its gradient sign(u₄)·(x − c)/|x − c|.
+    let dir = -c / c.length();
+    (c.length() > 0.0).then(|| (u4.signum() * (c.length() - r2.sqrt()), u4.signum() * dir))
 }
 
-fn mls(cloud: &Cloud, idx: &[usize], w: &[f64], x: DVec3, n0: DVec3) -> Option<f64> {
+fn mls(cloud: &Cloud, idx: &[usize], w: &[f64], x: DVec3, n0: DVec3) -> Option<(f64, DVec3)> {
     let sw: f64 = w.iter().sum();
     let a = idx.iter().zip(w).map(|(&i, &wi)| wi * cloud.points[i]).sum::<DVec3>() / sw;
     let mut cov = nalgebra::Matrix3::<f64>::zeros();
@@ -150,5 +158,9 @@ fn mls(cloud: &Cloud, idx: &[usize], w: &[f64], x: DVec3, n0: DVec3) -> Option<f
     let b = basis(s * d.dot(t1), s * d.dot(t2));
     let height: f64 = b.iter().zip(&g).map(|(p, q)| p * q).sum();
     let f = d.dot(n) - height;
-    f.is_finite().then_some(f)
+    // ∂g/∂u and ∂g/∂v at x, through the scaled coordinates.
+    let (u, v) = (s * d.dot(t1), s * d.dot(t2));
+    let (gu, gv) = (g[1] + 2.0 * g[3] * u + g[4] * v, g[2] + g[4] * u + 2.0 * g[5] * v);
+    let grad = n - s * (gu * t1 + gv * t2);
+    (f.is_finite() && grad.is_finite()).then_some((f, grad))
 }

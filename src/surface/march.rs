@@ -4,7 +4,7 @@
 //! vertices where f crosses zero along the edges (linearly). Unlike marching cubes' and surface
 //! nets' cells, a tetrahedron has no ambiguous case, so where the sampled surface is closed the
 //! mesh is closed and manifold, with no case table. Each vertex is then moved onto the surface
-//! by two Newton steps along ∇f. (Surface nets were tried first: on a noisy torus they left an
+//! by two Newton steps along the local fit's gradient. (Surface nets were tried first: on a noisy torus they left an
 //! edge shared by four triangles.)
 
 use super::{implicit, Cloud, Error, Method};
@@ -123,19 +123,10 @@ pub fn mesh(cloud: &mut Cloud, method: Method, resolution: usize) -> Result<Mesh
             }
         }
     }
-    // Onto the surface: two Newton steps along the numerical gradient.
-    let h = 0.25 * cell;
+    // Onto the surface: two Newton steps along the fit's own gradient.
     vertices.par_iter_mut().for_each(|v| {
         for _ in 0..2 {
-            let Some(f0) = implicit::value(cloud, method, *v) else { return };
-            let g = |e: DVec3| {
-                match (implicit::value(cloud, method, *v + h * e), implicit::value(cloud, method, *v - h * e)) {
-                    (Some(a), Some(b)) => Some((a - b) / (2.0 * h)),
-                    _ => None,
-                }
-            };
-            let (Some(gx), Some(gy), Some(gz)) = (g(DVec3::X), g(DVec3::Y), g(DVec3::Z)) else { return };
-            let grad = DVec3::new(gx, gy, gz);
+            let Some((f0, grad)) = implicit::fit(cloud, method, *v) else { return };
             let g2 = grad.length_squared();
             if !(g2 > 1e-12) {
                 return;
