@@ -112,6 +112,12 @@ fn lumen_surface_writes_a_mesh_and_refuses_bad_input() {
     let summary: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("mesh.json")).unwrap()).unwrap();
     assert_eq!(summary["watertight"], true);
     assert_eq!(summary["genus"], 0);
+    // An OBJ's vertices (as `lumen ps` writes its integrated surface) are points too.
+    let obj = d.join("sphere.obj");
+    std::fs::write(&obj, p.iter().map(|q| format!("v {} {} {}\n", q.x, q.y, q.z)).collect::<String>()).unwrap();
+    let (code, err) = common::lumen(&["surface", "--points", obj.to_str().unwrap(), "--out", d.join("from-obj.ply").to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("watertight"), "{err}");
     let empty = d.join("empty.ply");
     ply(&empty, &[]);
     let one = d.join("one.ply");

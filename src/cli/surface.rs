@@ -7,8 +7,9 @@ use std::path::PathBuf;
 /// `lumen surface`'s flags.
 #[derive(clap::Args)]
 pub struct SurfaceArgs {
-    /// Point cloud: PLY (ASCII or binary), vertices x y z with optional nx ny nz (faces, if
-    /// any, are ignored), such as `lumen sfm`'s points.ply.
+    /// Point cloud: PLY (ASCII or binary), vertices x y z with optional nx ny nz, such as
+    /// `lumen sfm`'s points.ply; or OBJ, its vertices (such as `lumen ps`'s surface.obj, the
+    /// depth its normals integrate to). Faces, if any, are ignored.
     #[arg(long)]
     pub points: PathBuf,
     /// The mesh: binary PLY. A summary (points, radius, vertices, triangles, watertight,
@@ -30,7 +31,8 @@ pub struct SurfaceArgs {
 
 pub fn run(a: &SurfaceArgs) -> Result<()> {
     let method: Method = a.method.parse().map_err(|e: lumen::error::Invalid| anyhow::Error::new(e).context("--method"))?;
-    let cloud = lumen::render::ply::read(&a.points)?;
+    let is_obj = a.points.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj"));
+    let cloud = if is_obj { lumen::render::obj::read(&a.points)? } else { lumen::render::ply::read(&a.points)? };
     let input = Input { points: cloud.positions, normals: cloud.normals };
     let config = Config { method, radius: a.radius, resolution: a.resolution, ..Config::default() };
     let out = surface::run(&input, &config).with_context(|| a.points.display().to_string())?;
