@@ -20,7 +20,7 @@
 //! There is no OpenCV code here: OpenCV's `mcc` detector and colour-checker-detection are
 //! measured beside it (`tools/chart_detect_peers.py`), not used.
 
-mod edges;
+pub mod edges;
 mod lattice;
 mod layout;
 pub mod overlay;
@@ -66,8 +66,20 @@ pub struct Detection {
     pub patch_half_side: [f64; 2],
     /// Full-resolution pixels per working pixel at the scale the chart was found.
     pub working_factor: usize,
-    /// Chart cell coordinates (u, v) ∈ [0, 6] × [0, 4] → image, row-major.
+    /// Chart cell coordinates (u, v) ∈ [0, 6] × [0, 4] → undistorted image, row-major.
     pub homography: [[f64; 3]; 3],
+    /// The radial term the edges measured (`edges::Lens`): an image point x is undistorted as
+    /// c + (x − c)(1 + k·ρ²), ρ = |x − c| over the half diagonal, c the image centre. The
+    /// corners are the homography's, distorted back into the image.
+    pub radial_k: f64,
+}
+
+impl Detection {
+    /// Chart cell coordinates → image pixels (the homography, then the lens).
+    pub fn to_image(&self, width: u32, height: u32, u: f64, v: f64) -> [f64; 2] {
+        let h = Matrix3::from_fn(|r, c| self.homography[r][c]);
+        edges::Lens::new(width as usize, height as usize, self.radial_k).distort(lattice::apply(&h, [u, v]))
+    }
 }
 
 fn corner_of(h: &Matrix3<f64>, u: f64, v: f64) -> [f64; 2] {
@@ -179,7 +191,8 @@ fn attempt(enc: &regions::Encoded, factor: usize, reference: &[[f64; 3]]) -> Res
     let refined = edges::refine(enc, &coarse, [HALF_SIDE; 2]);
     let hm = refined.as_ref().map_or(coarse, |r| r.h);
     let hm = hm / hm[(2, 2)];
-    let corners = [(0.0, 0.0), (6.0, 0.0), (6.0, 4.0), (0.0, 4.0)].map(|(u, v)| corner_of(&hm, u, v));
+    let lens = refined.as_ref().map_or(edges::Lens::new(enc.width, enc.height, 0.0), |r| r.lens);
+    let corners = [(0.0, 0.0), (6.0, 0.0), (6.0, 4.0), (0.0, 4.0)].map(|(u, v)| lens.distort(corner_of(&hm, u, v)));
     if corners.iter().flatten().any(|v| !v.is_finite()) {
         return Err("the chart's grid maps to no finite corners".into());
     }
@@ -198,5 +211,6 @@ fn attempt(enc: &regions::Encoded, factor: usize, reference: &[[f64; 3]]) -> Res
         patch_half_side: refined.as_ref().map_or([HALF_SIDE; 2], |r| r.half),
         working_factor: factor,
         homography: [0, 1, 2].map(|r| [0, 1, 2].map(|c| hm[(r, c)])),
+        radial_k: lens.k,
     }))
 }

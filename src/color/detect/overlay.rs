@@ -3,9 +3,8 @@
 //! samples it; cyan) and its number in chart order (1 "dark skin" … 24 "black 2"), so the
 //! corners, the orientation and the sampled areas can be checked by eye.
 
-use super::{lattice, Detection};
+use super::Detection;
 use crate::image::Image;
-use nalgebra::Matrix3;
 
 /// The overlay as RGB8 (width, height, bytes).
 pub fn draw(image: &Image, linear: bool, det: &Detection) -> (u32, u32, Vec<u8>) {
@@ -19,7 +18,6 @@ pub fn draw(image: &Image, linear: bool, det: &Detection) -> (u32, u32, Vec<u8>)
             rgb.extend(enc.pixel(x, y).map(|v| (v * 0.7 * 255.0 + 0.5) as u8));
         }
     }
-    let hm = Matrix3::from_fn(|r, c| det.homography[r][c]);
     let thick = (w.max(h) / 600).max(1);
     let mut line = |a: [f64; 2], b: [f64; 2], colour: [u8; 3]| {
         let n = ((b[0] - a[0]).abs().max((b[1] - a[1]).abs()).ceil() as usize).clamp(1, 20_000);
@@ -37,7 +35,7 @@ pub fn draw(image: &Image, linear: bool, det: &Detection) -> (u32, u32, Vec<u8>)
             }
         }
     };
-    let at = |u: f64, v: f64| lattice::apply(&hm, [u, v]);
+    let at = |u: f64, v: f64| det.to_image(image.width, image.height, u, v);
     for u in 0..=6 {
         line(at(u as f64, 0.0), at(u as f64, 4.0), [255, 220, 0]);
     }
