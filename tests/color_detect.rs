@@ -62,8 +62,14 @@ fn rendered_charts_are_found_within_half_a_pixel() {
         let view = View { turn_deg, tilt_deg, share, shift: [2.0 * u() - 1.0, 2.0 * u() - 1.0] };
         let k = k as u64;
         let (image, truth) = render_view(&view, k + 1);
-        let found = detect::detect(&image, true)
-            .unwrap_or_else(|e| panic!("view {k} (turn {:.0}°, tilt {:.0}°, {:.0} % of the width): {e}", view.turn_deg, view.tilt_deg, 100.0 * view.share));
+        let found = detect::detect(&image, true).unwrap_or_else(|e| {
+            panic!(
+                "view {k} (turn {:.0}°, tilt {:.0}°, {:.0} % of the width): {e}",
+                view.turn_deg,
+                view.tilt_deg,
+                100.0 * view.share
+            )
+        });
         let err = worst_corner(&found, &truth);
         let (lo, hi) = truth.iter().fold((f64::MAX, f64::MIN), |(l, h), c| (l.min(c[0]), h.max(c[0])));
         eprintln!(
@@ -111,7 +117,11 @@ fn the_ten_chart_photographs_are_found() {
         let found = detect::detect(&img, true).unwrap_or_else(|e| panic!("{name}: {e}"));
         let diagonal = (truth[0][0] - truth[2][0]).hypot(truth[0][1] - truth[2][1]);
         let err = worst_corner(&found, &truth);
-        eprintln!("{name}: worst corner {err:.1} px ({:.2} % of the diagonal), confidence {:.2}", 100.0 * err / diagonal, found.confidence);
+        eprintln!(
+            "{name}: worst corner {err:.1} px ({:.2} % of the diagonal), confidence {:.2}",
+            100.0 * err / diagonal,
+            found.confidence
+        );
         assert!(err < 0.015 * diagonal, "{name}: worst corner {err:.1} px, diagonal {diagonal:.0} px");
         let at_truth = lumen::color::chart::sample(&img, truth, 1.0).unwrap();
         let at_found = lumen::color::chart::sample(&img, found.corners, 1.0).unwrap();
@@ -180,13 +190,18 @@ fn a_chart_of_another_make_is_refused() {
     let order = [13, 2, 21, 8, 17, 5, 24, 10, 1, 19, 6, 15, 3, 22, 11, 18, 9, 4, 23, 14, 7, 20, 12, 16];
     let mut shuffled = text.clone();
     for (k, o) in order.iter().enumerate() {
-        shuffled = shuffled.replace(&format!("material = \"patch-{:02}\"", k + 1), &format!("material = \"tmp-{o:02}\""));
+        shuffled = shuffled
+            .replace(&format!("material = \"patch-{:02}\"", k + 1), &format!("material = \"tmp-{o:02}\""));
     }
     let shuffled = shuffled.replace("material = \"tmp-", "material = \"patch-");
     let dir = tempfile::tempdir().unwrap();
     let mut scene = common::scene(&shuffled, dir.path()).unwrap();
     scene.camera = CameraModel::centred(960, 720, 1100.0);
-    scene.t_world_cam = camera_for(&scene.camera, &GRID, &View { turn_deg: 10.0, tilt_deg: 20.0, share: 0.5, shift: [0.0, 0.0] });
+    scene.t_world_cam = camera_for(
+        &scene.camera,
+        &GRID,
+        &View { turn_deg: 10.0, tilt_deg: 20.0, share: 0.5, shift: [0.0, 0.0] },
+    );
     let image = render::try_render(&scene, &common::settings(&scene, 8, 2)).unwrap().mean;
     let e = detect::detect(&image, true).expect_err("another make").to_string();
     eprintln!("{e}");
@@ -209,7 +224,14 @@ fn tiny_grey_and_empty_images_are_refused() {
 
 /// Corners `lumen color detect` writes for `image`, or its error message.
 fn detect_cli(image: &std::path::Path, out: &std::path::Path) -> Result<[[f64; 2]; 4], String> {
-    let (code, stderr) = common::lumen(&["color", "detect", "--image", image.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let (code, stderr) = common::lumen(&[
+        "color",
+        "detect",
+        "--image",
+        image.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     if code != 0 {
         return Err(stderr);
     }
@@ -248,13 +270,21 @@ fn exif_orientation_and_16_bit_tiff_are_honoured() {
     let turned = dir.path().join("turned.jpg");
     std::fs::write(&turned, tagged).unwrap();
     let read = lumen::image::io::read(&turned).unwrap();
-    assert_eq!((read.width, read.height), (upright.width(), upright.height()), "the EXIF turn was not applied");
+    assert_eq!(
+        (read.width, read.height),
+        (upright.width(), upright.height()),
+        "the EXIF turn was not applied"
+    );
     let found = detect_cli(&turned, &dir.path().join("turned.json")).unwrap();
     // 16 bits per channel, the same code values.
-    let wide = image::ImageBuffer::<image::Rgb<u16>, Vec<u16>>::from_fn(upright.width(), upright.height(), |x, y| {
-        let p = upright.get_pixel(x, y).0;
-        image::Rgb(p.map(|v| v as u16 * 257))
-    });
+    let wide = image::ImageBuffer::<image::Rgb<u16>, Vec<u16>>::from_fn(
+        upright.width(),
+        upright.height(),
+        |x, y| {
+            let p = upright.get_pixel(x, y).0;
+            image::Rgb(p.map(|v| v as u16 * 257))
+        },
+    );
     let tiff = dir.path().join("wide.tif");
     wide.save(&tiff).unwrap();
     let from_tiff = detect_cli(&tiff, &dir.path().join("tiff.json")).unwrap();
@@ -274,17 +304,29 @@ fn color_fit_finds_the_chart_itself() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("ccm.json");
     let photo = data.join("color/photos/arcu-06.jpg");
-    let (code, stderr) = common::lumen(&["color", "fit", "--image", photo.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let (code, stderr) =
+        common::lumen(&["color", "fit", "--image", photo.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     assert_eq!(code, 0, "{stderr}");
     let j: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     let source = j["source"].as_str().unwrap();
     assert!(source.contains("corners found in the image") && source.contains("not linear"), "{source}");
-    let mut files: Vec<_> = std::fs::read_dir(data.join("sfm/herz-jesu-p8/images")).unwrap().map(|e| e.unwrap().path()).collect();
+    let mut files: Vec<_> =
+        std::fs::read_dir(data.join("sfm/herz-jesu-p8/images")).unwrap().map(|e| e.unwrap().path()).collect();
     files.sort();
     let out2 = dir.path().join("none.json");
-    let (code, stderr) = common::lumen(&["color", "fit", "--image", files[0].to_str().unwrap(), "--out", out2.to_str().unwrap()]);
+    let (code, stderr) = common::lumen(&[
+        "color",
+        "fit",
+        "--image",
+        files[0].to_str().unwrap(),
+        "--out",
+        out2.to_str().unwrap(),
+    ]);
     assert_ne!(code, 0);
-    assert!(stderr.contains(files[0].file_name().unwrap().to_str().unwrap()) && stderr.contains("chart"), "{stderr}");
+    assert!(
+        stderr.contains(files[0].file_name().unwrap().to_str().unwrap()) && stderr.contains("chart"),
+        "{stderr}"
+    );
     assert!(!out2.exists());
 }
 
@@ -300,10 +342,13 @@ fn a_chart_is_found_in_a_merged_radiance_map() {
     let times = [0.25f32, 1.0, 4.0];
     for (k, t) in times.iter().enumerate() {
         let path = dir.path().join(format!("e{k}.png"));
-        let img = image::RgbImage::from_fn(radiance.width, radiance.height, |x, y| {
-            let i = 3 * (y * radiance.width + x) as usize;
-            image::Rgb([0, 1, 2].map(|c| ((t * radiance.data[i + c]).clamp(0.0, 1.0).powf(1.0 / 2.2) * 255.0).round() as u8))
-        });
+        let img =
+            image::RgbImage::from_fn(radiance.width, radiance.height, |x, y| {
+                let i = 3 * (y * radiance.width + x) as usize;
+                image::Rgb([0, 1, 2].map(|c| {
+                    ((t * radiance.data[i + c]).clamp(0.0, 1.0).powf(1.0 / 2.2) * 255.0).round() as u8
+                }))
+            });
         img.save(&path).unwrap();
         args.push(path.to_str().unwrap().into());
     }

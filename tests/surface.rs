@@ -57,11 +57,17 @@ fn a_noiseless_sphere_is_recovered() {
     for method in [Method::Apss, Method::Mls] {
         for normals in [n.clone(), Vec::new()] {
             let estimated = normals.is_empty();
-            let out = surface::run(&Input { points: p.clone(), normals }, &Config { method, ..Config::default() }).unwrap();
+            let out =
+                surface::run(&Input { points: p.clone(), normals }, &Config { method, ..Config::default() })
+                    .unwrap();
             let e = rms(&out.mesh.vertices, |v| v.length() - 1.0);
             eprintln!("{method:?} (normals estimated: {estimated}): RMS {e:.2e}, {:?}", out.summary);
             assert!(e < 1e-3, "{method:?}: RMS distance {e}");
-            assert!(out.summary.watertight && out.summary.genus == Some(0) && out.summary.components == 1, "{:?}", out.summary);
+            assert!(
+                out.summary.watertight && out.summary.genus == Some(0) && out.summary.components == 1,
+                "{:?}",
+                out.summary
+            );
         }
     }
 }
@@ -78,7 +84,11 @@ fn a_noisy_torus_keeps_its_hole() {
         *q += sigma * g * *nn;
     }
     for method in [Method::Apss, Method::Mls] {
-        let out = surface::run(&Input { points: p.clone(), normals: Vec::new() }, &Config { method, ..Config::default() }).unwrap();
+        let out = surface::run(
+            &Input { points: p.clone(), normals: Vec::new() },
+            &Config { method, ..Config::default() },
+        )
+        .unwrap();
         let e = rms(&out.mesh.vertices, torus_distance);
         eprintln!("{method:?}: RMS {e:.2e} (noise {sigma}), {:?}", out.summary);
         assert!(e < sigma, "{method:?}: RMS distance {e}");
@@ -105,17 +115,26 @@ fn lumen_surface_writes_a_mesh_and_refuses_bad_input() {
     let good = d.join("sphere.ply");
     ply(&good, &p);
     let out = d.join("mesh.ply");
-    let (code, err) = common::lumen(&["surface", "--points", good.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let (code, err) =
+        common::lumen(&["surface", "--points", good.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     assert_eq!(code, 0, "{err}");
     let mesh = lumen::render::ply::read(&out).unwrap();
     assert!(mesh.triangles.len() > 1000);
-    let summary: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("mesh.json")).unwrap()).unwrap();
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("mesh.json")).unwrap()).unwrap();
     assert_eq!(summary["watertight"], true);
     assert_eq!(summary["genus"], 0);
     // An OBJ's vertices (as `lumen ps` writes its integrated surface) are points too.
     let obj = d.join("sphere.obj");
-    std::fs::write(&obj, p.iter().map(|q| format!("v {} {} {}\n", q.x, q.y, q.z)).collect::<String>()).unwrap();
-    let (code, err) = common::lumen(&["surface", "--points", obj.to_str().unwrap(), "--out", d.join("from-obj.ply").to_str().unwrap()]);
+    std::fs::write(&obj, p.iter().map(|q| format!("v {} {} {}\n", q.x, q.y, q.z)).collect::<String>())
+        .unwrap();
+    let (code, err) = common::lumen(&[
+        "surface",
+        "--points",
+        obj.to_str().unwrap(),
+        "--out",
+        d.join("from-obj.ply").to_str().unwrap(),
+    ]);
     assert_eq!(code, 0, "{err}");
     assert!(err.contains("watertight"), "{err}");
     let empty = d.join("empty.ply");
@@ -140,7 +159,8 @@ fn lumen_surface_writes_a_mesh_and_refuses_bad_input() {
     ];
     for (file, extra, expected) in cases {
         let bad_out = d.join("bad.ply");
-        let mut args = vec!["surface", "--points", file.to_str().unwrap(), "--out", bad_out.to_str().unwrap()];
+        let mut args =
+            vec!["surface", "--points", file.to_str().unwrap(), "--out", bad_out.to_str().unwrap()];
         args.extend_from_slice(extra);
         let (code, err) = common::lumen(&args);
         assert_ne!(code, 0, "{args:?} was accepted");
@@ -160,13 +180,21 @@ fn varying_density_and_outliers() {
     let mut p: Vec<DVec3> = all.into_iter().filter(|q| q.y > 0.0 || rng.gen::<f64>() < 0.1).collect();
     let outliers = p.len() / 20;
     for _ in 0..outliers {
-        p.push(DVec3::new(rng.gen::<f64>() * 3.0 - 1.5, rng.gen::<f64>() * 3.0 - 1.5, rng.gen::<f64>() * 3.0 - 1.5));
+        p.push(DVec3::new(
+            rng.gen::<f64>() * 3.0 - 1.5,
+            rng.gen::<f64>() * 3.0 - 1.5,
+            rng.gen::<f64>() * 3.0 - 1.5,
+        ));
     }
     let out = surface::run(&Input { points: p, normals: Vec::new() }, &Config::default()).unwrap();
     let e = rms(&out.mesh.vertices, |v| v.length() - 1.0);
     eprintln!("RMS {e:.2e}, {:?}", out.summary);
     assert!(e < 0.01, "RMS distance {e}");
-    assert!(out.summary.watertight && out.summary.components == 1 && out.summary.genus == Some(0), "{:?}", out.summary);
+    assert!(
+        out.summary.watertight && out.summary.components == 1 && out.summary.genus == Some(0),
+        "{:?}",
+        out.summary
+    );
 }
 
 /// A thin slab (2 × 2 × 0.06) sampled on its faces with normals, the fits' radius (0.12) twice
@@ -204,7 +232,8 @@ fn two_sheets_closer_than_the_radius_stay_apart() {
     let config = Config { radius: Some(0.12), resolution: 160, ..Config::default() };
     let out = surface::run(&Input { points: p, normals: n }, &config).unwrap();
     // Away from the rim, every vertex lies near one of the two faces.
-    let inner: Vec<&DVec3> = out.mesh.vertices.iter().filter(|v| v.x.abs() < 0.8 && v.y.abs() < 0.8).collect();
+    let inner: Vec<&DVec3> =
+        out.mesh.vertices.iter().filter(|v| v.x.abs() < 0.8 && v.y.abs() < 0.8).collect();
     let worst = inner.iter().map(|v| (v.z.abs() - h).abs()).fold(0.0, f64::max);
     eprintln!("{} inner vertices, worst distance from a face {worst:.4}, {:?}", inner.len(), out.summary);
     assert!(!inner.is_empty() && worst < 0.005, "worst distance from a face {worst}");

@@ -154,11 +154,8 @@ fn detect(a: &DetectArgs) -> Result<()> {
     let samples = color::chart::sample(&img, d.corners, a.saturation)
         .map_err(|m| anyhow::anyhow!("{}: {m}", a.image.display()))?;
     let names = spectra::chart().into_iter().map(|(n, _)| n);
-    let patches = samples
-        .iter()
-        .zip(names)
-        .map(|(s, name)| DetectedPatch { name, rgb: s.rgb, flag: s.flag })
-        .collect();
+    let patches =
+        samples.iter().zip(names).map(|(s, name)| DetectedPatch { name, rgb: s.rgb, flag: s.flag }).collect();
     let file = DetectFile {
         image: a.image.display().to_string(),
         encoding: how.to_string(),
@@ -204,7 +201,10 @@ fn read_and_detect(path: &Path, linear: bool) -> Result<(Image, color::detect::D
 }
 
 /// `read_and_detect`, with the detection's own time (decoding excluded) in seconds.
-fn read_and_detect_timed(path: &Path, linear: bool) -> Result<(Image, color::detect::Detection, &'static str, f64)> {
+fn read_and_detect_timed(
+    path: &Path,
+    linear: bool,
+) -> Result<(Image, color::detect::Detection, &'static str, f64)> {
     let (img, encoded, how) = read_both(path, linear)?;
     let t = std::time::Instant::now();
     let found = match &encoded {
@@ -271,12 +271,27 @@ fn fit(a: &FitArgs) -> Result<()> {
                 Some(text) => {
                     let c = color::parse_numbers::<8>(text, "--corners").map_err(anyhow::Error::msg)?;
                     let (img, how) = read_linear(path, a.linear)?;
-                    (img, [[c[0], c[1]], [c[2], c[3]], [c[4], c[5]], [c[6], c[7]]], "corners given".to_string(), how)
+                    (
+                        img,
+                        [[c[0], c[1]], [c[2], c[3]], [c[4], c[5]], [c[6], c[7]]],
+                        "corners given".to_string(),
+                        how,
+                    )
                 }
                 None => {
                     let (img, d, how) = read_and_detect(path, a.linear)?;
-                    let c: Vec<String> = d.corners.iter().map(|p| format!("{:.1},{:.1}", p[0], p[1])).collect();
-                    (img, d.corners, format!("corners found in the image: {} (confidence {:.2})", c.join(","), d.confidence), how)
+                    let c: Vec<String> =
+                        d.corners.iter().map(|p| format!("{:.1},{:.1}", p[0], p[1])).collect();
+                    (
+                        img,
+                        d.corners,
+                        format!(
+                            "corners found in the image: {} (confidence {:.2})",
+                            c.join(","),
+                            d.confidence
+                        ),
+                        how,
+                    )
                 }
             };
             let s = color::chart::sample(&img, corners, a.saturation)

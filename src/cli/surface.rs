@@ -30,9 +30,11 @@ pub struct SurfaceArgs {
 }
 
 pub fn run(a: &SurfaceArgs) -> Result<()> {
-    let method: Method = a.method.parse().map_err(|e: lumen::error::Invalid| anyhow::Error::new(e).context("--method"))?;
+    let method: Method =
+        a.method.parse().map_err(|e: lumen::error::Invalid| anyhow::Error::new(e).context("--method"))?;
     let is_obj = a.points.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj"));
-    let cloud = if is_obj { lumen::render::obj::read(&a.points)? } else { lumen::render::ply::read(&a.points)? };
+    let cloud =
+        if is_obj { lumen::render::obj::read(&a.points)? } else { lumen::render::ply::read(&a.points)? };
     let input = Input { points: cloud.positions, normals: cloud.normals };
     let config = Config { method, radius: a.radius, resolution: a.resolution, ..Config::default() };
     let out = surface::run(&input, &config).with_context(|| a.points.display().to_string())?;

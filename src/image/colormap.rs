@@ -64,7 +64,15 @@ fn draw_text(rgb: &mut [u8], w: usize, x: usize, y: usize, s: usize, text: &str)
 }
 
 /// Draws `text` in `colour` (digits and the signs of `glyph`), as `draw_text` does.
-pub(crate) fn draw_text_in(rgb: &mut [u8], w: usize, x: usize, y: usize, s: usize, text: &str, colour: [u8; 3]) {
+pub(crate) fn draw_text_in(
+    rgb: &mut [u8],
+    w: usize,
+    x: usize,
+    y: usize,
+    s: usize,
+    text: &str,
+    colour: [u8; 3],
+) {
     let h = rgb.len() / (3 * w);
     for (k, c) in text.chars().enumerate() {
         for (row, bits) in glyph(c).iter().enumerate() {

@@ -128,7 +128,9 @@ fn mls(cloud: &Cloud, idx: &[usize], w: &[f64], x: DVec3, n0: DVec3) -> Option<(
     let t1 = n.any_orthonormal_vector();
     let t2 = n.cross(t1);
     // Heights over the plane, in coordinates scaled by the neighbourhood's spread.
-    let scale = (idx.iter().zip(w).map(|(&i, &wi)| wi * (cloud.points[i] - a).length_squared()).sum::<f64>() / sw).sqrt();
+    let scale = (idx.iter().zip(w).map(|(&i, &wi)| wi * (cloud.points[i] - a).length_squared()).sum::<f64>()
+        / sw)
+        .sqrt();
     let s = if scale > 0.0 { 1.0 / scale } else { 1.0 };
     let basis = |u: f64, v: f64| [1.0, u, v, u * u, u * v, v * v];
     let mut g = [0.0; 6];

@@ -43,7 +43,9 @@ pub fn mesh(cloud: &mut Cloud, method: Method, resolution: usize) -> Result<Mesh
     let extent = (hi - lo).max_element();
     let cell = extent / resolution as f64;
     if !(cell.is_finite() && cell > 0.0) {
-        return Err(Error::BadInput(format!("the points span {extent} across: expected a positive, finite extent")));
+        return Err(Error::BadInput(format!(
+            "the points span {extent} across: expected a positive, finite extent"
+        )));
     }
     // Room for the surface beyond the outermost points.
     let margin = 2.0 * cell + cloud.radius.iter().copied().fold(0.0, f64::max).min(0.25 * extent);
@@ -106,9 +108,13 @@ pub fn mesh(cloud: &mut Cloud, method: Method, resolution: usize) -> Result<Mesh
                 let base = [i, j, k];
                 let corner_id = |c: [usize; 3]| grid.index(c[0], c[1], c[2]);
                 // Skip cubes with no sign change or an unknown corner.
-                let ids: [usize; 8] = std::array::from_fn(|b| corner_id([i + (b & 1), j + ((b >> 1) & 1), k + ((b >> 2) & 1)]));
+                let ids: [usize; 8] =
+                    std::array::from_fn(|b| corner_id([i + (b & 1), j + ((b >> 1) & 1), k + ((b >> 2) & 1)]));
                 let vals = ids.map(|g| f[g]);
-                if vals.iter().any(|v| v.is_nan()) || vals.iter().all(|&v| v < 0.0) || vals.iter().all(|&v| v >= 0.0) {
+                if vals.iter().any(|v| v.is_nan())
+                    || vals.iter().all(|&v| v < 0.0)
+                    || vals.iter().all(|&v| v >= 0.0)
+                {
                     continue;
                 }
                 for order in ORDERS {
@@ -186,7 +192,8 @@ fn polygonise(
     let centroid = |s: &[usize]| s.iter().map(|&g| position(grid, g)).sum::<DVec3>() / s.len() as f64;
     let out_dir = centroid(&outside) - centroid(&inside);
     let p: Vec<DVec3> = polygon.iter().map(|&v| vertices[v as usize]).collect();
-    let normal = (p[1] - p[0]).cross(p[2] - p[0]) + if p.len() == 4 { (p[2] - p[0]).cross(p[3] - p[0]) } else { DVec3::ZERO };
+    let normal = (p[1] - p[0]).cross(p[2] - p[0])
+        + if p.len() == 4 { (p[2] - p[0]).cross(p[3] - p[0]) } else { DVec3::ZERO };
     let mut poly = polygon;
     if normal.dot(out_dir) < 0.0 {
         poly.reverse();

@@ -178,14 +178,22 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     }
     if !input.normals.is_empty() {
         if input.normals.len() != n {
-            return Err(Error::BadInput(format!("{} normals for {n} points: expected one each", input.normals.len())));
+            return Err(Error::BadInput(format!(
+                "{} normals for {n} points: expected one each",
+                input.normals.len()
+            )));
         }
-        if let Some((i, v)) = input.normals.iter().enumerate().find(|(_, v)| !(v.is_finite() && v.length() > 0.0)) {
+        if let Some((i, v)) =
+            input.normals.iter().enumerate().find(|(_, v)| !(v.is_finite() && v.length() > 0.0))
+        {
             return Err(Error::BadInput(format!("normal {i} is {v}: expected a finite, non-zero vector")));
         }
     }
     if !(8..=1024).contains(&config.resolution) {
-        return Err(Error::BadInput(format!("resolution {}: expected 8 to 1024 cells across", config.resolution)));
+        return Err(Error::BadInput(format!(
+            "resolution {}: expected 8 to 1024 cells across",
+            config.resolution
+        )));
     }
     if !(3..=256).contains(&config.k) {
         return Err(Error::BadInput(format!("k = {}: expected 3 to 256 neighbours", config.k)));
@@ -194,7 +202,9 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     let (lo, hi) = input.points.iter().fold((DVec3::MAX, DVec3::MIN), |(a, b), p| (a.min(*p), b.max(*p)));
     let extent = (hi - lo).max_element();
     if !(extent > 0.0 && extent.is_finite()) {
-        return Err(Error::BadInput(format!("the {n} points span {extent} across: expected points that are not all in one place")));
+        return Err(Error::BadInput(format!(
+            "the {n} points span {extent} across: expected points that are not all in one place"
+        )));
     }
     // Each point's spacing (the distance to its 8th nearest neighbour) and how flat the 8 lie
     // (their covariance's smallest over largest eigenvalue).
@@ -232,7 +242,8 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
         .collect();
     let outliers = keep.iter().filter(|k| !**k).count();
     let (points, given_normals, spacing): (Vec<DVec3>, Vec<DVec3>, Vec<f64>) = if outliers > 0 {
-        let pick = |v: &[DVec3]| v.iter().zip(&keep).filter(|(_, k)| **k).map(|(p, _)| *p).collect::<Vec<_>>();
+        let pick =
+            |v: &[DVec3]| v.iter().zip(&keep).filter(|(_, k)| **k).map(|(p, _)| *p).collect::<Vec<_>>();
         (
             pick(&input.points),
             if input.normals.is_empty() { Vec::new() } else { pick(&input.normals) },
@@ -258,7 +269,11 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
         None => spacing.iter().map(|s| 2.5 * s.max(0.5 * median)).collect(),
     };
     let estimated = given_normals.is_empty();
-    cloud.normals = if estimated { normals::estimate(&cloud, config.k) } else { given_normals.iter().map(|v| v.normalize()).collect() };
+    cloud.normals = if estimated {
+        normals::estimate(&cloud, config.k)
+    } else {
+        given_normals.iter().map(|v| v.normalize()).collect()
+    };
     let mesh = march::mesh(&mut cloud, config.method, config.resolution)?;
     if mesh.triangles.is_empty() {
         return Err(Error::Empty(format!(
@@ -303,7 +318,8 @@ fn drop_small_pieces(mesh: march::Mesh) -> (march::Mesh, usize) {
         return (mesh, 0);
     }
     // Keep the other pieces' triangles and only the vertices they use, renumbered in order.
-    let kept: Vec<[u32; 3]> = mesh.triangles.into_iter().filter(|t| !small.contains(&labels[t[0] as usize])).collect();
+    let kept: Vec<[u32; 3]> =
+        mesh.triangles.into_iter().filter(|t| !small.contains(&labels[t[0] as usize])).collect();
     let mut new_index = vec![u32::MAX; mesh.vertices.len()];
     let mut vertices = Vec::new();
     for t in &kept {

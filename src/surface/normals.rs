@@ -32,7 +32,10 @@ pub fn estimate(cloud: &Cloud, k: usize) -> Vec<DVec3> {
             .iter()
             .enumerate()
             .map(|(i, nb)| {
-                let against = nb.iter().filter(|&&j| j as usize != i && normals[j as usize].dot(normals[i]) < 0.0).count();
+                let against = nb
+                    .iter()
+                    .filter(|&&j| j as usize != i && normals[j as usize].dot(normals[i]) < 0.0)
+                    .count();
                 2 * against > nb.len().saturating_sub(1)
             })
             .collect();
@@ -112,7 +115,10 @@ fn orient(cloud: &Cloud, neighbours: &[Vec<u32>], normals: &mut [DVec3]) {
     let centroid = cloud.points.iter().copied().sum::<DVec3>() / n as f64;
     let mut order: Vec<u32> = (0..n as u32).collect();
     order.sort_by(|&a, &b| {
-        let (da, db) = (cloud.points[a as usize].distance_squared(centroid), cloud.points[b as usize].distance_squared(centroid));
+        let (da, db) = (
+            cloud.points[a as usize].distance_squared(centroid),
+            cloud.points[b as usize].distance_squared(centroid),
+        );
         db.total_cmp(&da).then(a.cmp(&b))
     });
     let mut done = vec![false; n];

@@ -54,7 +54,10 @@ impl Lens {
         for _ in 0..6 {
             let (dx, dy) = (x[0] - self.centre[0], x[1] - self.centre[1]);
             let f = 1.0 + self.k * (dx * dx + dy * dy) * self.inv_radius * self.inv_radius;
-            x = [self.centre[0] + (xu[0] - self.centre[0]) / f, self.centre[1] + (xu[1] - self.centre[1]) / f];
+            x = [
+                self.centre[0] + (xu[0] - self.centre[0]) / f,
+                self.centre[1] + (xu[1] - self.centre[1]) / f,
+            ];
         }
         x
     }
@@ -84,7 +87,11 @@ fn line_value(p: &Point, half: [f64; 2]) -> f64 {
 
 /// Signed distance (px) of x from the image of the chart line {axis = value} under h.
 fn distance(hinv_t: &Matrix3<f64>, x: [f64; 2], axis: usize, value: f64) -> f64 {
-    let g = if axis == 0 { nalgebra::Vector3::new(1.0, 0.0, -value) } else { nalgebra::Vector3::new(0.0, 1.0, -value) };
+    let g = if axis == 0 {
+        nalgebra::Vector3::new(1.0, 0.0, -value)
+    } else {
+        nalgebra::Vector3::new(0.0, 1.0, -value)
+    };
     let l = hinv_t * g;
     (l[0] * x[0] + l[1] * x[1] + l[2]) / (l[0] * l[0] + l[1] * l[1]).sqrt()
 }
@@ -107,7 +114,8 @@ fn search(img: &Encoded, h: &Matrix3<f64>, lens: &Lens, half: [f64; 2], reach: f
                     if !(len.is_finite() && len >= 1.0) {
                         continue;
                     }
-                    let inside = |p: [f64; 2]| p[0] >= 1.0 && p[1] >= 1.0 && p[0] <= w - 2.0 && p[1] <= hh - 2.0;
+                    let inside =
+                        |p: [f64; 2]| p[0] >= 1.0 && p[1] >= 1.0 && p[0] <= w - 2.0 && p[1] <= hh - 2.0;
                     if !(inside(a) && inside(b)) {
                         continue;
                     }
@@ -128,7 +136,9 @@ fn search(img: &Encoded, h: &Matrix3<f64>, lens: &Lens, half: [f64; 2], reach: f
                     }
                     let grad: Vec<f32> = (1..n).map(|i| diff(profile[i + 1], profile[i - 1])).collect();
                     let (imax, gmax) =
-                        grad.iter().enumerate().fold((0, 0f32), |b, (i, &g)| if g > b.1 { (i, g) } else { b });
+                        grad.iter()
+                            .enumerate()
+                            .fold((0, 0f32), |b, (i, &g)| if g > b.1 { (i, g) } else { b });
                     if imax == 0 || imax + 1 >= grad.len() {
                         continue;
                     }
@@ -201,7 +211,11 @@ fn fit(
         let next = p - step;
         let rn = residuals(h0, lens, &next, points)?;
         let cost = |r: &[f64]| {
-            r.iter().map(|v| if v.abs() <= HUBER_PX { 0.5 * v * v } else { HUBER_PX * (v.abs() - 0.5 * HUBER_PX) }).sum::<f64>()
+            r.iter()
+                .map(
+                    |v| if v.abs() <= HUBER_PX { 0.5 * v * v } else { HUBER_PX * (v.abs() - 0.5 * HUBER_PX) },
+                )
+                .sum::<f64>()
         };
         if cost(&rn) > cost(&r) {
             break;
@@ -225,7 +239,8 @@ pub fn refine(img: &Encoded, h: &Matrix3<f64>, half: [f64; 2]) -> Option<Refined
     // Over a chart small in the frame a radial term is all but a homography's perspective: it
     // is fitted only when the chart spans 40 % of the frame's diagonal.
     let span = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]);
-    let diagonal = span(apply(&h, [0.0, 0.0]), apply(&h, [6.0, 4.0])).max(span(apply(&h, [6.0, 0.0]), apply(&h, [0.0, 4.0])));
+    let diagonal = span(apply(&h, [0.0, 0.0]), apply(&h, [6.0, 4.0]))
+        .max(span(apply(&h, [6.0, 0.0]), apply(&h, [0.0, 4.0])));
     let fit_lens = diagonal >= 0.4 * (img.width as f64).hypot(img.height as f64);
     let mut last = None;
     for reach in REACH {
@@ -240,7 +255,10 @@ pub fn refine(img: &Encoded, h: &Matrix3<f64>, half: [f64; 2]) -> Option<Refined
         let Some((hn, lensn, halfn, rms)) = fit(&h, &lens, fit_lens, half, &points) else { break };
         // |k| beyond 0.3 moves the frame's corners by a third of the half diagonal: no lens a
         // photograph is taken through, so the fit went astray.
-        if !(halfn.iter().all(|v| (0.2..0.5).contains(v)) && hn.iter().all(|v| v.is_finite()) && lensn.k.abs() < 0.3) {
+        if !(halfn.iter().all(|v| (0.2..0.5).contains(v))
+            && hn.iter().all(|v| v.is_finite())
+            && lensn.k.abs() < 0.3)
+        {
             break;
         }
         h = hn;

@@ -92,7 +92,9 @@ fn affine(pairs: &[([f64; 2], [f64; 2])]) -> Option<Matrix3<f64>> {
 fn grow(cands: &[Candidate], seed: usize, a: usize, b: usize) -> Option<Lattice> {
     let c = |i: usize| cands[i].centre;
     let mut members = vec![(seed, [0, 0]), (a, [1, 0]), (b, [0, 1])];
-    let mut h = affine(&members.iter().map(|&(i, cell)| ([cell[0] as f64, cell[1] as f64], c(i))).collect::<Vec<_>>())?;
+    let mut h = affine(
+        &members.iter().map(|&(i, cell)| ([cell[0] as f64, cell[1] as f64], c(i))).collect::<Vec<_>>(),
+    )?;
     let seed_pixels = cands[seed].pixels as f64;
     for reach in [1, 2, 3, 5, 8] {
         let inv = h.try_inverse()?;
@@ -131,7 +133,8 @@ fn grow(cands: &[Candidate], seed: usize, a: usize, b: usize) -> Option<Lattice>
             return None;
         }
         members = found;
-        let pairs: Vec<_> = members.iter().map(|&(i, cell)| ([cell[0] as f64, cell[1] as f64], c(i))).collect();
+        let pairs: Vec<_> =
+            members.iter().map(|&(i, cell)| ([cell[0] as f64, cell[1] as f64], c(i))).collect();
         h = fit(&pairs)?;
     }
     Some(Lattice { members, h })
@@ -185,7 +188,8 @@ pub fn find(cands: &[Candidate]) -> Vec<Lattice> {
             .collect();
         near.sort_by(|x, y| x.0.total_cmp(&y.0));
         for &(dj, j) in near.iter().take(2) {
-            let dvec = |k: usize| [cands[k].centre[0] - cands[i].centre[0], cands[k].centre[1] - cands[i].centre[1]];
+            let dvec =
+                |k: usize| [cands[k].centre[0] - cands[i].centre[0], cands[k].centre[1] - cands[i].centre[1]];
             let (vj, ci) = (dvec(j), &cands[i]);
             // The cosine of the angle between the two offsets in i's moment frame.
             let cos = |vk: [f64; 2], dk: f64| {

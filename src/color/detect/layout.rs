@@ -147,7 +147,17 @@ pub fn placements(work: &Work, lattice: &Lattice, reference: &[[f64; 3]]) -> Vec
                 let (ox, oy) = (oa as f64, ob as f64);
                 let cx = ox - 0.5 * (ra[0] + rb[0]) as f64;
                 let cy = oy - 0.5 * (ra[1] + rb[1]) as f64;
-                let t = Matrix3::new(ra[0] as f64, rb[0] as f64, cx, ra[1] as f64, rb[1] as f64, cy, 0.0, 0.0, 1.0);
+                let t = Matrix3::new(
+                    ra[0] as f64,
+                    rb[0] as f64,
+                    cx,
+                    ra[1] as f64,
+                    rb[1] as f64,
+                    cy,
+                    0.0,
+                    0.0,
+                    1.0,
+                );
                 let hc = h * t;
                 let mut observed = Vec::new();
                 let mut refs = Vec::new();

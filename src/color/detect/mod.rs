@@ -98,9 +98,12 @@ pub fn detect(image: &Image, linear: bool) -> Result<Detection, Invalid> {
     }
     let (w, h) = (image.width as usize, image.height as usize);
     if w < 48 || h < 48 {
-        return Err(format!("the image is {w}×{h} pixels: too small to hold a 6×4 chart (at least 48×48)").into());
+        return Err(
+            format!("the image is {w}×{h} pixels: too small to hold a 6×4 chart (at least 48×48)").into()
+        );
     }
-    let reference: Vec<[f64; 3]> = super::spectra::chart_reference_d50().into_iter().map(|(_, xyz)| xyz).collect();
+    let reference: Vec<[f64; 3]> =
+        super::spectra::chart_reference_d50().into_iter().map(|(_, xyz)| xyz).collect();
     let exposures: Vec<Option<f32>> =
         if linear { regions::exposures(image).into_iter().map(Some).collect() } else { vec![None] };
     let mut best_cells = 0;
@@ -135,7 +138,11 @@ pub fn detect(image: &Image, linear: bool) -> Result<Detection, Invalid> {
 enum Attempt {
     Found(Detection),
     /// No chart: the candidates, the largest lattice, and why the nearest grid was refused.
-    Missed { candidates: usize, cells: usize, near: Option<String> },
+    Missed {
+        candidates: usize,
+        cells: usize,
+        near: Option<String>,
+    },
 }
 
 /// Looks for the chart at one working scale; an error for a finding that ends the search (two
@@ -192,7 +199,8 @@ fn attempt(enc: &regions::Encoded, factor: usize, reference: &[[f64; 3]]) -> Res
     let hm = refined.as_ref().map_or(coarse, |r| r.h);
     let hm = hm / hm[(2, 2)];
     let lens = refined.as_ref().map_or(edges::Lens::new(enc.width, enc.height, 0.0), |r| r.lens);
-    let corners = [(0.0, 0.0), (6.0, 0.0), (6.0, 4.0), (0.0, 4.0)].map(|(u, v)| lens.distort(corner_of(&hm, u, v)));
+    let corners =
+        [(0.0, 0.0), (6.0, 0.0), (6.0, 4.0), (0.0, 4.0)].map(|(u, v)| lens.distort(corner_of(&hm, u, v)));
     if corners.iter().flatten().any(|v| !v.is_finite()) {
         return Err("the chart's grid maps to no finite corners".into());
     }

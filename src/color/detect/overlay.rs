@@ -42,7 +42,10 @@ pub fn draw(image: &Image, linear: bool, det: &Detection) -> (u32, u32, Vec<u8>)
     for v in 0..=4 {
         line(at(0.0, v as f64), at(6.0, v as f64), [255, 220, 0]);
     }
-    let (lo, hi) = (0.5 - crate::color::chart::SAMPLED_FRACTION / 2.0, 0.5 + crate::color::chart::SAMPLED_FRACTION / 2.0);
+    let (lo, hi) = (
+        0.5 - crate::color::chart::SAMPLED_FRACTION / 2.0,
+        0.5 + crate::color::chart::SAMPLED_FRACTION / 2.0,
+    );
     for k in 0..24 {
         let (c, r) = ((k % 6) as f64, (k / 6) as f64);
         let sq = [(lo, lo), (hi, lo), (hi, hi), (lo, hi)].map(|(a, b)| at(c + a, r + b));
@@ -63,7 +66,15 @@ pub fn draw(image: &Image, linear: bool, det: &Detection) -> (u32, u32, Vec<u8>)
         let (tw, th) = ((4 * text.len() - 1) * s, 5 * s);
         let (x, y) = (centre[0] - tw as f64 / 2.0, centre[1] - th as f64 / 2.0);
         if x >= 0.0 && y >= 0.0 {
-            crate::image::colormap::draw_text_in(&mut rgb, w, x as usize, y as usize, s, &text, [255, 255, 255]);
+            crate::image::colormap::draw_text_in(
+                &mut rgb,
+                w,
+                x as usize,
+                y as usize,
+                s,
+                &text,
+                [255, 255, 255],
+            );
         }
     }
     (w as u32, h as u32, rgb)

@@ -278,7 +278,8 @@ pub fn find(work: &Work) -> Regions {
             let n = s.n as f64;
             let (mx, my) = (s.sx / n, s.sy / n);
             // Each pixel is a unit square: its own spread, 1/12 each way, adds to the centres'.
-            let cov = [s.sxx / n - mx * mx + 1.0 / 12.0, s.sxy / n - mx * my, s.syy / n - my * my + 1.0 / 12.0];
+            let cov =
+                [s.sxx / n - mx * mx + 1.0 / 12.0, s.sxy / n - mx * my, s.syy / n - my * my + 1.0 / 12.0];
             let det = cov[0] * cov[2] - cov[1] * cov[1];
             if det <= 0.0 {
                 return None;

@@ -198,10 +198,16 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<Vec<Image>, Tru
         return Err(StageError::Config(format!("views = {}: expected 1 to {MAX_RENDERS}", c.views)));
     }
     if !(c.share.iter().all(|s| (0.01..=0.95).contains(s)) && c.share[0] <= c.share[1]) {
-        return Err(StageError::Config(format!("share = {:?}: expected [smallest, largest] within 0.01 to 0.95", c.share)));
+        return Err(StageError::Config(format!(
+            "share = {:?}: expected [smallest, largest] within 0.01 to 0.95",
+            c.share
+        )));
     }
     if !(c.tilt_deg.iter().all(|t| (0.0..=80.0).contains(t)) && c.tilt_deg[0] <= c.tilt_deg[1]) {
-        return Err(StageError::Config(format!("tilt_deg = {:?}: expected [lowest, highest] within 0° to 80°", c.tilt_deg)));
+        return Err(StageError::Config(format!(
+            "tilt_deg = {:?}: expected [lowest, highest] within 0° to 80°",
+            c.tilt_deg
+        )));
     }
     if !(c.image.iter().all(|&s| (48..=8192).contains(&s)) && c.focal_px.is_finite() && c.focal_px > 0.0) {
         return Err(StageError::Config(format!(
@@ -249,7 +255,8 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<Vec<Image>, Tru
         bar.inc(1);
         let Some(mut made) = made else { continue };
         let image = made.pop().filter(|i| i.channels == 3 && i.width == c.image[0] && i.height == c.image[1]);
-        let image = image.ok_or_else(|| StageError::Config(format!("view {k}: the cached render has the wrong size")))?;
+        let image = image
+            .ok_or_else(|| StageError::Config(format!("view {k}: the cached render has the wrong size")))?;
         let to_cam = scene.t_world_cam.inverse();
         let mut truth = [[0.0; 2]; 4];
         for (i, (u, v)) in [(0.0, 0.0), (6.0, 0.0), (6.0, 4.0), (0.0, 4.0)].into_iter().enumerate() {
@@ -305,7 +312,12 @@ pub fn validate(out: &Detections, truth: &Truth) -> Findings {
     let mut errors = Vec::new();
     let mut times: Vec<f64> = out.iter().map(|(_, t)| *t).collect();
     for (k, ((d, _), (corners, view))) in out.iter().zip(truth.corners.iter().zip(&truth.views)).enumerate() {
-        let pose = format!("turn {:.0}°, tilt {:.0}°, width {:.0} %", view.turn_deg, view.tilt_deg, 100.0 * view.share);
+        let pose = format!(
+            "turn {:.0}°, tilt {:.0}°, width {:.0} %",
+            view.turn_deg,
+            view.tilt_deg,
+            100.0 * view.share
+        );
         match d {
             Ok(d) => {
                 let e = worst_corner(&d.corners, corners);
@@ -326,7 +338,13 @@ pub fn validate(out: &Detections, truth: &Truth) -> Findings {
     m.push(Metric::new("views_missed", (out.len() - found) as f64, "views", Better::Lower));
     let max = errors.iter().copied().reduce(f64::max);
     m.push(Metric::maybe("corner_error_px_max", max, "px", Better::Lower, "no view found"));
-    m.push(Metric::maybe("corner_error_px_median", median(&mut errors), "px", Better::Lower, "no view found"));
+    m.push(Metric::maybe(
+        "corner_error_px_median",
+        median(&mut errors),
+        "px",
+        Better::Lower,
+        "no view found",
+    ));
     m.push(Metric::maybe("detect_s_median", median(&mut times), "s", Better::Lower, "no view"));
     f
 }
@@ -353,7 +371,8 @@ pub struct Photo {
 }
 
 fn read_truth(path: &std::path::Path) -> Result<Vec<(String, [[f64; 2]; 4])>, StageError> {
-    let text = std::fs::read_to_string(path).map_err(|e| StageError::Config(format!("{}: {e}", path.display())))?;
+    let text =
+        std::fs::read_to_string(path).map_err(|e| StageError::Config(format!("{}: {e}", path.display())))?;
     let mut out = Vec::new();
     for (i, line) in text.lines().enumerate().skip(1).filter(|(_, l)| !l.trim().is_empty()) {
         let f: Vec<&str> = line.split(',').map(str::trim).collect();
@@ -377,9 +396,12 @@ fn read_truth(path: &std::path::Path) -> Result<Vec<(String, [[f64; 2]; 4])>, St
 pub type Peer = std::collections::BTreeMap<String, Vec<(String, f64)>>;
 
 fn read_peer(path: &std::path::Path) -> Result<Peer, StageError> {
-    let text = std::fs::read_to_string(path).map_err(|e| StageError::Config(format!("{}: {e}", path.display())))?;
+    let text =
+        std::fs::read_to_string(path).map_err(|e| StageError::Config(format!("{}: {e}", path.display())))?;
     let mut out = Peer::new();
-    for (i, line) in text.lines().enumerate().filter(|(_, l)| !l.starts_with('#') && !l.trim().is_empty()).skip(1) {
+    for (i, line) in
+        text.lines().enumerate().filter(|(_, l)| !l.starts_with('#') && !l.trim().is_empty()).skip(1)
+    {
         let f: Vec<&str> = line.split(',').map(str::trim).collect();
         match (f.as_slice(), f.get(2).and_then(|v| v.parse::<f64>().ok())) {
             ([image, model, _], Some(v)) if v.is_finite() => {
@@ -500,8 +522,20 @@ pub fn validate_photos(out: &PhotoResults, peer: &Peer) -> Findings {
     m.push(Metric::new("photos_missed", (n - found) as f64, "photos", Better::Lower));
     let max = shares.iter().copied().reduce(f64::max);
     m.push(Metric::maybe("corner_error_share_max", max, "", Better::Lower, "no photograph found"));
-    m.push(Metric::maybe("loo_mean_de2000_median", median(&mut loo.clone()), "ΔE00", Better::Lower, "no fit"));
-    m.push(Metric::maybe("loo_mean_de2000_max", loo.iter().copied().reduce(f64::max), "ΔE00", Better::Lower, "no fit"));
+    m.push(Metric::maybe(
+        "loo_mean_de2000_median",
+        median(&mut loo.clone()),
+        "ΔE00",
+        Better::Lower,
+        "no fit",
+    ));
+    m.push(Metric::maybe(
+        "loo_mean_de2000_max",
+        loo.iter().copied().reduce(f64::max),
+        "ΔE00",
+        Better::Lower,
+        "no fit",
+    ));
     m.push(Metric::maybe("detect_s_median", median(&mut times), "s", Better::Lower, "no photograph"));
     f
 }

@@ -95,7 +95,12 @@ pub const REGISTRY: &[Kind] = &[
     },
     Kind { stage: "photometric", marked_by: None, real_data: None, parse: parse::<photometric::Config> },
     Kind { stage: "color", marked_by: None, real_data: None, parse: parse::<color::Config> },
-    Kind { stage: "chart", marked_by: Some("photos"), real_data: Some("photos"), parse: parse::<chart::PhotoConfig> },
+    Kind {
+        stage: "chart",
+        marked_by: Some("photos"),
+        real_data: Some("photos"),
+        parse: parse::<chart::PhotoConfig>,
+    },
     Kind { stage: "chart", marked_by: None, real_data: None, parse: parse::<chart::Config> },
     Kind { stage: "hdr", marked_by: Some("list"), real_data: Some("list"), parse: parse::<hdr::DataConfig> },
     Kind { stage: "hdr", marked_by: None, real_data: None, parse: parse::<hdr::Config> },
