@@ -51,6 +51,28 @@ pub struct Input {
     pub white: [f64; 3],
 }
 
+impl Input {
+    /// The solver's input from a chart's sampled patches, each beside its name and reference
+    /// XYZ (both in chart order).
+    pub fn from_samples<'a>(
+        samples: &[chart::Sample],
+        reference: impl IntoIterator<Item = (&'a str, [f64; 3])>,
+        white: [f64; 3],
+    ) -> Input {
+        let patches = samples
+            .iter()
+            .zip(reference)
+            .map(|(s, (name, xyz))| PatchInput {
+                name: name.to_string(),
+                rgb: s.rgb,
+                reference_xyz: xyz,
+                flag: s.flag,
+            })
+            .collect();
+        Input { patches, white }
+    }
+}
+
 #[derive(Clone, Debug)]
 pub struct Config {
     pub model: Model,

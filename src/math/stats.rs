@@ -8,6 +8,18 @@ pub fn upper_median(v: &mut [f64]) -> Option<f64> {
     (!v.is_empty()).then(|| *v.select_nth_unstable_by(mid, f64::total_cmp).1)
 }
 
+/// The median of `v` (the mean of the two middle values for even n; `v` is sorted), or
+/// `None` when `v` is empty.
+pub fn median(v: &mut [f64]) -> Option<f64> {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    match n {
+        0 => None,
+        _ if n % 2 == 1 => Some(v[n / 2]),
+        _ => Some(0.5 * (v[n / 2 - 1] + v[n / 2])),
+    }
+}
+
 /// Standard normal CDF Φ(x).
 pub fn normal_cdf(x: f64) -> f64 {
     0.5 * erfc(-x / std::f64::consts::SQRT_2)

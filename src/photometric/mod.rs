@@ -435,14 +435,7 @@ fn mean_of(v: &[f64]) -> Option<f64> {
 }
 
 fn median_of(v: &[f64]) -> Option<f64> {
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    let n = s.len();
-    match n {
-        0 => None,
-        _ if n % 2 == 1 => Some(s[n / 2]),
-        _ => Some(0.5 * (s[n / 2 - 1] + s[n / 2])),
-    }
+    crate::math::stats::median(&mut v.to_vec())
 }
 
 /// Writes `normals.exr` / `.png`, `albedo.exr` / `.png`, for Blinn-Phong `specular.exr`

@@ -50,16 +50,18 @@ pub fn estimate(cloud: &Cloud, k: usize) -> Vec<DVec3> {
 
 /// The smallest principal axis of the points' covariance (unit), or `None` for fewer than 3.
 pub fn plane_normal(pts: &[DVec3]) -> Option<DVec3> {
-    if pts.len() < 3 {
-        return None;
-    }
-    let c = pts.iter().copied().sum::<DVec3>() / pts.len() as f64;
+    (pts.len() >= 3).then(|| smallest_axis(&scatter(pts))).flatten()
+}
+
+/// Σ (p − c)(p − c)ᵀ about the points' centroid c.
+fn scatter(pts: &[DVec3]) -> nalgebra::Matrix3<f64> {
+    let c = pts.iter().copied().sum::<DVec3>() / pts.len().max(1) as f64;
     let mut m = nalgebra::Matrix3::<f64>::zeros();
     for p in pts {
         let d = nalgebra::Vector3::new(p.x - c.x, p.y - c.y, p.z - c.z);
         m += d * d.transpose();
     }
-    smallest_axis(&m)
+    m
 }
 
 /// The points' covariance's smallest over largest eigenvalue: 0 on a plane, 1 for points
@@ -68,13 +70,7 @@ pub fn flatness(pts: &[DVec3]) -> f64 {
     if pts.len() < 3 {
         return 1.0;
     }
-    let c = pts.iter().copied().sum::<DVec3>() / pts.len() as f64;
-    let mut m = nalgebra::Matrix3::<f64>::zeros();
-    for p in pts {
-        let d = nalgebra::Vector3::new(p.x - c.x, p.y - c.y, p.z - c.z);
-        m += d * d.transpose();
-    }
-    let e = nalgebra::SymmetricEigen::new(m).eigenvalues;
+    let e = nalgebra::SymmetricEigen::new(scatter(pts)).eigenvalues;
     let (lo, hi) = (e.min(), e.max());
     if hi > 0.0 {
         lo.max(0.0) / hi

@@ -20,7 +20,7 @@
 //! There is no OpenCV code here: OpenCV's `mcc` detector and colour-checker-detection are
 //! measured beside it (`tools/chart_detect_peers.py`), not used.
 
-pub mod edges;
+mod edges;
 mod lattice;
 mod layout;
 pub mod overlay;
@@ -80,10 +80,6 @@ impl Detection {
         let h = Matrix3::from_fn(|r, c| self.homography[r][c]);
         edges::Lens::new(width as usize, height as usize, self.radial_k).distort(lattice::apply(&h, [u, v]))
     }
-}
-
-fn corner_of(h: &Matrix3<f64>, u: f64, v: f64) -> [f64; 2] {
-    lattice::apply(h, [u, v])
 }
 
 /// Detects the chart. `linear` says the values are linear (EXR or raw-derived), to be scaled
@@ -149,8 +145,8 @@ enum Attempt {
 /// charts, a chart cut by the frame).
 fn attempt(enc: &regions::Encoded, factor: usize, reference: &[[f64; 3]]) -> Result<Attempt, Invalid> {
     let work = regions::Work::new(enc, factor);
-    let found = regions::find(&work);
-    let lattices = lattice::find(&found.candidates);
+    let candidates = regions::find(&work);
+    let lattices = lattice::find(&candidates);
     let cells = lattices.first().map_or(0, |l| l.members.len());
     let mut near = None;
     let mut charts = Vec::new();
@@ -182,7 +178,7 @@ fn attempt(enc: &regions::Encoded, factor: usize, reference: &[[f64; 3]]) -> Res
         .into());
     }
     let Some((l, placed, runner_up)) = charts.pop() else {
-        return Ok(Attempt::Missed { candidates: found.candidates.len(), cells, near });
+        return Ok(Attempt::Missed { candidates: candidates.len(), cells, near });
     };
     if !placed.outside.is_empty() {
         let names: Vec<String> = placed.outside.iter().map(|k| (k + 1).to_string()).collect();
@@ -199,8 +195,8 @@ fn attempt(enc: &regions::Encoded, factor: usize, reference: &[[f64; 3]]) -> Res
     let hm = refined.as_ref().map_or(coarse, |r| r.h);
     let hm = hm / hm[(2, 2)];
     let lens = refined.as_ref().map_or(edges::Lens::new(enc.width, enc.height, 0.0), |r| r.lens);
-    let corners =
-        [(0.0, 0.0), (6.0, 0.0), (6.0, 4.0), (0.0, 4.0)].map(|(u, v)| lens.distort(corner_of(&hm, u, v)));
+    let corners = [(0.0, 0.0), (6.0, 0.0), (6.0, 4.0), (0.0, 4.0)]
+        .map(|(u, v)| lens.distort(lattice::apply(&hm, [u, v])));
     if corners.iter().flatten().any(|v| !v.is_finite()) {
         return Err("the chart's grid maps to no finite corners".into());
     }
@@ -210,7 +206,7 @@ fn attempt(enc: &regions::Encoded, factor: usize, reference: &[[f64; 3]]) -> Res
         corners,
         confidence: share * margin,
         cells_found: l.members.len(),
-        candidates: found.candidates.len(),
+        candidates: candidates.len(),
         colour_residual: placed.residual,
         runner_up_residual: runner_up,
         refined: refined.is_some(),

@@ -171,11 +171,6 @@ impl Candidate {
     }
 }
 
-/// What the segmentation found: the candidates, and how many regions it looked at.
-pub struct Regions {
-    pub candidates: Vec<Candidate>,
-}
-
 /// The edge map: `true` where the colour gradient exceeds `EDGE_STEP`.
 fn edges(work: &Work) -> Vec<bool> {
     let (w, h) = (work.width, work.height);
@@ -217,7 +212,7 @@ struct Sums {
 }
 
 /// Segments the working image into flat regions and keeps those shaped like patches.
-pub fn find(work: &Work) -> Regions {
+pub fn find(work: &Work) -> Vec<Candidate> {
     let (w, h) = (work.width, work.height);
     let edge = edges(work);
     // Labels by a scan-line flood fill (4-connected), one region at a time.
@@ -271,8 +266,7 @@ pub fn find(work: &Work) -> Regions {
         sums.push(s);
     }
     let largest = w * h / 16;
-    let candidates = sums
-        .iter()
+    sums.iter()
         .filter(|s| !s.border && s.n >= MIN_PIXELS && s.n <= largest)
         .filter_map(|s| {
             let n = s.n as f64;
@@ -295,8 +289,7 @@ pub fn find(work: &Work) -> Regions {
             let flat = (0..3).all(|c| (s.rgb2[c] / n - rgb[c] * rgb[c]).max(0.0).sqrt() <= MAX_SPREAD);
             flat.then_some(Candidate { centre: [mx, my], cov, pixels: s.n })
         })
-        .collect();
-    Regions { candidates }
+        .collect()
 }
 
 #[cfg(test)]
@@ -325,8 +318,8 @@ mod tests {
             }
         });
         let r = find(&square);
-        let inner: Vec<_> = r.candidates.iter().filter(|c| c.pixels < 400).collect();
-        assert_eq!(inner.len(), 1, "{:?}", r.candidates);
+        let inner: Vec<_> = r.iter().filter(|c| c.pixels < 400).collect();
+        assert_eq!(inner.len(), 1, "{:?}", r);
         let c = inner[0];
         assert!((c.centre[0] - 29.5).abs() < 0.01 && (c.centre[1] - 19.5).abs() < 0.01, "{:?}", c.centre);
         let ring = work_of(120, 120, |x, y| {
@@ -341,7 +334,7 @@ mod tests {
         });
         let r = find(&ring);
         // The dark square inside the ring is a candidate; the ring itself (about 600 pixels) is not.
-        assert!(r.candidates.iter().all(|c| c.pixels < 400), "{:?}", r.candidates);
-        assert_eq!(r.candidates.len(), 1, "{:?}", r.candidates);
+        assert!(r.iter().all(|c| c.pixels < 400), "{:?}", r);
+        assert_eq!(r.len(), 1, "{:?}", r);
     }
 }

@@ -281,14 +281,14 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<Vec<Image>, Tru
 }
 
 /// Each view's detection (or why not) and its time.
-pub type Detections = Vec<(Result<detect::Detection, String>, f64)>;
+pub type Detections = Vec<(Result<detect::Detection, crate::error::Invalid>, f64)>;
 
 pub fn solve(images: &[Image]) -> Detections {
     images
         .iter()
         .map(|img| {
             let t = std::time::Instant::now();
-            let d = detect::detect(img, true).map_err(|e| e.to_string());
+            let d = detect::detect(img, true);
             (d, t.elapsed().as_secs_f64())
         })
         .collect()
@@ -296,15 +296,6 @@ pub fn solve(images: &[Image]) -> Detections {
 
 fn worst_corner(a: &[[f64; 2]; 4], b: &[[f64; 2]; 4]) -> f64 {
     a.iter().zip(b).map(|(p, q)| (p[0] - q[0]).hypot(p[1] - q[1])).fold(0.0, f64::max)
-}
-
-fn median(v: &mut [f64]) -> Option<f64> {
-    if v.is_empty() {
-        return None;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    Some(if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) })
 }
 
 pub fn validate(out: &Detections, truth: &Truth) -> Findings {
@@ -340,12 +331,18 @@ pub fn validate(out: &Detections, truth: &Truth) -> Findings {
     m.push(Metric::maybe("corner_error_px_max", max, "px", Better::Lower, "no view found"));
     m.push(Metric::maybe(
         "corner_error_px_median",
-        median(&mut errors),
+        crate::math::stats::median(&mut errors),
         "px",
         Better::Lower,
         "no view found",
     ));
-    m.push(Metric::maybe("detect_s_median", median(&mut times), "s", Better::Lower, "no view"));
+    m.push(Metric::maybe(
+        "detect_s_median",
+        crate::math::stats::median(&mut times),
+        "s",
+        Better::Lower,
+        "no view",
+    ));
     f
 }
 
@@ -445,7 +442,7 @@ pub fn read(c: &PhotoConfig, ctx: &Context) -> Result<(Vec<Photo>, Peer, Finding
 /// Per photograph: the detection (or why not), its time, and the fit on its sampled patches.
 pub struct PhotoResults {
     model: String,
-    photos: Vec<(String, [[f64; 2]; 4], Result<(detect::Detection, color::Output), String>, f64)>,
+    photos: Vec<(String, [[f64; 2]; 4], Result<(detect::Detection, color::Output), StageError>, f64)>,
 }
 
 pub fn solve_photos(c: &PhotoConfig, photos: &[Photo]) -> Result<PhotoResults, StageError> {
@@ -457,23 +454,15 @@ pub fn solve_photos(c: &PhotoConfig, photos: &[Photo]) -> Result<PhotoResults, S
             let t = std::time::Instant::now();
             let found = detect::detect(&p.codes, false);
             let secs = t.elapsed().as_secs_f64();
-            let result = found.map_err(|e| e.to_string()).and_then(|d| {
-                let samples = color::chart::sample(&p.image, d.corners, 1.0).map_err(|e| e.to_string())?;
-                let input = color::Input {
-                    patches: samples
-                        .iter()
-                        .zip(&reference)
-                        .map(|(s, (name, xyz))| color::PatchInput {
-                            name: name.clone(),
-                            rgb: s.rgb,
-                            reference_xyz: *xyz,
-                            flag: s.flag,
-                        })
-                        .collect(),
+            let result = found.map_err(StageError::from).and_then(|d| {
+                let samples = color::chart::sample(&p.image, d.corners, 1.0)?;
+                let input = color::Input::from_samples(
+                    &samples,
+                    reference.iter().map(|(n, xyz)| (n.as_str(), *xyz)),
                     white,
-                };
+                );
                 let config = color::Config { model, white_patch: 18, leave_one_out: true };
-                let fit = color::run(&input, &config).map_err(|e| e.to_string())?;
+                let fit = color::run(&input, &config)?;
                 Ok((d, fit))
             });
             (p.name.clone(), p.truth, result, secs)
@@ -524,7 +513,7 @@ pub fn validate_photos(out: &PhotoResults, peer: &Peer) -> Findings {
     m.push(Metric::maybe("corner_error_share_max", max, "", Better::Lower, "no photograph found"));
     m.push(Metric::maybe(
         "loo_mean_de2000_median",
-        median(&mut loo.clone()),
+        crate::math::stats::median(&mut loo.clone()),
         "ΔE00",
         Better::Lower,
         "no fit",
@@ -536,7 +525,13 @@ pub fn validate_photos(out: &PhotoResults, peer: &Peer) -> Findings {
         Better::Lower,
         "no fit",
     ));
-    m.push(Metric::maybe("detect_s_median", median(&mut times), "s", Better::Lower, "no photograph"));
+    m.push(Metric::maybe(
+        "detect_s_median",
+        crate::math::stats::median(&mut times),
+        "s",
+        Better::Lower,
+        "no photograph",
+    ));
     f
 }
 

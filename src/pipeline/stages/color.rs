@@ -34,7 +34,7 @@
 use super::Synthesis;
 use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError};
 use super::{run_case, CaseResult, Settings};
-use crate::color::{self, chart, spectra, Model, PatchInput};
+use crate::color::{self, chart, spectra, Model};
 use crate::image::Image;
 use crate::pipeline::cache::scene_digest;
 use crate::pipeline::cache::Pass;
@@ -316,20 +316,11 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<color::Input, T
         let (published, d50) = color::published_reference();
         (published.into_iter().map(|(_, x)| x).collect(), d50)
     };
-    let input = color::Input {
-        patches: samples
-            .iter()
-            .zip(&reference)
-            .zip(&chart)
-            .map(|((s, xyz), (name, _))| PatchInput {
-                name: name.clone(),
-                rgb: s.rgb,
-                reference_xyz: *xyz,
-                flag: s.flag,
-            })
-            .collect(),
+    let input = color::Input::from_samples(
+        &samples,
+        chart.iter().map(|(name, _)| name.as_str()).zip(reference.iter().copied()),
         white,
-    };
+    );
     let truth_rgb: Vec<[f64; 3]> = chart
         .iter()
         .map(|(_, r)| spectra::camera_rgb(r, &ill, &cam).map(|v| v * sensor.exposure * cos_theta))
