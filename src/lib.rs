@@ -27,6 +27,7 @@ pub mod cv;
 pub mod error;
 pub mod fit;
 pub mod hdr;
+pub mod ibr;
 pub mod image;
 pub mod math;
 pub mod photometric;
@@ -58,6 +59,8 @@ pub enum Error {
     Denoise(#[from] image::denoise::Error),
     #[error(transparent)]
     Surface(#[from] surface::Error),
+    #[error(transparent)]
+    Ibr(#[from] ibr::Error),
 }
 
 impl Error {
@@ -73,6 +76,7 @@ impl Error {
             Error::Sfm(e) => e.fault(),
             Error::Denoise(e) => e.fault(),
             Error::Surface(e) => e.fault(),
+            Error::Ibr(e) => e.fault(),
         }
     }
 }

@@ -10,6 +10,7 @@ mod render_cmd;
 mod scene;
 mod sfm;
 mod surface;
+mod warp;
 
 use bench::{bench_calibrate, bench_convergence, bench_hdr, bench_render, BenchRender};
 use pipeline_cmd::{merge_cmd, render_share, run_pipeline, slurm_cmd, SlurmArgs};
@@ -226,6 +227,10 @@ enum Command {
     /// or moving least squares, normals estimated and oriented when absent, meshed by
     /// marching tetrahedra near the points.
     Surface(surface::SurfaceArgs),
+    /// A new view from views with depth and cameras (depth-based rendering): forward
+    /// (splatting through a z-buffer) or backward mapping (filtered depth, colours looked up
+    /// in the sources), with a mask of the pixels no source sees.
+    Warp(warp::WarpArgs),
     /// Benchmarks.
     Bench {
         #[command(subcommand)]
@@ -418,6 +423,7 @@ pub fn main() -> i32 {
         Command::Hdr(args) => hdr::run(&args).map(|_| 0),
         Command::Denoise(args) => denoise::run(&args).map(|_| 0),
         Command::Surface(args) => surface::run(&args).map(|_| 0),
+        Command::Warp(args) => warp::run(&args).map(|_| 0),
         Command::Sfm(args) => sfm::run(&args).map(|_| 0),
         Command::Bench {
             what: Bench::Render { scene, integrator, spp, max_depth, threads, repeat, sampler, one_path },

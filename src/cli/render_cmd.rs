@@ -242,6 +242,12 @@ pub fn render_cmd(a: &RenderArgs) -> Result<()> {
                     written.push(path);
                 }
             }
+            // The camera the truth images were seen through (`render::scene::load_camera`):
+            // what `lumen warp` needs beside a depth.
+            let camera = sibling(out, "camera").with_extension("json");
+            let spec = render::scene::camera_spec(&scene.camera, &scene.t_world_cam);
+            let json = serde_json::to_string_pretty(&spec)?;
+            lumen::image::io::write_atomically(&camera, |tmp| std::fs::write(tmp, &json))?;
             if aov.iter().any(|a| a == "id") {
                 let ids = out.with_file_name(format!(
                     "{}.ids.json",

@@ -713,7 +713,7 @@ fn build_lens(c: &CameraSpec, path: &Path) -> Result<Option<ThinLens>, Error> {
     }
 }
 
-fn build_camera(c: &CameraSpec, path: &Path) -> Result<(CameraModel, CameraToWorld), Error> {
+pub(super) fn build_camera(c: &CameraSpec, path: &Path) -> Result<(CameraModel, CameraToWorld), Error> {
     let mut camera = match (c.fov_deg, c.fx, c.fy, c.cx, c.cy) {
         (Some(fov), None, None, None, None) => {
             if !(fov > 0.0 && fov < 180.0) {

@@ -69,18 +69,28 @@ impl SceneFile {
 pub struct CameraSpec {
     pub width: u32,
     pub height: u32,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fov_deg: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fx: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fy: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cx: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cy: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub distortion: Option<[f64; 5]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub look_at: Option<LookAt>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub t_world_cam: Option<TransformSpec>,
     /// Thin lens (depth of field, as Mitsuba's `thinlens`): radius of the aperture in scene
     /// units (default 0, a pinhole) and the distance along the optical axis (camera z) of
     /// the plane in focus, which a lens needs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub aperture_radius: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub focus_distance: Option<f64>,
     /// The medium (`[[media]]` by name) the camera sits in: it fills space up to the first
     /// shape that bounds another (as Mitsuba's sensor `medium`). Default none (vacuum).
@@ -105,10 +115,13 @@ pub struct LookAt {
 pub struct TransformSpec {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub matrix: Option<[[f64; 4]; 4]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rotation: Option<[[f64; 3]; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rvec: Option<[f64; 3]>,
     #[serde(default)]
     pub translation: [f64; 3],
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scale: Option<Scale>,
 }
 

@@ -133,6 +133,65 @@ pub fn load(path: &Path) -> Result<Scene, Error> {
     build(&file, path)
 }
 
+/// Reads a camera file: a scene file's `[camera]` table on its own, as TOML or (by the
+/// extension `.json`) JSON, or a whole TOML scene file (its camera), checked as a scene's
+/// camera is. `lumen render --aov depth` writes
+/// one beside the render (`NAME.camera.json`, `camera_spec`). A thin lens is refused: what
+/// reads camera files (`lumen warp`) models pinhole views.
+pub fn load_camera(path: &Path) -> Result<(CameraModel, CameraToWorld), Error> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| Error::Io { path: path.to_path_buf(), message: e.to_string() })?;
+    let is_json = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("json"));
+    let spec: CameraSpec = if is_json {
+        serde_json::from_str(&text)
+            .map_err(|e| Error::Parse { path: path.to_path_buf(), message: e.to_string() })?
+    } else {
+        let parse = |e: toml::de::Error| Error::Parse { path: path.to_path_buf(), message: e.to_string() };
+        let table: toml::Table = toml::from_str(&text).map_err(parse)?;
+        match table.get("camera") {
+            // A whole scene file: its camera.
+            Some(toml::Value::Table(camera)) if !table.contains_key("width") => {
+                camera.clone().try_into().map_err(parse)?
+            }
+            _ => table.try_into().map_err(parse)?,
+        }
+    };
+    if spec.aperture_radius.is_some_and(|r| r != 0.0) {
+        return Err(Error::Invalid {
+            path: path.to_path_buf(),
+            field: "aperture_radius".into(),
+            message: "a thin lens: expected a pinhole camera (no aperture_radius)".into(),
+        });
+    }
+    build::build_camera(&spec, path)
+}
+
+/// The camera file (`load_camera`) of a camera and its pose: intrinsics, distortion, and the
+/// pose as a rotation (rows) and translation.
+pub fn camera_spec(camera: &CameraModel, pose: &CameraToWorld) -> CameraSpec {
+    let i = camera.intrinsics;
+    let r = pose.rotation.transpose().to_cols_array_2d();
+    CameraSpec {
+        width: camera.width,
+        height: camera.height,
+        fov_deg: None,
+        fx: Some(i.fx),
+        fy: Some(i.fy),
+        cx: Some(i.cx),
+        cy: Some(i.cy),
+        distortion: (!camera.distortion.is_zero()).then(|| camera.distortion.to_array()),
+        look_at: None,
+        t_world_cam: Some(TransformSpec {
+            rotation: Some(r),
+            translation: pose.translation.to_array(),
+            ..TransformSpec::default()
+        }),
+        aperture_radius: None,
+        focus_distance: None,
+        medium: None,
+    }
+}
+
 /// Reads and builds a Mitsuba 3 scene; `params` are its `$name` values (`-D name=value`).
 pub fn load_mitsuba(path: &Path, params: &[(String, String)]) -> Result<Scene, Error> {
     let read = mitsuba::read(path, params)?;
