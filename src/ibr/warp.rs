@@ -17,7 +17,7 @@
 //!   source that does not see X (occluded, or out of its frame) gives nothing.
 //!
 //! Several sources blend with weights 1/(θ + 1°), θ the angle at X between the rays to the
-//! source's and the target's centres (the angle penalty of Buehler et al. 2001's unstructured
+//! source's and the target's centres (as a chord, `angle_weight`) (the angle penalty of Buehler et al. 2001's unstructured
 //! lumigraph): the source that sees X most nearly as the target does dominates. Pixels no
 //! source sees are 0 and marked in the mask.
 
@@ -106,11 +106,12 @@ fn max_ray2(camera: &CameraModel) -> f64 {
 struct Projector {
     camera: CameraModel,
     max_ray2: f64,
+    distorted: bool,
 }
 
 impl Projector {
     fn new(camera: &CameraModel) -> Projector {
-        Projector { camera: *camera, max_ray2: max_ray2(camera) }
+        Projector { camera: *camera, max_ray2: max_ray2(camera), distorted: !camera.distortion.is_zero() }
     }
 
     fn project(&self, p: DVec3) -> Option<DVec2> {
@@ -121,7 +122,8 @@ impl Projector {
         if n.length_squared() > self.max_ray2 {
             return None;
         }
-        let x = self.camera.normalized_to_pixel(self.camera.distortion.distort(n));
+        let d = if self.distorted { self.camera.distortion.distort(n) } else { n };
+        let x = self.camera.normalized_to_pixel(d);
         let (w, h) = (self.camera.width as f64, self.camera.height as f64);
         (x.x > -0.5 && x.y > -0.5 && x.x < w - 0.5 && x.y < h - 0.5).then_some(x)
     }
@@ -138,16 +140,16 @@ struct Splat {
 }
 
 /// The angle weight 1/(θ + 1°) of a source whose centre is `c_source` (target frame) for the
-/// point `p` (target frame).
+/// point `p` (target frame). θ is taken as the chord |â − b̂| = 2·sin(θ/2), equal to θ within
+/// 1 % below 20° and, unlike acos, cheap and exact near 0.
 fn angle_weight(p: DVec3, c_source: DVec3) -> f32 {
-    let a = p;
     let b = p - c_source;
-    let cos = (a.dot(b) / (a.length() * b.length())).clamp(-1.0, 1.0);
-    (1.0 / (cos.acos() + 1f64.to_radians())) as f32
+    let cos = p.dot(b) / (p.length_squared() * b.length_squared()).sqrt();
+    (1.0 / ((2.0 - 2.0 * cos).max(0.0).sqrt() + 1f64.to_radians())) as f32
 }
 
 /// Every source pixel with a depth, carried into the target.
-fn splats(source: &Source, target: &Projector, t_tgt_src: &Pose) -> Vec<Splat> {
+fn splats(source: &Source, target: &Projector, t_tgt_src: &Pose, weigh: bool) -> Vec<Vec<Splat>> {
     let cam = &source.view.camera;
     let w = cam.width as usize;
     let ray_table = (!cam.distortion.is_zero()).then(|| rays(cam));
@@ -158,9 +160,10 @@ fn splats(source: &Source, target: &Projector, t_tgt_src: &Pose) -> Vec<Splat> {
         .data
         .par_chunks(w)
         .enumerate()
-        .flat_map_iter(|(y, row)| {
+        .map(|(y, row)| {
             let ray_table = &ray_table;
-            row.iter().enumerate().filter_map(move |(x, &z)| {
+            let mut out = Vec::with_capacity(row.len());
+            out.extend(row.iter().enumerate().filter_map(|(x, &z)| {
                 if z <= 0.0 {
                     return None;
                 }
@@ -175,10 +178,11 @@ fn splats(source: &Source, target: &Projector, t_tgt_src: &Pose) -> Vec<Splat> {
                 Some(Splat {
                     target: (v * tw + u) as u32,
                     z: p.z as f32,
-                    weight: angle_weight(p, c_source),
+                    weight: if weigh { angle_weight(p, c_source) } else { 0.0 },
                     source: i as u32,
                 })
-            })
+            }));
+            out
         })
         .collect()
 }
@@ -221,11 +225,13 @@ pub fn warp(sources: &[Source], target: &View, config: &Config) -> Result<Output
         )));
     }
     let projector = Projector::new(&target.camera);
-    let all: Vec<Vec<Splat>> =
-        sources.iter().map(|s| splats(s, &projector, &relative_pose(&s.view, target))).collect();
+    let all: Vec<Vec<Vec<Splat>>> = sources
+        .iter()
+        .map(|s| splats(s, &projector, &relative_pose(&s.view, target), config.mode == Mode::Forward))
+        .collect();
     let (w, h) = (target.camera.width, target.camera.height);
     let mut zbuf = vec![f32::INFINITY; (w * h) as usize];
-    for s in all.iter().flatten() {
+    for s in all.iter().flatten().flatten() {
         let z = &mut zbuf[s.target as usize];
         *z = z.min(s.z);
     }
@@ -245,7 +251,7 @@ pub fn warp(sources: &[Source], target: &View, config: &Config) -> Result<Output
 /// Forward mapping: the splats within the tolerance of the nearest, blended.
 fn forward(
     sources: &[Source],
-    all: &[Vec<Splat>],
+    all: &[Vec<Vec<Splat>>],
     zbuf: &[f32],
     w: u32,
     h: u32,
@@ -256,7 +262,7 @@ fn forward(
     let mut sum = vec![0.0f32; zbuf.len() * c];
     let mut weight = vec![0.0f32; zbuf.len()];
     for (source, splats) in sources.iter().zip(all) {
-        for s in splats {
+        for s in splats.iter().flatten() {
             let t = s.target as usize;
             if s.z > zbuf[t] * (1.0 + tolerance as f32) {
                 continue;
@@ -314,6 +320,10 @@ fn median_fill(z: &[f32], w: usize, h: usize, tolerance: f32) -> Vec<f32> {
             }
             let present = z[i].is_finite();
             if n == 0 || (!present && n < 5) {
+                return z[i];
+            }
+            // Not behind the nearest neighbour, so not behind the median: kept.
+            if present && z[i] <= v[..n].iter().fold(f32::INFINITY, |m, &d| m.min(d)) * (1.0 + tolerance) {
                 return z[i];
             }
             let v = &mut v[..n];
