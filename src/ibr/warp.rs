@@ -21,7 +21,7 @@
 //! lumigraph): the source that sees X most nearly as the target does dominates. Pixels no
 //! source sees are 0 and marked in the mask.
 
-use super::{Error, Source, View};
+use super::{Error, Projector, Source, View};
 use crate::image::Image;
 use crate::math::{CameraModel, Pose};
 use glam::{DVec2, DVec3};
@@ -81,52 +81,6 @@ fn rays(camera: &CameraModel) -> Vec<Option<DVec2>> {
         .into_par_iter()
         .map(|i| camera.undistort_pixel(DVec2::new((i % w) as f64, (i / w) as f64)))
         .collect()
-}
-
-/// The largest |n|² the camera's frame shows (its corners and edge midpoints, undistorted),
-/// with a margin: beyond the fold of a strong distortion a point far outside the frame can
-/// project into it, so projections of rays wider than this are refused.
-fn max_ray2(camera: &CameraModel) -> f64 {
-    let (w, h) = (camera.width as f64 - 1.0, camera.height as f64 - 1.0);
-    let probes =
-        [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h), (w / 2.0, 0.0), (w / 2.0, h), (0.0, h / 2.0), (w, h / 2.0)];
-    let worst = probes
-        .iter()
-        .filter_map(|&(x, y)| camera.undistort_pixel(DVec2::new(x, y)))
-        .map(|n| n.length_squared())
-        .fold(0.0, f64::max);
-    if worst > 0.0 {
-        1.44 * worst
-    } else {
-        f64::INFINITY
-    }
-}
-
-/// A camera's projection with the guard of `max_ray2`.
-struct Projector {
-    camera: CameraModel,
-    max_ray2: f64,
-    distorted: bool,
-}
-
-impl Projector {
-    fn new(camera: &CameraModel) -> Projector {
-        Projector { camera: *camera, max_ray2: max_ray2(camera), distorted: !camera.distortion.is_zero() }
-    }
-
-    fn project(&self, p: DVec3) -> Option<DVec2> {
-        if !(p.z > 0.0) {
-            return None;
-        }
-        let n = DVec2::new(p.x / p.z, p.y / p.z);
-        if n.length_squared() > self.max_ray2 {
-            return None;
-        }
-        let d = if self.distorted { self.camera.distortion.distort(n) } else { n };
-        let x = self.camera.normalized_to_pixel(d);
-        let (w, h) = (self.camera.width as f64, self.camera.height as f64);
-        (x.x > -0.5 && x.y > -0.5 && x.x < w - 0.5 && x.y < h - 0.5).then_some(x)
-    }
 }
 
 /// A source pixel landed in the target: the target pixel, its depth there, the blend weight,

@@ -161,3 +161,160 @@ pub fn ply(out: &Output) -> String {
     }
     s
 }
+
+/// One registered image of a COLMAP text model: its file name, camera and pose.
+#[derive(Clone, Debug)]
+pub struct ModelImage {
+    pub name: String,
+    pub camera: crate::math::CameraModel,
+    pub t_cam_world: crate::math::WorldToCamera,
+}
+
+/// Reads `cameras.txt` and `images.txt` of a COLMAP text model folder (lumen's or COLMAP's
+/// own): the registered images in file order. Camera models SIMPLE_PINHOLE, PINHOLE,
+/// SIMPLE_RADIAL, RADIAL, OPENCV and FULL_OPENCV (its k4–k6 zero) are read, their principal
+/// points moved by −0.5 to lumen's pixel centres; any other model is refused by name.
+pub fn read_text_model(dir: &std::path::Path) -> Result<Vec<ModelImage>, super::Error> {
+    use super::Error;
+    use crate::math::{CameraModel, Distortion, Intrinsics, Pose, WorldToCamera};
+    let read = |name: &str| {
+        let path = dir.join(name);
+        std::fs::read_to_string(&path).map(|t| (path.clone(), t)).map_err(|e| Error::Io {
+            path,
+            message: format!("cannot read ({e}): expected a COLMAP text model folder"),
+        })
+    };
+    let (cameras_path, cameras_text) = read("cameras.txt")?;
+    let bad = |path: &std::path::Path, line: usize, message: String| Error::File {
+        path: path.to_path_buf(),
+        message: format!("line {}: {message}", line + 1),
+    };
+    let numbers = |path: &std::path::Path, line: usize, fields: &[&str]| -> Result<Vec<f64>, Error> {
+        fields
+            .iter()
+            .map(|f| {
+                f.parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite())
+                    .ok_or_else(|| bad(path, line, format!("`{f}`: expected a finite number")))
+            })
+            .collect()
+    };
+    let mut cameras = std::collections::HashMap::new();
+    for (n, line) in cameras_text.lines().enumerate() {
+        let f: Vec<&str> = line.split_whitespace().collect();
+        if f.is_empty() || f[0].starts_with('#') {
+            continue;
+        }
+        if f.len() < 5 {
+            return Err(bad(&cameras_path, n, "expected CAMERA_ID MODEL WIDTH HEIGHT PARAMS…".into()));
+        }
+        let size = |s: &str| s.parse::<u32>().ok().filter(|&v| v > 0);
+        let (Some(width), Some(height)) = (size(f[2]), size(f[3])) else {
+            return Err(bad(&cameras_path, n, format!("size {}×{}: expected positive integers", f[2], f[3])));
+        };
+        let p = numbers(&cameras_path, n, &f[4..])?;
+        let expected = match f[1] {
+            "SIMPLE_PINHOLE" => 3,
+            "PINHOLE" | "SIMPLE_RADIAL" => 4,
+            "RADIAL" => 5,
+            "OPENCV" => 8,
+            "FULL_OPENCV" => 12,
+            other => {
+                return Err(bad(
+                    &cameras_path,
+                    n,
+                    format!("camera model {other}: expected SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV or FULL_OPENCV"),
+                ))
+            }
+        };
+        if p.len() != expected {
+            return Err(bad(
+                &cameras_path,
+                n,
+                format!("{} has {} parameters: expected {expected}", f[1], p.len()),
+            ));
+        }
+        let (k, d) = match f[1] {
+            "SIMPLE_PINHOLE" => ([p[0], p[0], p[1], p[2]], [0.0; 5]),
+            "PINHOLE" => ([p[0], p[1], p[2], p[3]], [0.0; 5]),
+            "SIMPLE_RADIAL" => ([p[0], p[0], p[1], p[2]], [p[3], 0.0, 0.0, 0.0, 0.0]),
+            "RADIAL" => ([p[0], p[0], p[1], p[2]], [p[3], p[4], 0.0, 0.0, 0.0]),
+            "OPENCV" => ([p[0], p[1], p[2], p[3]], [p[4], p[5], p[6], p[7], 0.0]),
+            _ => {
+                if p[9..].iter().any(|&v| v != 0.0) {
+                    return Err(bad(
+                        &cameras_path,
+                        n,
+                        "FULL_OPENCV with k4–k6 not zero: lumen's model stops at k3".into(),
+                    ));
+                }
+                ([p[0], p[1], p[2], p[3]], [p[4], p[5], p[6], p[7], p[8]])
+            }
+        };
+        let camera = CameraModel {
+            width,
+            height,
+            intrinsics: Intrinsics { fx: k[0], fy: k[1], cx: k[2] - 0.5, cy: k[3] - 0.5 },
+            distortion: Distortion::from_array(d),
+        };
+        camera.validate().map_err(|e| bad(&cameras_path, n, e.0))?;
+        cameras.insert(f[0].to_string(), camera);
+    }
+    let (images_path, images_text) = read("images.txt")?;
+    let mut images = Vec::new();
+    let mut header = true;
+    for (n, line) in images_text.lines().enumerate() {
+        let t = line.trim();
+        if t.starts_with('#') {
+            continue;
+        }
+        // Two lines per image: the pose line, then its keypoints (possibly empty).
+        if !header {
+            header = true;
+            continue;
+        }
+        if t.is_empty() {
+            continue;
+        }
+        header = false;
+        let f: Vec<&str> = t.split_whitespace().collect();
+        if f.len() < 10 {
+            return Err(bad(&images_path, n, "expected IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME".into()));
+        }
+        let v = numbers(&images_path, n, &f[1..8])?;
+        let q = nalgebra::Quaternion::new(v[0], v[1], v[2], v[3]);
+        if !((q.norm() - 1.0).abs() < 1e-3) {
+            return Err(bad(
+                &images_path,
+                n,
+                format!("quaternion of norm {}: expected a unit quaternion", q.norm()),
+            ));
+        }
+        let r = nalgebra::UnitQuaternion::from_quaternion(q).to_rotation_matrix();
+        let m = r.matrix();
+        let rotation = glam::DMat3::from_cols_array(&[
+            m[(0, 0)],
+            m[(1, 0)],
+            m[(2, 0)],
+            m[(0, 1)],
+            m[(1, 1)],
+            m[(2, 1)],
+            m[(0, 2)],
+            m[(1, 2)],
+            m[(2, 2)],
+        ]);
+        let Some(camera) = cameras.get(f[8]) else {
+            return Err(bad(&images_path, n, format!("camera {} is not in cameras.txt", f[8])));
+        };
+        images.push(ModelImage {
+            name: f[9..].join(" "),
+            camera: *camera,
+            t_cam_world: WorldToCamera(Pose { rotation, translation: glam::DVec3::new(v[4], v[5], v[6]) }),
+        });
+    }
+    if images.is_empty() {
+        return Err(Error::File { path: images_path, message: "no registered image".into() });
+    }
+    Ok(images)
+}
