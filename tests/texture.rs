@@ -249,3 +249,141 @@ fn an_occluder_does_not_paint_what_it_hides() {
     assert!(compared > 1000);
     assert!(red * 1000 < compared, "{red} of {compared} pixels painted with the occluder's red");
 }
+
+/// Writes `mesh` as OBJ text.
+fn obj(mesh: &Mesh) -> String {
+    let mut s = String::new();
+    for v in &mesh.vertices {
+        s += &format!("v {} {} {}\n", v.x, v.y, v.z);
+    }
+    for t in &mesh.triangles {
+        s += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    s
+}
+
+/// A COLMAP text model of `views` (PINHOLE, principal points +0.5), named view0.png ….
+fn colmap_model(views: &[View]) -> (String, String) {
+    let mut cameras = String::from("# CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n");
+    let mut images = String::from("# IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME\n");
+    for (k, v) in views.iter().enumerate() {
+        let c = &v.camera;
+        let i = &c.intrinsics;
+        cameras += &format!(
+            "{} PINHOLE {} {} {} {} {} {}\n",
+            k + 1,
+            c.width,
+            c.height,
+            i.fx,
+            i.fy,
+            i.cx + 0.5,
+            i.cy + 0.5
+        );
+        let p = v.t_world_cam.inverse();
+        let r = p.rotation;
+        let m = nalgebra::Matrix3::new(
+            r.x_axis.x, r.y_axis.x, r.z_axis.x, r.x_axis.y, r.y_axis.y, r.z_axis.y, r.x_axis.z, r.y_axis.z,
+            r.z_axis.z,
+        );
+        let q = nalgebra::UnitQuaternion::from_matrix(&m);
+        let t = p.translation;
+        images += &format!(
+            "{} {} {} {} {} {} {} {} {} view{k}.png\n\n",
+            k + 1,
+            q.w,
+            q.i,
+            q.j,
+            q.k,
+            t.x,
+            t.y,
+            t.z,
+            k + 1
+        );
+    }
+    (cameras, images)
+}
+
+/// `lumen texture` end to end from PNG photographs and a COLMAP model, and its refusals, each
+/// naming the file and the value, with nothing written: a mesh without faces, a camera model
+/// lumen does not read, a photograph missing, cameras that look away from the mesh.
+#[test]
+fn lumen_texture_from_a_colmap_model() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let v: Vec<_> =
+        (0..6).map(|k| view(60.0 * k as f64, if k % 2 == 0 { 1.2 } else { -0.8 }, [1.0; 3])).collect();
+    std::fs::create_dir_all(d.join("images")).unwrap();
+    for (k, (img, _, _)) in v.iter().enumerate() {
+        lumen::image::io::write_png_srgb(&d.join(format!("images/view{k}.png")), img).unwrap();
+    }
+    let views: Vec<View> = v.iter().map(|x| x.2).collect();
+    let (cameras, images) = colmap_model(&views);
+    std::fs::create_dir_all(d.join("model")).unwrap();
+    std::fs::write(d.join("model/cameras.txt"), &cameras).unwrap();
+    std::fs::write(d.join("model/images.txt"), &images).unwrap();
+    std::fs::write(d.join("mesh.obj"), obj(&mesh())).unwrap();
+    let p = |s: &str| d.join(s).display().to_string();
+    let run = |mesh: &str, model: &str, out: &str| {
+        common::lumen(&[
+            "texture",
+            "--mesh",
+            &p(mesh),
+            "--model",
+            &p(model),
+            "--images",
+            &p("images"),
+            "--out",
+            &p(out),
+            "--size",
+            "256",
+        ])
+    };
+    let (code, err) = run("mesh.obj", "model", "out");
+    assert_eq!(code, 0, "{err}");
+    for f in ["mesh.obj", "mesh.mtl", "texture.png", "summary.json"] {
+        assert!(d.join("out").join(f).is_file(), "{f}: {err}");
+    }
+    let textured = lumen::render::obj::read(&d.join("out/mesh.obj")).unwrap();
+    assert_eq!(textured.triangles.len(), mesh().triangles.len());
+    assert!(
+        textured.triangles.iter().all(|t| t.vt.is_some())
+            && textured.uvs.iter().all(|uv| uv.x >= 0.0 && uv.x <= 1.0 && uv.y >= 0.0 && uv.y <= 1.0)
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("out/summary.json")).unwrap()).unwrap();
+    // Six views on two rings leave the poles and the small sphere's far side unseen (about 11 %).
+    assert!(summary["seen_fraction"].as_f64().unwrap() > 0.8, "{summary}");
+
+    std::fs::write(d.join("points.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\n").unwrap();
+    std::fs::create_dir_all(d.join("fisheye")).unwrap();
+    std::fs::write(d.join("fisheye/cameras.txt"), cameras.replacen("PINHOLE", "OPENCV_FISHEYE", 1)).unwrap();
+    std::fs::write(d.join("fisheye/images.txt"), &images).unwrap();
+    std::fs::create_dir_all(d.join("missing")).unwrap();
+    std::fs::write(d.join("missing/cameras.txt"), &cameras).unwrap();
+    std::fs::write(d.join("missing/images.txt"), images.replace("view3.png", "view9.png")).unwrap();
+    // Every camera turned to look away: its pose's rotation by 180° about its own y axis.
+    let away: Vec<View> = views
+        .iter()
+        .map(|v| {
+            let mut v = *v;
+            v.t_world_cam.0.rotation =
+                v.t_world_cam.rotation * glam::DMat3::from_diagonal(DVec3::new(-1.0, 1.0, -1.0));
+            v
+        })
+        .collect();
+    let (c2, i2) = colmap_model(&away);
+    std::fs::create_dir_all(d.join("away")).unwrap();
+    std::fs::write(d.join("away/cameras.txt"), c2).unwrap();
+    std::fs::write(d.join("away/images.txt"), i2).unwrap();
+    for (mesh, model, expect) in [
+        ("points.obj", "model", "no faces"),
+        ("mesh.obj", "fisheye", "OPENCV_FISHEYE"),
+        ("mesh.obj", "missing", "view9.png"),
+        ("mesh.obj", "away", "no photograph sees the mesh"),
+    ] {
+        let (code, err) = run(mesh, model, "refused");
+        assert_ne!(code, 0, "{model}");
+        assert!(err.contains(expect), "{mesh} {model}: {err}");
+        assert!(!d.join("refused").exists(), "{model}: something was written");
+    }
+}

@@ -10,6 +10,7 @@ mod render_cmd;
 mod scene;
 mod sfm;
 mod surface;
+mod texture;
 mod warp;
 
 use bench::{bench_calibrate, bench_convergence, bench_hdr, bench_render, BenchRender};
@@ -231,6 +232,10 @@ enum Command {
     /// (splatting through a z-buffer) or backward mapping (filtered depth, colours looked up
     /// in the sources), with a mask of the pixels no source sees.
     Warp(warp::WarpArgs),
+    /// A texture for a mesh from photographs with known cameras (a COLMAP text model): a UV
+    /// atlas, each texel's colour from the views that see it (occlusion tested against the
+    /// mesh), per-photograph gains, written as OBJ + MTL + PNG.
+    Texture(texture::TextureArgs),
     /// Benchmarks.
     Bench {
         #[command(subcommand)]
@@ -424,6 +429,7 @@ pub fn main() -> i32 {
         Command::Denoise(args) => denoise::run(&args).map(|_| 0),
         Command::Surface(args) => surface::run(&args).map(|_| 0),
         Command::Warp(args) => warp::run(&args).map(|_| 0),
+        Command::Texture(args) => texture::run(&args).map(|_| 0),
         Command::Sfm(args) => sfm::run(&args).map(|_| 0),
         Command::Bench {
             what: Bench::Render { scene, integrator, spp, max_depth, threads, repeat, sampler, one_path },
@@ -475,6 +481,11 @@ fn fault(e: &anyhow::Error) -> Option<lumen::Fault> {
             .or_else(|| c.downcast_ref::<lumen::photometric::Error>().map(|e| e.fault()))
             .or_else(|| c.downcast_ref::<lumen::fit::FitError>().map(|e| e.fault()))
             .or_else(|| c.downcast_ref::<lumen::sfm::Error>().map(|e| e.fault()))
+            .or_else(|| c.downcast_ref::<lumen::surface::Error>().map(|e| e.fault()))
+            .or_else(|| c.downcast_ref::<lumen::ibr::Error>().map(|e| e.fault()))
+            .or_else(|| c.downcast_ref::<lumen::image::denoise::Error>().map(|e| e.fault()))
+            .or_else(|| c.downcast_ref::<lumen::render::obj::ObjError>().map(|e| e.fault()))
+            .or_else(|| c.downcast_ref::<lumen::render::ply::PlyError>().map(|e| e.fault()))
             .or_else(|| c.downcast_ref::<lumen::error::Invalid>().map(|e| e.fault()))
             .or_else(|| c.downcast_ref::<lumen::render::integrators::UnknownIntegrator>().map(|e| e.fault()))
     })

@@ -394,6 +394,13 @@ pub fn run(mesh: &Mesh, photos: &[Photo], config: &Config) -> Result<Output, Err
     let mut used = vec![0usize; photos.len()];
     data.iter().flat_map(|d| &d.1).for_each(|&v| used[v as usize] += 1);
     let seen = data.iter().filter(|d| d.0.is_some()).count();
+    if seen == 0 {
+        return Err(Error::BadInput(format!(
+            "no photograph sees the mesh ({} photographs, {} texels): expected cameras that look at it, in the mesh's frame and units",
+            photos.len(),
+            texels.len()
+        )));
+    }
     let colours =
         solve(&atlas, &texels, &data.iter().map(|d| d.0).collect::<Vec<_>>(), mesh, config.smoothness);
     let texture = paint(&atlas, &texels, &colours, channels);
@@ -568,4 +575,34 @@ pub fn draw(mesh: &Mesh, atlas: &Atlas, texture: &Image, view: &View) -> (Image,
         m[0] = 1.0;
     });
     (img, mask)
+}
+
+/// The textured mesh as Wavefront OBJ text referring to `mtl` (material `texture`): every
+/// vertex, three texture coordinates per triangle (v up, as OBJ has it), the faces.
+pub fn obj_text(mesh: &Mesh, atlas: &Atlas, mtl: &str) -> String {
+    use std::fmt::Write;
+    let mut s = format!(
+        "# lumen texture: {} vertices, {} triangles\nmtllib {mtl}\nusemtl texture\n",
+        mesh.vertices.len(),
+        mesh.triangles.len()
+    );
+    for v in &mesh.vertices {
+        let _ = writeln!(s, "v {} {} {}", v.x, v.y, v.z);
+    }
+    let size = atlas.size as f64;
+    for uv in &atlas.uv {
+        for p in uv {
+            let _ = writeln!(s, "vt {} {}", p.x / size, 1.0 - p.y / size);
+        }
+    }
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        let vt = 3 * t + 1;
+        let _ = writeln!(s, "f {}/{} {}/{} {}/{}", tri[0] + 1, vt, tri[1] + 1, vt + 1, tri[2] + 1, vt + 2);
+    }
+    s
+}
+
+/// The material file `obj_text` refers to: a white diffuse material with the texture image.
+pub fn mtl_text(texture_file: &str) -> String {
+    format!("newmtl texture\nKa 0 0 0\nKd 1 1 1\nKs 0 0 0\nmap_Kd {texture_file}\n")
 }
