@@ -7,7 +7,7 @@ mod common;
 use std::path::Path;
 use std::process::Command;
 
-/// The tour's `lumen render|preview|calibrate|ps|undistort|color|hdr|sfm|surface` lines, from the README's tour block.
+/// The tour's `lumen render|preview|calibrate|ps|undistort|color|hdr|sfm|surface|texture|warp` lines, from the README's tour block.
 fn tour_commands() -> Vec<String> {
     let readme = std::fs::read_to_string(common::root().join("README.md")).unwrap();
     let tour = readme.split("## A tour of the command line").nth(1).expect("the README has a tour");
@@ -26,6 +26,8 @@ fn tour_commands() -> Vec<String> {
                 "lumen hdr ",
                 "lumen sfm ",
                 "lumen surface ",
+                "lumen texture ",
+                "lumen warp ",
             ]
             .iter()
             .any(|p| l.starts_with(p))
@@ -57,7 +59,7 @@ fn run(line: &str, dir: &Path, photos: &Path) -> (bool, String) {
 #[test]
 fn readme_tour_writes_what_it_says() {
     let lines = tour_commands();
-    assert_eq!(lines.len(), 12, "the tour's commands: {lines:?}");
+    assert_eq!(lines.len(), 14, "the tour's commands: {lines:?}");
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let shared = common::root().join("../shared/data");
@@ -72,6 +74,7 @@ fn readme_tour_writes_what_it_says() {
         "box.albedo.exr",
         "box.id.exr",
         "box.ids.json",
+        "box.camera.json",
         "box.variance.exr",
     ] {
         assert!(d.join("out").join(f).is_file(), "{f} missing after: {err}");
@@ -79,6 +82,11 @@ fn readme_tour_writes_what_it_says() {
     let (ok, err) = run(&lines[1], d, &photos);
     assert!(ok, "{err}");
     for f in ["box.png", "box.depth.png", "box.normal.png", "box.id.png"] {
+        assert!(d.join("out").join(f).is_file(), "{f} missing after: {err}");
+    }
+    let (ok, err) = run(&lines[13], d, &photos);
+    assert!(ok, "{err}");
+    for f in ["box-left.exr", "box-left.mask.png", "box-left.json"] {
         assert!(d.join("out").join(f).is_file(), "{f} missing after: {err}");
     }
     // Colour: the chart the README's pipeline run keeps (its case chart-d65-root-poly-2),
@@ -139,6 +147,11 @@ fn readme_tour_writes_what_it_says() {
     assert!(ok, "{err}");
     for f in ["surface.ply", "surface.json"] {
         assert!(d.join("out/herz-jesu").join(f).is_file(), "herz-jesu/{f} missing");
+    }
+    let (ok, err) = run(&lines[12], d, &photos);
+    assert!(ok, "{err}");
+    for f in ["mesh.obj", "mesh.mtl", "texture.png", "summary.json"] {
+        assert!(d.join("out/herz-jesu/textured").join(f).is_file(), "herz-jesu/textured/{f} missing");
     }
     // Nothing outside out/.
     let top: Vec<_> = std::fs::read_dir(d).unwrap().map(|e| e.unwrap().file_name()).collect();
