@@ -21,8 +21,9 @@
 //!   first on texels seen by two or more views, alternating the texels' weighted means with
 //!   each view's median ratio mean / I_v, the gains' geometric mean held at 1.
 //! - **Solve.** With normalised data weights (Σ_v w_tv = 1 where a texel is seen, 0 where not)
-//!   the minimum is found by Jacobi iteration. Texels no photograph sees are filled from their
-//!   neighbours (the smoothness term alone: diffusion). The gutter around each chart is then
+//!   the minimum is found by Jacobi iteration (at most 200 steps), started from the data, and
+//!   for texels no photograph sees from the nearest seen texel; those are then smoothed by
+//!   the smoothness term alone (diffusion). The gutter around each chart is then
 //!   filled from the chart, so bilinear lookups at chart edges read the chart's colours.
 
 use super::atlas::{self, Atlas, Texel};
@@ -462,17 +463,22 @@ fn solve(
         near[p as usize].push(q);
         near[q as usize].push(p);
     }
-    // Start: the data where seen, the mean of the seen elsewhere.
-    let seen: Vec<[f32; 4]> = data.iter().flatten().copied().collect();
-    let mut mean = [0.0f32; 4];
-    for c in &seen {
-        for k in 0..4 {
-            mean[k] += c[k] / seen.len().max(1) as f32;
+    // Start: the data where seen; elsewhere the colour of the nearest seen texel along the
+    // neighbour graph (breadth first), so that the iteration only smooths what it inpaints.
+    let mut c: Vec<[f32; 4]> = data.iter().map(|d| d.unwrap_or([0.0; 4])).collect();
+    let mut reached: Vec<bool> = data.iter().map(|d| d.is_some()).collect();
+    let mut queue: std::collections::VecDeque<u32> = (0..c.len() as u32).filter(|&t| reached[t as usize]).collect();
+    while let Some(t) = queue.pop_front() {
+        for &n in &near[t as usize] {
+            if !reached[n as usize] {
+                reached[n as usize] = true;
+                c[n as usize] = c[t as usize];
+                queue.push_back(n);
+            }
         }
     }
-    let mut c: Vec<[f32; 4]> = data.iter().map(|d| d.unwrap_or(mean)).collect();
     let lambda = lambda as f32;
-    for _ in 0..500 {
+    for _ in 0..200 {
         let next: Vec<[f32; 4]> = (0..c.len())
             .into_par_iter()
             .map(|t| {

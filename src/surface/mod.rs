@@ -132,7 +132,8 @@ pub struct Cloud {
 }
 
 impl Cloud {
-    fn new(points: Vec<DVec3>) -> Result<Cloud, Error> {
+    /// The points, indexed (no normals or radii yet).
+    pub fn new(points: Vec<DVec3>) -> Result<Cloud, Error> {
         let raw: Vec<[f64; 3]> = points.iter().map(|p| p.to_array()).collect();
         let tree = ImmutableKdTree::new_from_slice(&raw)
             .map_err(|e| Error::BadInput(format!("the points could not be indexed: {e:?}")))?;

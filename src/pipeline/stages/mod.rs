@@ -19,6 +19,7 @@ pub mod calibrate;
 pub mod chart;
 pub mod color;
 pub mod hdr;
+pub mod novel_view;
 pub mod photometric;
 pub mod render;
 pub mod sfm;
@@ -106,6 +107,7 @@ pub const REGISTRY: &[Kind] = &[
     Kind { stage: "hdr", marked_by: None, real_data: None, parse: parse::<hdr::Config> },
     Kind { stage: "sfm", marked_by: Some("scene"), real_data: None, parse: parse::<sfm::RenderConfig> },
     Kind { stage: "sfm", marked_by: None, real_data: Some("images"), parse: parse::<sfm::Config> },
+    Kind { stage: "novel-view", marked_by: None, real_data: None, parse: parse::<novel_view::Config> },
 ];
 
 /// The entry's stage from its name and its own keys, through `REGISTRY`.
@@ -198,6 +200,10 @@ pub enum StageError {
     Fit(#[from] crate::fit::FitError),
     #[error(transparent)]
     Sfm(#[from] crate::sfm::Error),
+    #[error(transparent)]
+    Surface(#[from] crate::surface::Error),
+    #[error(transparent)]
+    Ibr(#[from] crate::ibr::Error),
 }
 
 impl From<Invalid> for StageError {
@@ -218,6 +224,8 @@ impl StageError {
             StageError::Photometric(e) => e.fault(),
             StageError::Fit(e) => e.fault(),
             StageError::Sfm(e) => e.fault(),
+            StageError::Surface(e) => e.fault(),
+            StageError::Ibr(e) => e.fault(),
         }
     }
 }

@@ -240,7 +240,7 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<Synthesis<sfm::Inpu
 
 /// A render as the photograph `lumen sfm` would read: 8-bit sRGB codes, read back as
 /// `sfm::input` reads them, with the camera the solver is `given`.
-fn photograph(
+pub(super) fn photograph(
     name: String,
     rendered: Vec<crate::image::Image>,
     camera: &crate::math::CameraModel,
@@ -350,7 +350,7 @@ fn photo_recipes(
 /// The solver's settings for a case: its keypoints per image, what it refines of guessed
 /// intrinsics (`refine` names, or none when they are given), whether verified pairs are
 /// matched again guided by their geometry, and which pairs are matched.
-fn config(
+pub(super) fn config(
     max_features: usize,
     guessed: bool,
     refine: &Option<Vec<String>>,
