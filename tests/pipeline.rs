@@ -258,6 +258,26 @@ fn absent_real_data_is_skipped_and_dataset_keys_are_checked() {
     );
     let (code, err) = run(&sfm("refine = [\"k1\"]\n"), &out);
     assert!(code == 1 && err.contains("refine: only with guessed intrinsics"), "{err}");
+    // A novel-view case checks its ring and its held-out place.
+    let novel = |extra: &str| {
+        let scene = common::root().join("pipelines/scenes/sfm-courtyard.toml");
+        format!(
+            "[[stages]]\nstage = \"novel-view\"\ncase = \"n\"\nscene = \"{}\"\ntarget = [0.0, 0.5, 0.6]\nradius = 3.5\nheights = [1.3, 1.5]\narc_deg = 40\n{extra}",
+            scene.display()
+        )
+    };
+    let (code, err) = run(&novel("held_out = [1.5, 1.4]\n"), &out);
+    assert!(
+        code == 1 && err.contains("held_out = [1.5, 1.4]") && err.contains("held-out place from 0 to 1"),
+        "{err}"
+    );
+    let (code, err) = run(&novel("held_out = [0.5, 1.4]\nviews = 2\n"), &out);
+    assert!(code == 1 && err.contains("views = 2") && err.contains("3 to 200 views"), "{err}");
+    let (code, err) =
+        run(&novel("held_out = [0.5, 1.4]\narc_deg = 400\n").replace("arc_deg = 40\n", ""), &out);
+    assert!(code == 1 && err.contains("arc_deg = 400"), "{err}");
+    let (code, err) = run(&novel(""), &out);
+    assert!(code == 1 && err.contains("missing field `held_out`"), "{err}");
 }
 
 /// An `hdr` case on a stack of files (`list`): on a stack exposed exactly as its list says,

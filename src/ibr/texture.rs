@@ -467,7 +467,8 @@ fn solve(
     // neighbour graph (breadth first), so that the iteration only smooths what it inpaints.
     let mut c: Vec<[f32; 4]> = data.iter().map(|d| d.unwrap_or([0.0; 4])).collect();
     let mut reached: Vec<bool> = data.iter().map(|d| d.is_some()).collect();
-    let mut queue: std::collections::VecDeque<u32> = (0..c.len() as u32).filter(|&t| reached[t as usize]).collect();
+    let mut queue: std::collections::VecDeque<u32> =
+        (0..c.len() as u32).filter(|&t| reached[t as usize]).collect();
     while let Some(t) = queue.pop_front() {
         for &n in &near[t as usize] {
             if !reached[n as usize] {

@@ -31,7 +31,9 @@
 //! - `warp_psnr_db` and `warp_hole_fraction`: the warped view against the held-out photograph
 //!   over the pixels it fills, and the share of the pixels the truth sees that it leaves empty.
 
-use super::{apply_overrides, run_case, CaseResult, Context, Findings, Settings, SettingsKey, StageError, Synthesis};
+use super::{
+    apply_overrides, run_case, CaseResult, Context, Findings, Settings, SettingsKey, StageError, Synthesis,
+};
 use crate::ibr::{self, texture, warp, View};
 use crate::image::Image;
 use crate::math::{CameraToWorld, WorldToCamera};
@@ -178,7 +180,12 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<Input, Truth>, 
         let mut pose = [0.0; 12];
         pose[..9].copy_from_slice(&p.rotation.to_cols_array());
         pose[9..].copy_from_slice(&p.translation.to_array());
-        let recipe = ViewRecipe { product: "novel-view-rgb", scene: &digest, t_world_cam: pose, settings: SettingsKey::from(&settings) };
+        let recipe = ViewRecipe {
+            product: "novel-view-rgb",
+            scene: &digest,
+            t_world_cam: pose,
+            settings: SettingsKey::from(&settings),
+        };
         let name = format!("view{k:03}.png");
         let rendered = ctx.cache.images(ctx.case, &name, &recipe, || {
             Ok::<_, StageError>(vec![render::try_render(&scene, &settings)?.mean])
@@ -191,7 +198,11 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<Input, Truth>, 
             width: camera.width,
             height: camera.height,
             channels: 3,
-            data: photo.rgb8.iter().flat_map(|p| p.map(|v| crate::image::srgb_decode(v as f32 / 255.0))).collect(),
+            data: photo
+                .rgb8
+                .iter()
+                .flat_map(|p| p.map(|v| crate::image::srgb_decode(v as f32 / 255.0)))
+                .collect(),
         };
         let truth = render::truth(&scene, None);
         if k < c.views {
@@ -217,7 +228,8 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<Input, Truth>, 
                 Ok::<_, StageError>(vec![render::try_render(&scene, &settings)?.mean])
             })?;
             let Some(mut shading) = shading else { continue };
-            let Some(shading) = shading.pop().filter(|i| i.channels == 3 && i.data.len() == lin.data.len()) else {
+            let Some(shading) = shading.pop().filter(|i| i.channels == 3 && i.data.len() == lin.data.len())
+            else {
                 return Err(StageError::Config("the cached shading render has the wrong size".into()));
             };
             held = Some((truth.albedo, truth.depth, lin.clone(), shading));
@@ -254,17 +266,21 @@ pub fn solve(c: &Config, input: &Input) -> Result<Output, StageError> {
     let out = sfm::run(&input.sfm, &super::sfm::config(8192, false, &None, false, &None)?)?;
     let sfm_s = t.elapsed().as_secs_f64();
     let Some(held) = view_of(&out, input.held_out) else {
-        return Err(StageError::Ibr(ibr::Error::BadInput("the held-out view was not registered: no camera to draw into".into())));
+        return Err(StageError::Ibr(ibr::Error::BadInput(
+            "the held-out view was not registered: no camera to draw into".into(),
+        )));
     };
     let t = std::time::Instant::now();
-    let points: Vec<DVec3> = out.reconstruction.seen_points().map(|(_, p, _)| DVec3::new(p.xyz.x, p.xyz.y, p.xyz.z)).collect();
+    let points: Vec<DVec3> =
+        out.reconstruction.seen_points().map(|(_, p, _)| DVec3::new(p.xyz.x, p.xyz.y, p.xyz.z)).collect();
     let surface = crate::surface::run(
         &crate::surface::Input { points, normals: Vec::new() },
         &crate::surface::Config { resolution: c.surface_resolution, ..Default::default() },
     )?;
     let surface_s = t.elapsed().as_secs_f64();
     let t = std::time::Instant::now();
-    let training: Vec<(usize, View)> = (0..input.held_out).filter_map(|k| view_of(&out, k).map(|v| (k, v))).collect();
+    let training: Vec<(usize, View)> =
+        (0..input.held_out).filter_map(|k| view_of(&out, k).map(|v| (k, v))).collect();
     let photos: Vec<texture::Photo> = training
         .iter()
         .map(|&(k, view)| texture::Photo { name: format!("view {k}"), image: &input.linear[k], view })
@@ -277,19 +293,31 @@ pub fn solve(c: &Config, input: &Input) -> Result<Output, StageError> {
     let t = std::time::Instant::now();
     let centre = held.t_world_cam.centre();
     let mut nearest = training.clone();
-    nearest.sort_by(|a, b| a.1.t_world_cam.centre().distance(centre).total_cmp(&b.1.t_world_cam.centre().distance(centre)));
+    nearest.sort_by(|a, b| {
+        a.1.t_world_cam.centre().distance(centre).total_cmp(&b.1.t_world_cam.centre().distance(centre))
+    });
     nearest.truncate(2);
     let depths: Vec<Image> = nearest
         .iter()
         .map(|(_, v)| {
             let r = ibr::raster::rasterise(&mesh, v);
-            Image { width: r.width, height: r.height, channels: 1, data: r.depth.iter().map(|&z| if z.is_finite() { z } else { 0.0 }).collect() }
+            Image {
+                width: r.width,
+                height: r.height,
+                channels: 1,
+                data: r.depth.iter().map(|&z| if z.is_finite() { z } else { 0.0 }).collect(),
+            }
         })
         .collect();
     let sources: Vec<ibr::Source> = nearest
         .iter()
         .zip(&depths)
-        .map(|(&(k, view), depth)| ibr::Source { name: format!("view {k}"), image: &input.linear[k], depth, view })
+        .map(|(&(k, view), depth)| ibr::Source {
+            name: format!("view {k}"),
+            image: &input.linear[k],
+            depth,
+            view,
+        })
         .collect();
     let warped = warp::warp(&sources, &held, &warp::Config::default())?;
     let warp_s = t.elapsed().as_secs_f64();
@@ -323,7 +351,11 @@ fn eroded(inside: &[bool], w: usize, h: usize) -> Vec<bool> {
     (0..w * h)
         .map(|i| {
             let (x, y) = (i % w, i / w);
-            x > 0 && y > 0 && x + 1 < w && y + 1 < h && (0..9).all(|k| inside[(y + k / 3 - 1) * w + x + k % 3 - 1])
+            x > 0
+                && y > 0
+                && x + 1 < w
+                && y + 1 < h
+                && (0..9).all(|k| inside[(y + k / 3 - 1) * w + x + k % 3 - 1])
         })
         .collect()
 }
@@ -358,11 +390,17 @@ pub fn validate(out: &Output, truth: &Truth) -> Findings {
     });
     match &aligned {
         Some((vertices, normals)) if !vertices.is_empty() && !truth.points.is_empty() => {
-            let (lo, hi) = truth.points.iter().fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(l, h), p| (l.min(*p), h.max(*p)));
+            let (lo, hi) = truth
+                .points
+                .iter()
+                .fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(l, h), p| {
+                    (l.min(*p), h.max(*p))
+                });
             let extent = (hi - lo).length();
-            let (Ok(tree_truth), Ok(tree_mesh)) =
-                (crate::surface::Cloud::new(truth.points.clone()), crate::surface::Cloud::new(vertices.clone()))
-            else {
+            let (Ok(tree_truth), Ok(tree_mesh)) = (
+                crate::surface::Cloud::new(truth.points.clone()),
+                crate::surface::Cloud::new(vertices.clone()),
+            ) else {
                 f.notes.push("the surface could not be indexed: no surface metrics".into());
                 return f;
             };
@@ -371,8 +409,10 @@ pub fn validate(out: &Output, truth: &Truth) -> Findings {
                 let j = tree.nearest(p, 1).first().copied().unwrap_or(0) as usize;
                 (tree.points[j].distance(p), j)
             };
-            let accuracy = vertices.iter().map(|&p| near(&tree_truth, p).0).sum::<f64>() / vertices.len() as f64;
-            let completeness = truth.points.iter().map(|&p| near(&tree_mesh, p).0).sum::<f64>() / truth.points.len() as f64;
+            let accuracy =
+                vertices.iter().map(|&p| near(&tree_truth, p).0).sum::<f64>() / vertices.len() as f64;
+            let completeness =
+                truth.points.iter().map(|&p| near(&tree_mesh, p).0).sum::<f64>() / truth.points.len() as f64;
             m.push(Metric::new("chamfer_rel", 0.5 * (accuracy + completeness) / extent, "", Better::Lower));
             m.push(Metric::new("surface_accuracy_rel", accuracy / extent, "", Better::Lower));
             m.push(Metric::new("surface_completeness_rel", completeness / extent, "", Better::Lower));
@@ -388,7 +428,13 @@ pub fn validate(out: &Output, truth: &Truth) -> Findings {
                     n.dot(truth.normals[j]).abs().min(1.0).acos().to_degrees()
                 })
                 .collect();
-            m.push(Metric::maybe("normal_err_median_deg", crate::math::stats::median(&mut angles), "°", Better::Lower, "no triangle"));
+            m.push(Metric::maybe(
+                "normal_err_median_deg",
+                crate::math::stats::median(&mut angles),
+                "°",
+                Better::Lower,
+                "no triangle",
+            ));
         }
         _ => {
             for name in ["chamfer_rel", "surface_accuracy_rel", "surface_completeness_rel"] {
@@ -407,18 +453,42 @@ pub fn validate(out: &Output, truth: &Truth) -> Findings {
     let lum = |img: &Image, i: usize| crate::image::luminance(&img.data[i * 3..i * 3 + 3]);
     let mut lit: Vec<f64> = (0..keep.len()).filter(|&i| keep[i]).map(|i| lum(&truth.shading, i)).collect();
     let floor = 0.25 * crate::math::stats::median(&mut lit).unwrap_or(0.0);
-    let lit: Vec<bool> = (0..keep.len()).map(|i| keep[i] && lum(&truth.shading, i) > floor && floor > 0.0).collect();
+    let lit: Vec<bool> =
+        (0..keep.len()).map(|i| keep[i] && lum(&truth.shading, i) > floor && floor > 0.0).collect();
     let albedo_est = Image {
-        data: drawn.data.iter().zip(&truth.shading.data).map(|(&d, &s)| if s > 0.0 { d / s } else { 0.0 }).collect(),
+        data: drawn
+            .data
+            .iter()
+            .zip(&truth.shading.data)
+            .map(|(&d, &s)| if s > 0.0 { d / s } else { 0.0 })
+            .collect(),
         ..drawn.clone()
     };
     let (tex, n) = psnr(&albedo_est, &truth.albedo, &lit);
-    m.push(Metric::maybe("texture_psnr_db", tex, "dB", Better::Higher, "no pixel drawn inside the true silhouette"));
+    m.push(Metric::maybe(
+        "texture_psnr_db",
+        tex,
+        "dB",
+        Better::Higher,
+        "no pixel drawn inside the true silhouette",
+    ));
     let (view, _) = psnr(drawn, &truth.photo, &keep);
-    m.push(Metric::maybe("view_psnr_db", view, "dB", Better::Higher, "no pixel drawn inside the true silhouette"));
+    m.push(Metric::maybe(
+        "view_psnr_db",
+        view,
+        "dB",
+        Better::Higher,
+        "no pixel drawn inside the true silhouette",
+    ));
     let filled: Vec<bool> = sees.iter().zip(&out.warped.mask.data).map(|(&s, &m)| s && m > 0.0).collect();
     let (wp, wn) = psnr(&out.warped.image, &truth.photo, &eroded(&filled, w, h));
-    m.push(Metric::maybe("warp_psnr_db", wp, "dB", Better::Higher, "the warp filled no pixel the truth sees"));
+    m.push(Metric::maybe(
+        "warp_psnr_db",
+        wp,
+        "dB",
+        Better::Higher,
+        "the warp filled no pixel the truth sees",
+    ));
     let seen = sees.iter().filter(|&&s| s).count().max(1);
     let holes = sees.iter().zip(&filled).filter(|(&s, &f)| s && !f).count();
     m.push(Metric::new("warp_hole_fraction", holes as f64 / seen as f64, "", Better::Lower));
