@@ -13,7 +13,7 @@
 
 use super::{Projector, View};
 use crate::surface::march::Mesh;
-use glam::{DVec2, DVec3};
+use glam::DVec2;
 use rayon::prelude::*;
 
 /// What each pixel sees: `triangle` is `u32::MAX` where nothing is.
@@ -156,11 +156,4 @@ fn fill(
             plot(x, y, z as f32, (lb * izb * z) as f32, (lc * izc * z) as f32);
         }
     }
-}
-
-/// The point of triangle `t` at barycentrics (b1, b2).
-pub fn point(mesh: &Mesh, t: u32, b: [f32; 2]) -> DVec3 {
-    let [i, j, k] = mesh.triangles[t as usize].map(|i| mesh.vertices[i as usize]);
-    let (b1, b2) = (b[0] as f64, b[1] as f64);
-    i * (1.0 - b1 - b2) + j * b1 + k * b2
 }
