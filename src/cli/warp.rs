@@ -32,7 +32,7 @@ pub struct WarpArgs {
     /// depth, then look the colours up in the sources).
     #[arg(long, default_value = "backward")]
     pub mode: String,
-    /// Relative depth difference under which two depths are one surface.
+    /// Backward mapping: the relative depth difference under which two depths are one surface.
     #[arg(long, default_value_t = 0.02)]
     pub depth_tolerance: f64,
 }

@@ -6,7 +6,7 @@
 //! the target camera projects: x_t = π(T_ts·X).
 //!
 //! - **Forward** mapping splats each source pixel's colour onto the target pixel nearest x_t
-//!   through a z-buffer. Where the target magnifies the source, splats leave cracks; where the
+//!   through a z-buffer: the nearest splat, from whichever source, is what the pixel shows. Where the target magnifies the source, splats leave cracks; where the
 //!   target sees what no source saw, holes.
 //! - **Backward** mapping splats only the depth, then filters it: a 3×3 median over the depths
 //!   present replaces the background that shows through a crack in a foreground (a depth
@@ -16,7 +16,7 @@
 //!   four pixels around π_s(X) whose depth agrees with X's (relative `depth_tolerance`), so a
 //!   source that does not see X (occluded, or out of its frame) gives nothing.
 //!
-//! Several sources blend with weights 1/(θ + 1°), θ the angle at X between the rays to the
+//! In backward mapping several sources blend with weights 1/(θ + 1°), θ the angle at X between the rays to the
 //! source's and the target's centres (as a chord, `angle_weight`) (the angle penalty of Buehler et al. 2001's unstructured
 //! lumigraph): the source that sees X most nearly as the target does dominates. Pixels no
 //! source sees are 0 and marked in the mask.
@@ -26,6 +26,7 @@ use crate::image::Image;
 use crate::math::{CameraModel, Pose};
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Mode {
@@ -47,7 +48,7 @@ impl std::str::FromStr for Mode {
 #[derive(Clone, Debug)]
 pub struct Config {
     pub mode: Mode,
-    /// Relative depth difference under which two depths are one surface (default 0.02: a
+    /// Backward mapping: the relative depth difference under which two depths are one surface (default 0.02: a
     /// surface at 70° from the view, seen at a focal length of 250 px, changes depth by about
     /// 1 % of itself per pixel).
     pub depth_tolerance: f64,
@@ -83,16 +84,6 @@ fn rays(camera: &CameraModel) -> Vec<Option<DVec2>> {
         .collect()
 }
 
-/// A source pixel landed in the target: the target pixel, its depth there, the blend weight,
-/// the source pixel.
-#[derive(Clone, Copy)]
-struct Splat {
-    target: u32,
-    z: f32,
-    weight: f32,
-    source: u32,
-}
-
 /// The angle weight 1/(θ + 1°) of a source whose centre is `c_source` (target frame) for the
 /// point `p` (target frame). θ is taken as the chord |â − b̂| = 2·sin(θ/2), equal to θ within
 /// 1 % below 20° and, unlike acos, cheap and exact near 0.
@@ -102,43 +93,38 @@ fn angle_weight(p: DVec3, c_source: DVec3) -> f32 {
     (1.0 / ((2.0 - 2.0 * cos).max(0.0).sqrt() + 1f64.to_radians())) as f32
 }
 
-/// Every source pixel with a depth, carried into the target.
-fn splats(source: &Source, target: &Projector, t_tgt_src: &Pose, weigh: bool) -> Vec<Vec<Splat>> {
+/// Calls `visit(target pixel, z there, source pixel)` for every source pixel with a depth
+/// that lands in the target (the nearest pixel centre), in parallel over the source's rows.
+fn for_each_splat(
+    source: &Source,
+    target: &Projector,
+    t_tgt_src: &Pose,
+    visit: impl Fn(usize, f32, usize) + Sync,
+) {
     let cam = &source.view.camera;
     let w = cam.width as usize;
     let ray_table = (!cam.distortion.is_zero()).then(|| rays(cam));
-    let c_source = t_tgt_src.translation;
     let tw = target.camera.width as usize;
-    source
-        .depth
-        .data
-        .par_chunks(w)
-        .enumerate()
-        .map(|(y, row)| {
-            let ray_table = &ray_table;
-            let mut out = Vec::with_capacity(row.len());
-            out.extend(row.iter().enumerate().filter_map(|(x, &z)| {
-                if z <= 0.0 {
-                    return None;
-                }
-                let i = y * w + x;
-                let n = match ray_table {
-                    Some(t) => t[i]?,
-                    None => cam.pixel_to_normalized(DVec2::new(x as f64, y as f64)),
-                };
-                let p = t_tgt_src.transform_point(DVec3::new(n.x, n.y, 1.0) * z as f64);
-                let px = target.project(p)?;
+    source.depth.data.par_chunks(w).enumerate().for_each(|(y, row)| {
+        for (x, &z) in row.iter().enumerate() {
+            if z <= 0.0 {
+                continue;
+            }
+            let i = y * w + x;
+            let n = match &ray_table {
+                Some(t) => match t[i] {
+                    Some(n) => n,
+                    None => continue,
+                },
+                None => cam.pixel_to_normalized(DVec2::new(x as f64, y as f64)),
+            };
+            let p = t_tgt_src.transform_point(DVec3::new(n.x, n.y, 1.0) * z as f64);
+            if let Some(px) = target.project(p) {
                 let (u, v) = (px.x.round() as usize, px.y.round() as usize);
-                Some(Splat {
-                    target: (v * tw + u) as u32,
-                    z: p.z as f32,
-                    weight: if weigh { angle_weight(p, c_source) } else { 0.0 },
-                    source: i as u32,
-                })
-            }));
-            out
-        })
-        .collect()
+                visit(v * tw + u, p.z as f32, i);
+            }
+        }
+    });
 }
 
 /// The pose carrying source-camera coordinates into target-camera coordinates.
@@ -179,19 +165,21 @@ pub fn warp(sources: &[Source], target: &View, config: &Config) -> Result<Output
         )));
     }
     let projector = Projector::new(&target.camera);
-    let all: Vec<Vec<Vec<Splat>>> = sources
-        .iter()
-        .map(|s| splats(s, &projector, &relative_pose(&s.view, target), config.mode == Mode::Forward))
-        .collect();
     let (w, h) = (target.camera.width, target.camera.height);
-    let mut zbuf = vec![f32::INFINITY; (w * h) as usize];
-    for s in all.iter().flatten().flatten() {
-        let z = &mut zbuf[s.target as usize];
-        *z = z.min(s.z);
-    }
+    let poses: Vec<Pose> = sources.iter().map(|s| relative_pose(&s.view, target)).collect();
     let (image, mask, depth) = match config.mode {
-        Mode::Forward => forward(sources, &all, &zbuf, w, h, channels, config.depth_tolerance),
+        Mode::Forward => forward(sources, &projector, &poses, w, h, channels)?,
         Mode::Backward => {
+            // Positive floats order as their bits do: the nearest depth is an atomic minimum
+            // of the bits (splats from far-apart rows seldom meet at one pixel at once).
+            let nearest: Vec<AtomicU32> =
+                (0..w * h).map(|_| AtomicU32::new(f32::INFINITY.to_bits())).collect();
+            for (s, pose) in sources.iter().zip(&poses) {
+                for_each_splat(s, &projector, pose, |t, z, _| {
+                    nearest[t].fetch_min(z.to_bits(), Ordering::Relaxed);
+                });
+            }
+            let mut zbuf: Vec<f32> = nearest.into_iter().map(|z| f32::from_bits(z.into_inner())).collect();
             for _ in 0..config.fill_passes {
                 zbuf = median_fill(&zbuf, w as usize, h as usize, config.depth_tolerance as f32);
             }
@@ -202,33 +190,56 @@ pub fn warp(sources: &[Source], target: &View, config: &Config) -> Result<Output
     Ok(Output { image, mask, depth, hole_fraction: holes as f64 / (w * h) as f64 })
 }
 
-/// Forward mapping: the splats within the tolerance of the nearest, blended.
+/// Forward mapping: each target pixel shows the nearest splat, the atomic minimum of its
+/// depth's bits (positive floats order as their bits do) with the splat's number below them.
 fn forward(
     sources: &[Source],
-    all: &[Vec<Vec<Splat>>],
-    zbuf: &[f32],
+    projector: &Projector,
+    poses: &[Pose],
     w: u32,
     h: u32,
     channels: u32,
-    tolerance: f64,
-) -> (Image, Image, Image) {
-    let c = channels as usize;
-    let mut sum = vec![0.0f32; zbuf.len() * c];
-    let mut weight = vec![0.0f32; zbuf.len()];
-    for (source, splats) in sources.iter().zip(all) {
-        for s in splats.iter().flatten() {
-            let t = s.target as usize;
-            if s.z > zbuf[t] * (1.0 + tolerance as f32) {
-                continue;
-            }
-            let colour = &source.image.data[s.source as usize * c..][..c];
-            for (acc, &v) in sum[t * c..][..c].iter_mut().zip(colour) {
-                *acc += s.weight * v;
-            }
-            weight[t] += s.weight;
-        }
+) -> Result<(Image, Image, Image), Error> {
+    let mut offsets = Vec::with_capacity(sources.len());
+    let mut total = 0u64;
+    for s in sources {
+        offsets.push(total);
+        total += s.depth.data.len() as u64;
     }
-    finish(sum, &weight, zbuf, w, h, channels)
+    if total > u32::MAX as u64 {
+        return Err(Error::BadInput(format!(
+            "{total} source pixels: expected at most 2^32 for forward mapping"
+        )));
+    }
+    let nearest: Vec<AtomicU64> = (0..w * h).map(|_| AtomicU64::new(u64::MAX)).collect();
+    for ((s, pose), &offset) in sources.iter().zip(poses).zip(&offsets) {
+        for_each_splat(s, projector, pose, |t, z, i| {
+            nearest[t].fetch_min(((z.to_bits() as u64) << 32) | (offset + i as u64), Ordering::Relaxed);
+        });
+    }
+    let c = channels as usize;
+    let mut image = Image::new(w, h, channels);
+    let mut mask = Image::new(w, h, 1);
+    let mut depth = Image::new(w, h, 1);
+    image
+        .data
+        .par_chunks_mut(c)
+        .zip(mask.data.par_chunks_mut(1))
+        .zip(depth.data.par_chunks_mut(1))
+        .zip(nearest.par_iter())
+        .for_each(|(((px, m), d), key)| {
+            let key = key.load(Ordering::Relaxed);
+            if key == u64::MAX {
+                return;
+            }
+            let id = key & 0xffff_ffff;
+            let k = offsets.partition_point(|&o| o <= id) - 1;
+            let i = (id - offsets[k]) as usize;
+            px.copy_from_slice(&sources[k].image.data[i * c..][..c]);
+            m[0] = 1.0;
+            d[0] = f32::from_bits((key >> 32) as u32);
+        });
+    Ok((image, mask, depth))
 }
 
 /// Normalises the blended sums; the image, the mask and the depth.
