@@ -27,6 +27,9 @@
 //!   where a Lambertian point's radiance is exactly its albedo times the radiance it has with
 //!   albedo 1, so the drawing is divided by a render of the held-out view with every albedo 1,
 //!   over the pixels lit by at least a quarter of the median (not in a shadow);
+//! - `texture_psnr_true_cameras_db`: the same, with the texture made from the true cameras
+//!   (carried into the reconstruction's frame by the similarity) on the same mesh: the gap to
+//!   `texture_psnr_db` is what SfM's cameras cost;
 //! - `view_psnr_db`: the same drawing against the held-out photograph (linearised);
 //! - `warp_psnr_db` and `warp_hole_fraction`: the warped view against the held-out photograph
 //!   over the pixels it fills, and the share of the pixels the truth sees that it leaves empty.
@@ -118,6 +121,10 @@ pub struct Truth {
     photo: Image,
     /// The held-out view rendered with every albedo 1.
     shading: Image,
+    /// The true camera, and the training photographs (linearised): the texture made again with
+    /// the true cameras tells the share of its error that SfM's cameras add.
+    camera: crate::math::CameraModel,
+    training: Vec<Image>,
 }
 
 pub struct Output {
@@ -127,6 +134,7 @@ pub struct Output {
     drawn: (Image, Image),
     warped: warp::Output,
     seen_fraction: f64,
+    texture_size: u32,
     seconds: [f64; 4],
 }
 
@@ -249,9 +257,21 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<Input, Truth>, 
         "{}: {} training views of {}×{} px at {} spp on a {}° ring of radius {} about {:?} at heights {:?}; held out at {:.2} of the arc, height {}.",
         c.scene, c.views, camera.width, camera.height, settings.spp, c.arc_deg, c.radius, c.target, c.heights, c.held_out[0], c.held_out[1]
     );
+    let training = linear[..c.views].to_vec();
     Ok(Some((
         Input { sfm: sfm::Input { images, prepared: sfm::Prepared::default() }, linear, held_out: c.views },
-        Truth { case: ctx.case.to_string(), poses, points, normals, albedo, depth, photo, shading },
+        Truth {
+            case: ctx.case.to_string(),
+            poses,
+            points,
+            normals,
+            albedo,
+            depth,
+            photo,
+            shading,
+            camera,
+            training,
+        },
         Findings { notes: vec![note], ..Default::default() },
     )))
 }
@@ -328,7 +348,29 @@ pub fn solve(c: &Config, input: &Input) -> Result<Output, StageError> {
         drawn,
         warped,
         seen_fraction: tex.summary.seen_fraction,
+        texture_size: c.texture_size,
         seconds: [sfm_s, surface_s, texture_s, warp_s],
+    })
+}
+
+/// A true camera pose carried into the reconstruction's frame, given the similarity
+/// (s, R, t) with X_true = s·R·X_rec + t: p_cam = R_c·(s·R·X + t) + t_c, divided by s (a
+/// pinhole sees a scaled world the same).
+fn into_reconstruction(
+    p: &WorldToCamera,
+    (s, r, t): (f64, nalgebra::Matrix3<f64>, Vector3<f64>),
+) -> WorldToCamera {
+    let rc = nalgebra::Matrix3::from_fn(|i, j| p.rotation.col(j)[i]);
+    let tc = Vector3::new(p.translation.x, p.translation.y, p.translation.z);
+    let rot = rc * r;
+    let tr = (rc * t + tc) / s;
+    WorldToCamera(crate::math::Pose {
+        rotation: glam::DMat3::from_cols(
+            DVec3::new(rot[(0, 0)], rot[(1, 0)], rot[(2, 0)]),
+            DVec3::new(rot[(0, 1)], rot[(1, 1)], rot[(2, 1)]),
+            DVec3::new(rot[(0, 2)], rot[(1, 2)], rot[(2, 2)]),
+        ),
+        translation: DVec3::new(tr.x, tr.y, tr.z),
     })
 }
 
@@ -375,7 +417,8 @@ pub fn validate(out: &Output, truth: &Truth) -> Findings {
             Some((Vector3::new(e.x, e.y, e.z), Vector3::new(t.x, t.y, t.z)))
         })
         .unzip();
-    let aligned = eval::similarity(&src, &dst).map(|(s, r, t)| {
+    let similarity = eval::similarity(&src, &dst);
+    let aligned = similarity.map(|(s, r, t)| {
         let to = |p: DVec3| {
             let q = s * r * Vector3::new(p.x, p.y, p.z) + t;
             DVec3::new(q.x, q.y, q.z)
@@ -455,22 +498,56 @@ pub fn validate(out: &Output, truth: &Truth) -> Findings {
     let floor = 0.25 * crate::math::stats::median(&mut lit).unwrap_or(0.0);
     let lit: Vec<bool> =
         (0..keep.len()).map(|i| keep[i] && lum(&truth.shading, i) > floor && floor > 0.0).collect();
-    let albedo_est = Image {
-        data: drawn
-            .data
-            .iter()
-            .zip(&truth.shading.data)
-            .map(|(&d, &s)| if s > 0.0 { d / s } else { 0.0 })
-            .collect(),
-        ..drawn.clone()
+    let albedo_psnr = |drawn: &Image| {
+        let est = Image {
+            data: drawn
+                .data
+                .iter()
+                .zip(&truth.shading.data)
+                .map(|(&d, &s)| if s > 0.0 { d / s } else { 0.0 })
+                .collect(),
+            ..drawn.clone()
+        };
+        psnr(&est, &truth.albedo, &lit)
     };
-    let (tex, n) = psnr(&albedo_est, &truth.albedo, &lit);
+    let (tex, n) = albedo_psnr(drawn);
     m.push(Metric::maybe(
         "texture_psnr_db",
         tex,
         "dB",
         Better::Higher,
         "no pixel drawn inside the true silhouette",
+    ));
+    // The same texture from the true cameras, carried into the reconstruction's frame, on the
+    // same mesh: what is left is the mesh's and the texture's own error.
+    let true_cameras = similarity.and_then(|sim| {
+        let into = |p: &WorldToCamera| View {
+            camera: truth.camera,
+            t_world_cam: into_reconstruction(p, sim).inverse(),
+        };
+        let photos: Vec<texture::Photo> = truth
+            .training
+            .iter()
+            .zip(&truth.poses)
+            .enumerate()
+            .map(|(k, (image, p))| texture::Photo { name: format!("view {k}"), image, view: into(p) })
+            .collect();
+        let held = into(truth.poses.last()?);
+        let tex = texture::run(
+            &out.mesh,
+            &photos,
+            &texture::Config { size: out.texture_size, ..Default::default() },
+        )
+        .ok()?;
+        let (drawn, _) = texture::draw(&out.mesh, &tex.atlas, &tex.texture, &held);
+        albedo_psnr(&drawn).0
+    });
+    m.push(Metric::maybe(
+        "texture_psnr_true_cameras_db",
+        true_cameras,
+        "dB",
+        Better::Higher,
+        "no alignment of the reconstruction to the truth, or no texture from the true cameras",
     ));
     let (view, _) = psnr(drawn, &truth.photo, &keep);
     m.push(Metric::maybe(
