@@ -82,6 +82,8 @@ pub struct Case {
     pub group: String,
     /// The swept fields' values of this case (empty outside a sweep).
     pub sweep: BTreeMap<String, String>,
+    /// The earlier cases this one takes an output from (`from:CASE`), by index.
+    pub upstream: Vec<usize>,
 }
 
 #[derive(Debug)]
@@ -194,10 +196,65 @@ pub fn parse(text: &str, path: &Path) -> Result<PipelineFile, Error> {
                 line,
                 group: common.case.clone(),
                 sweep: shown,
+                upstream: Vec::new(),
             });
         }
     }
+    resolve_upstream(&mut cases, path)?;
     Ok(PipelineFile { name: raw.name, seed: raw.seed, cases })
+}
+
+impl PipelineFile {
+    /// The first case of the chain case `i` belongs to (`from:` followed back), so that a
+    /// shard runs a chained case after its source, in the same process.
+    pub fn root(&self, mut i: usize) -> usize {
+        while let Some(&j) = self.cases[i].upstream.first() {
+            i = j;
+        }
+        i
+    }
+}
+
+/// Finds the case each `from:CASE` names: it must exist, come earlier in the file (so there is
+/// no cycle), and hand on the kind of output the field takes.
+fn resolve_upstream(cases: &mut [Case], path: &Path) -> Result<(), Error> {
+    for i in 0..cases.len() {
+        let mut found = Vec::new();
+        for (field, name, kind) in cases[i].stage.upstream() {
+            let c = &cases[i];
+            let err = |message: String| Error::Parse {
+                path: path.into(),
+                message: format!(
+                    "stages[{}] (line {}, case {}): `{field}` = \"from:{name}\": {message}",
+                    c.entry - 1,
+                    c.line,
+                    c.common.case
+                ),
+            };
+            let Some(j) = cases.iter().position(|x| x.common.case == name) else {
+                return Err(err(format!("no case `{name}` in this file")));
+            };
+            if j >= i {
+                return Err(err(format!(
+                    "case `{name}` is {}: a case takes only from an earlier one",
+                    if j == i { "this case" } else { "a later one" }
+                )));
+            }
+            if !cases[j].stage.provides().contains(&kind) {
+                return Err(err(format!(
+                    "case `{name}` is a {} case, which hands on no {kind}{}",
+                    cases[j].stage.name(),
+                    match kind {
+                        "camera" => " (a calibrate case on renders does)",
+                        _ => "",
+                    }
+                )));
+            }
+            found.push(j);
+        }
+        cases[i].upstream = found;
+    }
+    Ok(())
 }
 
 fn check_common(c: &Common) -> Result<(), Invalid> {

@@ -145,7 +145,15 @@ pub fn render_share(
         let n = file.cases.len();
         for (k, case) in file.cases.iter().enumerate() {
             let seed = case.common.seed.unwrap_or(file.seed);
-            let ctx = Context { dir: &dir, case: &case.common.case, seed, cache: &cache, progress: false };
+            let none = Default::default();
+            let ctx = Context {
+                dir: &dir,
+                case: &case.common.case,
+                seed,
+                cache: &cache,
+                progress: false,
+                upstream: &none,
+            };
             let before = cache.share_count();
             let Some(result) = case.stage.share(&ctx, pass) else { continue };
             if progress {
@@ -184,18 +192,30 @@ fn run_cases(path: &Path, file: &PipelineFile, opts: &RunOptions) -> Result<Repo
     let start_time = humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
     let mut stages = Vec::new();
     let mut files = Vec::new();
+    // A chained case runs in its chain's first case's shard, after it.
     let taken: Vec<usize> =
-        (0..file.cases.len()).filter(|&i| opts.shard.is_none_or(|s| s.takes(i))).collect();
+        (0..file.cases.len()).filter(|&i| opts.shard.is_none_or(|s| s.takes(file.root(i)))).collect();
+    let mut handed_on: std::collections::BTreeMap<String, stages::Exports> = Default::default();
     let n = taken.len();
     for (k, case) in taken.iter().map(|&i| &file.cases[i]).enumerate() {
         let seed = case.common.seed.unwrap_or(file.seed);
-        let ctx = Context { dir: &dir, case: &case.common.case, seed, cache: &cache, progress: bars };
+        let ctx = Context {
+            dir: &dir,
+            case: &case.common.case,
+            seed,
+            cache: &cache,
+            progress: bars,
+            upstream: &handed_on,
+        };
         if opts.progress {
             eprintln!("[{}/{n}] {} {} ...", k + 1, case.stage.name(), case.common.case);
         }
         let t = std::time::Instant::now();
-        let result = case.stage.run(&ctx);
+        let mut result = case.stage.run(&ctx);
         let total = t.elapsed().as_secs_f64();
+        if let Ok(r) = &mut result {
+            handed_on.insert(case.common.case.clone(), std::mem::take(&mut r.exports));
+        }
         let (mut st, kept) = report_case(path, case, seed, result)?;
         st.timings_s.insert("total".into(), total);
         st.renders = Renders::from_events(&cache.events_of(&case.common.case));
@@ -252,7 +272,7 @@ fn report_case(
         case: common.case.clone(),
         group: case.group.clone(),
         sweep: case.sweep.clone(),
-        mode: "alone".into(),
+        mode: if case.upstream.is_empty() { "alone" } else { "chained" }.into(),
         seed,
         outcome: Outcome { declared, actual: "result".into() },
         error: None,

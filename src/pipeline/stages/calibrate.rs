@@ -562,10 +562,18 @@ impl Settings for Config {
         "fx_rel_err"
     }
     fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
-        run_case(|| synthesize(self, ctx), |i| solve(self, i), |o, t| validate(self, o, t))
+        super::run_case_exporting(
+            || synthesize(self, ctx),
+            |i| solve(self, i),
+            |o, t| validate(self, o, t),
+            |o, t| super::Exports { camera: Some((o.calibration.camera(), t.camera)) },
+        )
     }
     fn share(&self, ctx: &Context, pass: Pass) -> Option<Result<(), StageError>> {
         (pass == Pass::Renders).then(|| synthesize(self, ctx).map(|_| ()))
+    }
+    fn provides(&self) -> &'static [&'static str] {
+        &["camera"]
     }
 }
 

@@ -36,6 +36,76 @@ pub trait Settings: std::fmt::Debug + Send + Sync {
     fn share(&self, _ctx: &Context, _pass: Pass) -> Option<Result<(), StageError>> {
         None
     }
+    /// The earlier cases this one takes an output from, as its `from:CASE` fields name them:
+    /// (field, case, the kind of output).
+    fn upstream(&self) -> Vec<(&'static str, String, &'static str)> {
+        Vec::new()
+    }
+    /// The kinds of output this case hands on to later cases (`Exports`).
+    fn provides(&self) -> &'static [&'static str] {
+        &[]
+    }
+}
+
+/// What a case hands on to the later cases that name it (`from:CASE`): its estimate, and the
+/// truth beside it, so the later case can say how far off what it inherits is.
+#[derive(Clone, Debug, Default)]
+pub struct Exports {
+    /// `camera`: the calibrated camera, and the true one.
+    pub camera: Option<(crate::math::CameraModel, crate::math::CameraModel)>,
+}
+
+/// A chained case's result: the chained run's metrics under their names, the alone run's as
+/// `alone_<name>`, and for each of the `errors` both runs measured the error inherited,
+/// `inherited_<name>` = chained − alone; `upstream` (what was inherited) and the inherited
+/// errors as a note; the two runs' times added.
+pub fn chained_result(chained: CaseResult, alone: CaseResult, errors: &[&str], upstream: &str) -> CaseResult {
+    let mut metrics = chained.metrics.clone();
+    for a in &alone.metrics {
+        metrics.push(Metric { name: format!("alone_{}", a.name), ..a.clone() });
+    }
+    let mut lines = Vec::new();
+    for name in errors {
+        let value = |r: &CaseResult| r.metrics.iter().find(|m| m.name == *name).and_then(|m| m.value);
+        let metric = chained.metrics.iter().find(|m| m.name == *name);
+        if let (Some(cv), Some(av), Some(m)) = (value(&chained), value(&alone), metric) {
+            metrics.push(Metric::new(&format!("inherited_{name}"), cv - av, &m.unit, m.better));
+            lines.push(format!("{name} {av:.6} alone, {cv:.6} chained ({:+.6} inherited)", cv - av));
+        }
+    }
+    let mut notes = vec![format!("{upstream} {}.", lines.join("; "))];
+    notes.extend(chained.notes);
+    let mut timings_s = chained.timings_s;
+    for (k, v) in alone.timings_s {
+        *timings_s.entry(k).or_insert(0.0) += v;
+    }
+    let mut files = chained.files;
+    files.extend(alone.files);
+    CaseResult { metrics, notes, timings_s, files, exports: chained.exports }
+}
+
+/// What an inherited camera is off by, for a chained case's notes.
+pub fn camera_error(
+    source: &str,
+    estimate: &crate::math::CameraModel,
+    truth: &crate::math::CameraModel,
+) -> String {
+    let (e, t) = (&estimate.intrinsics, &truth.intrinsics);
+    let (ed, td) = (estimate.distortion.to_array(), truth.distortion.to_array());
+    format!(
+        "Chained: the camera from case `{source}` is off the truth by fx {:+.4} %, fy {:+.4} %, cx {:+.3} px, cy {:+.3} px, k1 {:+.5}, k2 {:+.5}; inherited:",
+        100.0 * (e.fx - t.fx) / t.fx,
+        100.0 * (e.fy - t.fy) / t.fy,
+        e.cx - t.cx,
+        e.cy - t.cy,
+        ed[0] - td[0],
+        ed[1] - td[1]
+    )
+}
+
+/// A field's `from:CASE`, the case it names; `None` for any other value.
+pub fn from_case(value: &Option<String>) -> Option<String> {
+    value.as_deref().and_then(|v| v.strip_prefix("from:")).map(str::to_string)
 }
 
 /// A stage of a pipeline entry with its settings.
@@ -57,6 +127,12 @@ impl Stage {
     }
     pub fn share(&self, ctx: &Context, pass: Pass) -> Option<Result<(), StageError>> {
         self.settings.share(ctx, pass)
+    }
+    pub fn upstream(&self) -> Vec<(&'static str, String, &'static str)> {
+        self.settings.upstream()
+    }
+    pub fn provides(&self) -> &'static [&'static str] {
+        self.settings.provides()
     }
 }
 
@@ -239,6 +315,8 @@ pub struct Context<'a> {
     pub seed: u64,
     pub cache: &'a Cache,
     pub progress: bool,
+    /// What the earlier cases of the run handed on, by case name.
+    pub upstream: &'a BTreeMap<String, Exports>,
 }
 
 impl Context<'_> {
@@ -261,6 +339,8 @@ pub struct CaseResult {
     pub timings_s: BTreeMap<String, f64>,
     /// Files to write into the output folder with the report.
     pub files: Vec<(PathBuf, Kept)>,
+    /// What the case hands on to later cases.
+    pub exports: Exports,
 }
 
 /// A file a case asks to keep in the output folder, written with the report.
@@ -286,6 +366,16 @@ pub fn run_case<I, T, O>(
     solve: impl FnOnce(&I) -> Result<O, StageError>,
     validate: impl FnOnce(&O, &T) -> Findings,
 ) -> Result<CaseResult, StageError> {
+    run_case_exporting(synthesize, solve, validate, |_, _| Exports::default())
+}
+
+/// `run_case`, with what the case hands on to later cases made from its output and truth.
+pub fn run_case_exporting<I, T, O>(
+    synthesize: impl FnOnce() -> Result<Synthesis<I, T>, StageError>,
+    solve: impl FnOnce(&I) -> Result<O, StageError>,
+    validate: impl FnOnce(&O, &T) -> Findings,
+    export: impl FnOnce(&O, &T) -> Exports,
+) -> Result<CaseResult, StageError> {
     let t = std::time::Instant::now();
     // A run's cache hands every render back; only a share's synthesis ends without input.
     let Some((input, truth, mut found)) = synthesize()? else {
@@ -298,6 +388,7 @@ pub fn run_case<I, T, O>(
     let t = std::time::Instant::now();
     let more = validate(&output, &truth);
     let validate_s = t.elapsed().as_secs_f64();
+    let exports = export(&output, &truth);
     found.metrics.extend(more.metrics);
     found.notes.extend(more.notes);
     found.files.extend(more.files);
@@ -306,7 +397,7 @@ pub fn run_case<I, T, O>(
         ("solve".into(), solve_s),
         ("validate".into(), validate_s),
     ]);
-    Ok(CaseResult { metrics: found.metrics, notes: found.notes, timings_s, files: found.files })
+    Ok(CaseResult { metrics: found.metrics, notes: found.notes, timings_s, files: found.files, exports })
 }
 
 /// Most views (calibrate, sfm) or lights (photometric) one case may ask for: each is a render.

@@ -82,6 +82,12 @@ pub struct RenderConfig {
     /// Which pairs are matched: "exhaustive" (default) or "sequential:N", the views in order
     /// along the arc (`mapper::PairSelection`).
     pub pairs: Option<String>,
+    /// `"from:CASE"`: give the solver the camera an earlier calibrate case estimated instead of
+    /// the true one (a chained case). It runs alone too, with the true camera, and reports
+    /// both: the chained metrics under their names, the alone ones as `alone_<metric>`, and
+    /// the error the case inherits as `inherited_<metric>` (chained − alone). The calibrated
+    /// camera must be this scene's: same size, true intrinsics and distortion.
+    pub camera: Option<String>,
 }
 
 fn default_views() -> usize {
@@ -135,6 +141,16 @@ struct PairsRecipe<'a, R> {
 const PAIR_BLOCK: usize = 8;
 
 pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<Synthesis<sfm::Input, Truth>, StageError> {
+    synthesize_given(c, ctx, None)
+}
+
+/// `synthesize`, the solver given `inherited`'s estimate (an upstream case's camera and the
+/// truth it had) instead of the true camera.
+fn synthesize_given(
+    c: &RenderConfig,
+    ctx: &Context,
+    inherited: Option<(crate::math::CameraModel, crate::math::CameraModel)>,
+) -> Result<Synthesis<sfm::Input, Truth>, StageError> {
     if !(2..=MAX_RENDERS).contains(&c.views) {
         return Err(StageError::Config(format!("views = {}: expected 2 to {MAX_RENDERS}", c.views)));
     }
@@ -158,6 +174,16 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<Synthesis<sfm::Inpu
     let mut settings = render::Settings::from_scene(&scene);
     apply_overrides(&mut settings, c.spp, None)?;
     let camera = scene.camera;
+    if let Some((_, upstream_truth)) = &inherited {
+        if *upstream_truth != camera {
+            return Err(StageError::Config(format!(
+                "camera = \"{}\": that case calibrated a camera of {}×{} px, fx {}, k1 {}; this scene's is {}×{} px, fx {}, k1 {}: a chained case must see through the camera its source calibrated",
+                c.camera.as_deref().unwrap_or(""),
+                upstream_truth.width, upstream_truth.height, upstream_truth.intrinsics.fx, upstream_truth.distortion.k1,
+                camera.width, camera.height, camera.intrinsics.fx, camera.distortion.k1
+            )));
+        }
+    }
     let cfg = config(c.max_features, c.guess_intrinsics, &c.refine, c.guided_matching, &c.pairs)?;
     let mut recipes = Vec::new();
     let target = DVec3::from_array(c.target);
@@ -193,10 +219,10 @@ pub fn synthesize(c: &RenderConfig, ctx: &Context) -> Result<Synthesis<sfm::Inpu
         let rendered = ctx.cache.images(ctx.case, &name, &recipe.view, || {
             Ok::<_, StageError>(vec![render::try_render(&scene, &settings)?.mean])
         })?;
-        let given = if c.guess_intrinsics {
-            sfm::input::assumed_camera(camera.width, camera.height)
-        } else {
-            camera.clone()
+        let given = match inherited {
+            Some((estimate, _)) => estimate,
+            None if c.guess_intrinsics => sfm::input::assumed_camera(camera.width, camera.height),
+            None => camera,
         };
         let Some(rendered) = rendered else {
             // A share of the renders pass: the owner of a view extracts its features.
@@ -591,7 +617,36 @@ impl Settings for RenderConfig {
         "rotation_err_median_deg"
     }
     fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
-        run_case(|| synthesize(self, ctx), |i| solve_render(self, i), validate)
+        let Some(source) = super::from_case(&self.camera) else {
+            if let Some(v) = &self.camera {
+                return Err(StageError::Config(format!(
+                    "camera = \"{v}\": expected \"from:CASE\", a calibrate case earlier in the file (a rendered case's true camera is its scene's)"
+                )));
+            }
+            return run_case(|| synthesize(self, ctx), |i| solve_render(self, i), validate);
+        };
+        if self.guess_intrinsics {
+            return Err(StageError::Config(format!(
+                "camera = \"from:{source}\" and guess_intrinsics = true: a chained case is given its source's camera, not a guess"
+            )));
+        }
+        let Some((estimate, truth)) = ctx.upstream.get(&source).and_then(|e| e.camera) else {
+            return Err(StageError::Config(format!(
+                "camera = \"from:{source}\": case `{source}` handed on no camera (it failed or ended in a declared error)"
+            )));
+        };
+        let chained = run_case(
+            || synthesize_given(self, ctx, Some((estimate, truth))),
+            |i| solve_render(self, i),
+            validate,
+        )?;
+        let alone = run_case(|| synthesize(self, ctx), |i| solve_render(self, i), validate)?;
+        let errors =
+            ["rotation_err_median_deg", "rotation_err_max_deg", "centre_err_max_rel", "reprojection_rms_px"];
+        Ok(super::chained_result(chained, alone, &errors, &super::camera_error(&source, &estimate, &truth)))
+    }
+    fn upstream(&self) -> Vec<(&'static str, String, &'static str)> {
+        super::from_case(&self.camera).map(|s| vec![("camera", s, "camera")]).unwrap_or_default()
     }
     /// Both passes: the views' renders and features, then the pairs (`synthesize`).
     fn share(&self, ctx: &Context, _pass: Pass) -> Option<Result<(), StageError>> {
