@@ -764,3 +764,56 @@ sweep = {{ denoise = [false, true] }}
         assert!(b.is_finite() && b >= 0.0, "{name}: {metric} {b}");
     }
 }
+
+/// A chained case is given its source's output, never the truth: with the calibration's seed
+/// changed, the chained sfm case's errors change and its alone ones do not. The report marks it
+/// chained, and a source that hands on nothing usable is named.
+#[test]
+fn chained_case_takes_the_upstream_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let scenes = common::root().join("pipelines/scenes");
+    let session = |seed: u64| {
+        format!(
+            "[[stages]]\nstage = \"calibrate\"\ncase = \"cal\"\nseed = {seed}\nscene = \"{}\"\nviews = 8\nspp = 4\nbounds = {{ views_missed = 0 }}\n\
+             [[stages]]\nstage = \"sfm\"\ncase = \"s\"\nscene = \"{}\"\ncamera = \"from:cal\"\ntarget = [0.0, 0.5, 0.6]\nradius = 3.5\nheight = 1.3\narc_deg = 40\nviews = 4\nbounds = {{ unregistered_images = 0 }}\n",
+            scenes.join("session-board.toml").display(),
+            scenes.join("sfm-courtyard-wide.toml").display()
+        )
+    };
+    let metrics = |seed: u64| {
+        let (code, err) = run(&session(seed), &out);
+        assert_eq!(code, 0, "{err}");
+        let j: serde_json::Value = read_json(&out.join("report.json"));
+        let sfm = &j["stages"][1];
+        assert_eq!(sfm["mode"], "chained");
+        assert_eq!(j["stages"][0]["mode"], "alone");
+        let value = |name: &str| {
+            sfm["metrics"].as_array().unwrap().iter().find(|m| m["name"] == name).unwrap()["value"]
+                .as_f64()
+                .unwrap()
+        };
+        (
+            value("rotation_err_median_deg"),
+            value("alone_rotation_err_median_deg"),
+            value("inherited_rotation_err_median_deg"),
+        )
+    };
+    let (c1, a1, i1) = metrics(1);
+    let (c2, a2, i2) = metrics(2);
+    assert_eq!(a1, a2, "the alone run does not depend on the upstream");
+    assert_ne!(c1, c2, "the chained run takes the upstream's estimate");
+    assert!((i1 - (c1 - a1)).abs() < 1e-12 && (i2 - (c2 - a2)).abs() < 1e-12);
+    // A source of another camera, and a source that ended in a declared error.
+    let other = session(1).replace("session-board.toml", "calib-board.toml");
+    let (code, err) = run(&other, &out);
+    assert!(
+        code == 1 && err.contains("a chained case must see through the camera its source calibrated"),
+        "{err}"
+    );
+    let failed = session(1)
+        .replace("views = 8\n", "views = 1\nexpect_error = \"bad-input\"\n")
+        .replace("bounds = { views_missed = 0 }\n", "");
+    let (code, err) = run(&failed, &out);
+    assert!(code == 1 && err.contains("case `cal` handed on no camera"), "{err}");
+}

@@ -326,6 +326,25 @@ mod tests {
     }
 
     #[test]
+    fn from_names_an_earlier_case_that_hands_on_its_kind() {
+        let cal = "[[stages]]\nstage = \"calibrate\"\ncase = \"cal\"\nscene = \"b.toml\"\n";
+        let sfm = |from: &str| {
+            format!("[[stages]]\nstage = \"sfm\"\ncase = \"s\"\nscene = \"c.toml\"\ntarget = [0.0, 0.0, 0.0]\nradius = 1.0\nheight = 1.0\narc_deg = 40\ncamera = \"from:{from}\"\n")
+        };
+        let f = parse_str(&format!("{ENTRY}{cal}{}", sfm("cal"))).unwrap();
+        assert_eq!(f.cases[2].upstream, vec![1]);
+        assert_eq!((f.root(2), f.root(1), f.root(0)), (1, 1, 0));
+        let e = parse_str(&format!("{cal}{}", sfm("nope"))).unwrap_err().to_string();
+        assert!(e.contains("`camera` = \"from:nope\": no case `nope`") && e.contains("case s"), "{e}");
+        let e = parse_str(&format!("{}{cal}", sfm("cal"))).unwrap_err().to_string();
+        assert!(e.contains("case `cal` is a later one"), "{e}");
+        let e = parse_str(&sfm("s")).unwrap_err().to_string();
+        assert!(e.contains("case `s` is this case"), "{e}");
+        let e = parse_str(&format!("{ENTRY}{}", sfm("f"))).unwrap_err().to_string();
+        assert!(e.contains("case `f` is a render case, which hands on no camera"), "{e}");
+    }
+
+    #[test]
     fn sweeps_expand_into_named_cases() {
         let f = parse_str(&format!("{ENTRY}sweep = {{ spp = [4, 16], max_depth = [2, 3, 4] }}\n")).unwrap();
         assert_eq!(f.cases.len(), 6);

@@ -1,5 +1,6 @@
 //! One pipeline over several processes or nodes: `lumen run --shard K/N` runs every N-th case
-//! (case i goes to shard i mod N + 1, so the split depends only on the file and N) and writes a
+//! (case i goes to shard i mod N + 1, so the split depends only on the file and N; a chained
+//! case goes with the first case of its chain, `PipelineFile::root`, and runs after it) and writes a
 //! fragment, a report of its cases, to `OUT/shards/K-of-N/`; `lumen merge OUT` checks that the
 //! fragments belong together and cover every case once, and writes the one report to `OUT`.
 //! Shards share the render cache, whose entries are written under a private name and renamed.
