@@ -766,8 +766,10 @@ sweep = {{ denoise = [false, true] }}
 }
 
 /// A chained case is given its source's output, never the truth: with the calibration's seed
-/// changed, the chained sfm case's errors change and its alone ones do not. The report marks it
-/// chained, and a source that hands on nothing usable is named.
+/// changed, the chained sfm case's errors change and its alone ones do not. With the inherited
+/// focal length made 2 % long, the inherited error shows and the sensitivity predicts it
+/// within a factor of 2. The report marks the case chained; a source that hands on nothing
+/// usable, and `perturb` on a case that inherits nothing, are named.
 #[test]
 fn chained_case_takes_the_upstream_output() {
     let dir = tempfile::tempdir().unwrap();
@@ -804,6 +806,29 @@ fn chained_case_takes_the_upstream_output() {
     assert_eq!(a1, a2, "the alone run does not depend on the upstream");
     assert_ne!(c1, c2, "the chained run takes the upstream's estimate");
     assert!((i1 - (c1 - a1)).abs() < 1e-12 && (i2 - (c2 - a2)).abs() < 1e-12);
+    // A deliberately wrong upstream (the focal length 2 % long): its inherited error shows,
+    // and the sensitivity's prediction is within a factor of 2 of it.
+    let wrong = session(1).replace("views = 4\n", "views = 4\nperturb = { focal_rel = 0.02 }\n");
+    let (code, err) = run(&wrong, &out);
+    assert_eq!(code, 0, "{err}");
+    let j: serde_json::Value = read_json(&out.join("report.json"));
+    let value = |name: &str| {
+        j["stages"][1]["metrics"].as_array().unwrap().iter().find(|m| m["name"] == name).unwrap()["value"]
+            .as_f64()
+            .unwrap()
+    };
+    let (inherited, predicted) =
+        (value("inherited_rotation_err_median_deg"), value("predicted_inherited_rotation_err_median_deg"));
+    assert!(
+        inherited > 0.05 && inherited > 10.0 * i1.abs(),
+        "fx +2 %: inherited {inherited}° (unperturbed {i1}°)"
+    );
+    assert!(
+        predicted > 0.5 * inherited && predicted < 2.0 * inherited,
+        "predicted {predicted}°, measured {inherited}°"
+    );
+    let (code, err) = run(&session(1).replace("camera = \"from:cal\"\n", "perturb = { k1 = 0.1 }\n"), &out);
+    assert!(code == 1 && err.contains("perturb: only on a chained case"), "{err}");
     // A source of another camera, and a source that ended in a declared error.
     let other = session(1).replace("session-board.toml", "calib-board.toml");
     let (code, err) = run(&other, &out);
