@@ -82,15 +82,7 @@ pub fn run(a: &TextureArgs) -> Result<()> {
             io::write_png_srgb(&dir.join("texture.png"), &out.texture)?;
         } else {
             // PNG and JPEG photographs were read as code values: written back as such.
-            let bytes: Vec<u8> =
-                out.texture.data.iter().map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect();
-            io::write_png_bytes(
-                &dir.join("texture.png"),
-                out.texture.width,
-                out.texture.height,
-                out.texture.channels,
-                &bytes,
-            )?;
+            io::write_png_codes(&dir.join("texture.png"), &out.texture)?;
         }
         std::fs::write(dir.join("summary.json"), &json)?;
         Ok(())

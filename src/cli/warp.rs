@@ -106,14 +106,8 @@ pub fn run(a: &WarpArgs) -> Result<()> {
     let json = serde_json::to_string_pretty(&summary)?;
     io::write_together(&dir, |stage: &Path| -> Result<()> {
         write_image(&stage.join(&file), &out.image, all_linear)?;
-        let mask: Vec<u8> = out.mask.data.iter().map(|&m| if m > 0.0 { 255 } else { 0 }).collect();
-        io::write_png_bytes(
-            &stage.join(format!("{name}.mask.png")),
-            out.mask.width,
-            out.mask.height,
-            1,
-            &mask,
-        )?;
+        // The mask holds 0 or 1: black and white.
+        io::write_png_codes(&stage.join(format!("{name}.mask.png")), &out.mask)?;
         std::fs::write(stage.join(format!("{name}.json")), &json).context("cannot write the summary")?;
         Ok(())
     })?;
@@ -139,6 +133,5 @@ fn write_image(path: &Path, img: &Image, linear: bool) -> Result<()> {
     if !is_png || linear {
         return Ok(io::write(path, img)?);
     }
-    let bytes: Vec<u8> = img.data.iter().map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect();
-    Ok(io::write_png_bytes(path, img.width, img.height, img.channels, &bytes)?)
+    Ok(io::write_png_codes(path, img)?)
 }

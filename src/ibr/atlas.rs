@@ -62,19 +62,25 @@ pub fn face_normals(mesh: &Mesh) -> Vec<DVec3> {
         .collect()
 }
 
-/// The triangles sharing each edge with each triangle.
-fn neighbours(mesh: &Mesh) -> Vec<Vec<u32>> {
-    let mut by_edge: HashMap<(u32, u32), Vec<u32>> = HashMap::new();
+/// Every edge (its vertices, lower first) with the triangles around it: each triangle and the
+/// edge's place k in it (from vertex k to vertex k + 1).
+pub fn edges(mesh: &Mesh) -> HashMap<(u32, u32), Vec<(u32, usize)>> {
+    let mut by_edge: HashMap<(u32, u32), Vec<(u32, usize)>> = HashMap::new();
     for (t, tri) in mesh.triangles.iter().enumerate() {
         for k in 0..3 {
             let (a, b) = (tri[k], tri[(k + 1) % 3]);
-            by_edge.entry((a.min(b), a.max(b))).or_default().push(t as u32);
+            by_edge.entry((a.min(b), a.max(b))).or_default().push((t as u32, k));
         }
     }
+    by_edge
+}
+
+/// The triangles sharing each edge with each triangle.
+fn neighbours(mesh: &Mesh) -> Vec<Vec<u32>> {
     let mut out = vec![Vec::new(); mesh.triangles.len()];
-    for tris in by_edge.values() {
-        for &a in tris {
-            for &b in tris {
+    for tris in edges(mesh).values() {
+        for &(a, _) in tris {
+            for &(b, _) in tris {
                 if a != b {
                     out[a as usize].push(b);
                 }

@@ -207,6 +207,8 @@ fn bilinear(img: &Image, px: DVec2) -> [f32; 4] {
 /// What each photograph makes of the texel at `x` with normal `n` (module docs).
 struct Looker<'a> {
     photos: &'a [Photo<'a>],
+    /// Each photograph's world-to-camera pose.
+    from_world: Vec<crate::math::WorldToCamera>,
     rasters: Vec<Raster>,
     projectors: Vec<Projector>,
     sharpness: Vec<f64>,
@@ -224,7 +226,7 @@ impl Looker<'_> {
             if !(cos >= self.cos_max) {
                 continue;
             }
-            let q = p.view.t_world_cam.inverse().transform_point(x);
+            let q = self.from_world[v].transform_point(x);
             let Some(px) = self.projectors[v].project(q) else {
                 continue;
             };
@@ -285,14 +287,6 @@ fn fit_gains(samples: &[Vec<Look>], views: usize, channels: usize) -> Vec<[f64; 
 /// The texel pairs across chart seams: along every mesh edge two charts share, points one
 /// texel apart, each mapped to the covered texel it falls in on either side.
 fn seam_pairs(mesh: &Mesh, atlas: &Atlas, slot: &[u32]) -> Vec<(u32, u32)> {
-    let mut by_edge: std::collections::HashMap<(u32, u32), Vec<(u32, usize)>> =
-        std::collections::HashMap::new();
-    for (t, tri) in mesh.triangles.iter().enumerate() {
-        for k in 0..3 {
-            let (a, b) = (tri[k], tri[(k + 1) % 3]);
-            by_edge.entry((a.min(b), a.max(b))).or_default().push((t as u32, k));
-        }
-    }
     let size = atlas.size as i64;
     let texel_at = |p: DVec2| -> Option<u32> {
         let (x, y) = (p.x.floor() as i64, p.y.floor() as i64);
@@ -303,7 +297,7 @@ fn seam_pairs(mesh: &Mesh, atlas: &Atlas, slot: &[u32]) -> Vec<(u32, u32)> {
         (s != u32::MAX).then_some(s)
     };
     let mut pairs = Vec::new();
-    for (&(lo, _), sides) in &by_edge {
+    for (&(lo, _), sides) in &atlas::edges(mesh) {
         let [(t1, k1), (t2, k2)] = sides[..] else { continue };
         if atlas.chart[t1 as usize] == atlas.chart[t2 as usize] {
             continue;
@@ -345,6 +339,7 @@ pub fn run(mesh: &Mesh, photos: &[Photo], config: &Config) -> Result<Output, Err
     let sharpest = sharp.iter().copied().fold(0.0, f64::max);
     let looker = Looker {
         photos,
+        from_world: photos.iter().map(|p| p.view.t_world_cam.inverse()).collect(),
         rasters: photos.iter().map(|p| raster::rasterise(mesh, &p.view)).collect(),
         projectors: photos.iter().map(|p| Projector::new(&p.view.camera)).collect(),
         sharpness: sharp

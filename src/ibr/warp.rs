@@ -183,7 +183,7 @@ pub fn warp(sources: &[Source], target: &View, config: &Config) -> Result<Output
             for _ in 0..config.fill_passes {
                 zbuf = median_fill(&zbuf, w as usize, h as usize, config.depth_tolerance as f32);
             }
-            backward(sources, target, &zbuf, channels, config.depth_tolerance)
+            backward(sources, &poses, target, &zbuf, channels, config.depth_tolerance)
         }
     };
     let holes = mask.data.iter().filter(|&&m| m == 0.0).count();
@@ -307,8 +307,10 @@ fn median_fill(z: &[f32], w: usize, h: usize, tolerance: f32) -> Vec<f32> {
 }
 
 /// Backward mapping: each target pixel with a depth looked up in every source.
+/// `t_tgt_src[k]` carries source k's camera coordinates into the target's.
 fn backward(
     sources: &[Source],
+    t_tgt_src: &[Pose],
     target: &View,
     zbuf: &[f32],
     channels: u32,
@@ -318,13 +320,11 @@ fn backward(
     let (w, h) = (cam.width, cam.height);
     let c = channels as usize;
     let ray_table = (!cam.distortion.is_zero()).then(|| rays(cam));
+    // Per source: its projection, the pose into it, and its centre in the target's frame.
     let lookups: Vec<(Projector, Pose, DVec3)> = sources
         .iter()
-        .map(|s| {
-            let t_src_tgt = relative_pose(target, &s.view);
-            let c_source = relative_pose(&s.view, target).translation;
-            (Projector::new(&s.view.camera), t_src_tgt, c_source)
-        })
+        .zip(t_tgt_src)
+        .map(|(s, pose)| (Projector::new(&s.view.camera), pose.inverse(), pose.translation))
         .collect();
     let mut sum = vec![0.0f32; zbuf.len() * c];
     let mut weight = vec![0.0f32; zbuf.len()];

@@ -251,6 +251,13 @@ pub fn write_png_bytes(path: &Path, w: u32, h: u32, c: u32, bytes: &[u8]) -> Res
     })
 }
 
+/// Writes code values in [0, 1] (what `read` gives for a PNG or JPEG) as an 8-bit PNG, no
+/// encoding applied: the inverse of `read` for 8-bit files.
+pub fn write_png_codes(path: &Path, img: &Image) -> Result<(), Error> {
+    let bytes: Vec<u8> = img.data.iter().map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8).collect();
+    write_png_bytes(path, img.width, img.height, img.channels, &bytes)
+}
+
 /// Writes raw integer sample values (already quantised) as an 8- or 16-bit PNG. Values of 10
 /// or 12 bits are stored in 16-bit samples shifted to the top bits (a 10-bit 1023 is written
 /// 65472), as cameras' 16-bit files hold them, so full scale stays full scale for a reader.

@@ -25,12 +25,12 @@ pub enum IndexKind {
 }
 
 impl std::str::FromStr for IndexKind {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = crate::error::Invalid;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
         match s {
             "kdtree" => Ok(IndexKind::Kdtree),
             "grid" => Ok(IndexKind::Grid),
-            _ => Err(format!("`{s}`: expected kdtree or grid")),
+            _ => Err(format!("`{s}`: expected kdtree or grid").into()),
         }
     }
 }

@@ -314,10 +314,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<calib::Input, T
         let cam_from_world = WorldToCamera(Pose { rotation: r, translation: t - r * origin });
         scene.t_world_cam = cam_from_world.inverse();
         settings.seed = render::sampler::mix64(ctx.seed ^ (k as u64 + 1));
-        let p = scene.t_world_cam;
-        let mut pose = [0.0; 12];
-        pose[..9].copy_from_slice(&p.rotation.to_cols_array());
-        pose[9..].copy_from_slice(&p.translation.to_array());
+        let pose = super::pose_key(&scene.t_world_cam);
         let recipe = ViewRecipe {
             product: "calibrate-grey",
             scene: &digest,

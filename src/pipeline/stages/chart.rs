@@ -229,10 +229,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<Vec<Image>, Tru
     for (k, view) in views.iter().enumerate() {
         scene.t_world_cam = camera_for(&scene.camera, &grid, view);
         settings.seed = render::sampler::mix64(ctx.seed ^ (k as u64 + 1));
-        let p = scene.t_world_cam.0;
-        let mut pose = [0.0; 12];
-        pose[..9].copy_from_slice(&p.rotation.to_cols_array());
-        pose[9..].copy_from_slice(&p.translation.to_array());
+        let pose = super::pose_key(&scene.t_world_cam);
         let recipe = ViewRecipe {
             product: "chart-view",
             scene: &digest,

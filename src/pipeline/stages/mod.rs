@@ -428,6 +428,23 @@ pub fn apply_overrides(
     Ok(())
 }
 
+/// One view's render through a scene's own camera, as the cache keys it (sfm, novel-view).
+#[derive(serde::Serialize)]
+pub struct ViewRecipe<'a> {
+    pub product: &'static str,
+    pub scene: &'a str,
+    pub t_world_cam: [f64; 12],
+    pub settings: SettingsKey,
+}
+
+/// A camera pose as a cache key holds it: the rotation's columns, then the translation.
+pub fn pose_key(p: &crate::math::Pose) -> [f64; 12] {
+    let mut key = [0.0; 12];
+    key[..9].copy_from_slice(&p.rotation.to_cols_array());
+    key[9..].copy_from_slice(&p.translation.to_array());
+    key
+}
+
 /// The render settings a cache key depends on, and the filter a denoised truth render went
 /// through (absent from the key of an unfiltered one, so those keys are as they always were).
 #[derive(serde::Serialize)]

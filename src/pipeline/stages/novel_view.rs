@@ -36,17 +36,18 @@
 
 use super::{
     apply_overrides, run_case, CaseResult, Context, Findings, Settings, SettingsKey, StageError, Synthesis,
+    ViewRecipe,
 };
 use crate::ibr::{self, texture, warp, View};
 use crate::image::Image;
-use crate::math::{CameraToWorld, WorldToCamera};
+use crate::math::WorldToCamera;
 use crate::pipeline::cache::{scene_digest, Pass};
 use crate::pipeline::metric::{Better, Metric};
 use crate::render;
 use crate::sfm::{self, eval};
 use glam::DVec3;
 use nalgebra::Vector3;
-use serde::{Deserialize, Serialize};
+use serde::Deserialize;
 
 /// A `novel-view` case (module docs).
 #[derive(Debug, Deserialize)]
@@ -91,14 +92,6 @@ fn default_texture_size() -> u32 {
 }
 fn default_resolution() -> usize {
     96
-}
-
-#[derive(Serialize)]
-struct ViewRecipe<'a> {
-    product: &'static str,
-    scene: &'a str,
-    t_world_cam: [f64; 12],
-    settings: SettingsKey,
 }
 
 pub struct Input {
@@ -154,15 +147,6 @@ fn check(c: &Config) -> Result<(), StageError> {
     Ok(())
 }
 
-/// The camera at place `f` (0 to 1) on the arc, at height `z`.
-fn camera_at(c: &Config, f: f64, z: f64) -> Result<CameraToWorld, StageError> {
-    let target = DVec3::from_array(c.target);
-    let phi = (-90.0 + c.arc_deg * (f - 0.5)).to_radians();
-    let origin = DVec3::new(target.x + c.radius * phi.cos(), target.y + c.radius * phi.sin(), z);
-    CameraToWorld::look_at(origin, target, DVec3::Z)
-        .ok_or_else(|| StageError::Config(format!("the camera at {origin} cannot look at {target}")))
-}
-
 pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<Input, Truth>, StageError> {
     check(c)?;
     let scene_path = ctx.dir.join(&c.scene);
@@ -182,16 +166,13 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<Input, Truth>, 
     let (mut points, mut normals) = (Vec::new(), Vec::new());
     let mut held = None;
     for (k, &(f, z)) in places.iter().enumerate() {
-        scene.t_world_cam = camera_at(c, f, z)?;
+        scene.t_world_cam =
+            super::sfm::arc_camera(k, DVec3::from_array(c.target), c.radius, z, c.arc_deg, f)?;
         settings.seed = render::sampler::mix64(ctx.seed ^ (k as u64 + 1));
-        let p = scene.t_world_cam.0;
-        let mut pose = [0.0; 12];
-        pose[..9].copy_from_slice(&p.rotation.to_cols_array());
-        pose[9..].copy_from_slice(&p.translation.to_array());
         let recipe = ViewRecipe {
             product: "novel-view-rgb",
             scene: &digest,
-            t_world_cam: pose,
+            t_world_cam: super::pose_key(&scene.t_world_cam),
             settings: SettingsKey::from(&settings),
         };
         let name = format!("view{k:03}.png");

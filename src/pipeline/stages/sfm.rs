@@ -38,7 +38,7 @@
 //! fx −0.007 %, gives both at the noise's scale).
 
 use super::Synthesis;
-use super::{apply_overrides, Context, Findings, SettingsKey, StageError, MAX_RENDERS};
+use super::{apply_overrides, Context, Findings, SettingsKey, StageError, ViewRecipe, MAX_RENDERS};
 use super::{run_case, CaseResult, Settings};
 use crate::math::{CameraToWorld, WorldToCamera};
 use crate::pipeline::cache::{scene_digest, Pass};
@@ -128,14 +128,6 @@ fn default_views() -> usize {
     8
 }
 
-#[derive(Serialize)]
-struct ViewRecipe<'a> {
-    product: &'static str,
-    scene: &'a str,
-    t_world_cam: [f64; 12],
-    settings: SettingsKey,
-}
-
 /// A view's features (a derived cache entry): its render and the detector's settings.
 #[derive(Serialize)]
 struct FeaturesRecipe<'a> {
@@ -167,6 +159,23 @@ struct PairsRecipe<'a, R> {
     cameras: Vec<crate::math::CameraModel>,
     /// `mapper::Options` as Debug prints it.
     options: &'a str,
+}
+
+/// View `k`'s camera at place `f` (0 to 1) on a horizontal arc of `arc_deg` centred on the −y
+/// side of `target`, at distance `radius` from it and height `height`, looking at it.
+pub(super) fn arc_camera(
+    k: usize,
+    target: DVec3,
+    radius: f64,
+    height: f64,
+    arc_deg: f64,
+    f: f64,
+) -> Result<CameraToWorld, StageError> {
+    let phi = (-90.0 + arc_deg * (f - 0.5)).to_radians();
+    let origin = DVec3::new(target.x + radius * phi.cos(), target.y + radius * phi.sin(), height);
+    CameraToWorld::look_at(origin, target, DVec3::Z).ok_or_else(|| {
+        StageError::Config(format!("view {k}: the camera at {origin} cannot look at {target}"))
+    })
 }
 
 /// Images on each side of a block of pairs the matches pass hands out: 8 × 8 pairs, under a
@@ -226,19 +235,10 @@ fn synthesize_given(
     let mut poses = Vec::new();
     for k in 0..c.views {
         let f = k as f64 / (c.views - 1) as f64;
-        let phi = (-90.0 + c.arc_deg * (f - 0.5)).to_radians();
-        let r = c.radius - c.forward * f;
-        let origin = DVec3::new(target.x + r * phi.cos(), target.y + r * phi.sin(), c.height);
-        let Some(world_from_cam) = CameraToWorld::look_at(origin, target, DVec3::Z) else {
-            return Err(StageError::Config(format!(
-                "view {k}: the camera at {origin} cannot look at {target}"
-            )));
-        };
+        let world_from_cam = arc_camera(k, target, c.radius - c.forward * f, c.height, c.arc_deg, f)?;
         scene.t_world_cam = world_from_cam;
         settings.seed = render::sampler::mix64(ctx.seed ^ (k as u64 + 1));
-        let mut pose = [0.0; 12];
-        pose[..9].copy_from_slice(&world_from_cam.rotation.to_cols_array());
-        pose[9..].copy_from_slice(&world_from_cam.translation.to_array());
+        let pose = super::pose_key(&world_from_cam);
         let name = format!("view{k:03}.png");
         let recipe = FeaturesRecipe {
             product: "sfm-features",
