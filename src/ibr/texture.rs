@@ -181,29 +181,6 @@ fn sharpness(img: &Image) -> f64 {
     sum / ((w - 2) * (h - 2)) as f64
 }
 
-/// A photograph's colour at `px`, bilinear (`px` inside the frame, at least half a pixel from
-/// its last centre).
-fn bilinear(img: &Image, px: DVec2) -> [f32; 4] {
-    let (w, h, c) = (img.width as usize, img.height as usize, img.channels as usize);
-    let x = px.x.clamp(0.0, (w - 1) as f64);
-    let y = px.y.clamp(0.0, (h - 1) as f64);
-    let (x0, y0) = (x.floor() as usize, y.floor() as usize);
-    let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-    let (fx, fy) = ((x - x0 as f64) as f32, (y - y0 as f64) as f32);
-    let mut out = [0.0f32; 4];
-    for (xx, yy, b) in [
-        (x0, y0, (1.0 - fx) * (1.0 - fy)),
-        (x1, y0, fx * (1.0 - fy)),
-        (x0, y1, (1.0 - fx) * fy),
-        (x1, y1, fx * fy),
-    ] {
-        for (o, &v) in out.iter_mut().zip(&img.data[(yy * w + xx) * c..][..c]) {
-            *o += b * v;
-        }
-    }
-    out
-}
-
 /// What each photograph makes of the texel at `x` with normal `n` (module docs).
 struct Looker<'a> {
     photos: &'a [Photo<'a>],
@@ -242,7 +219,7 @@ impl Looker<'_> {
             out.push(Look {
                 view: v as u32,
                 weight: footprint * footprint * self.sharpness[v],
-                colour: bilinear(p.image, px),
+                colour: p.image.bilinear(px),
             });
         }
     }
@@ -572,7 +549,7 @@ pub fn draw(mesh: &Mesh, atlas: &Atlas, texture: &Image, view: &View) -> (Image,
         let [b1, b2] = r.bary[i].map(|v| v as f64);
         let uv = a * (1.0 - b1 - b2) + b * b1 + cc * b2;
         // Texel centres are at +0.5.
-        let colour = bilinear(texture, uv - DVec2::splat(0.5));
+        let colour = texture.bilinear(uv - DVec2::splat(0.5));
         px.copy_from_slice(&colour[..c]);
         m[0] = 1.0;
     });

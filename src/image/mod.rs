@@ -56,6 +56,30 @@ impl Image {
         sums.iter().map(|s| s / n).collect()
     }
 
+    /// The first four channels at `px` (pixel centres at integer coordinates), bilinear;
+    /// clamped to the last pixel centres, so a point outside the frame takes the edge's value.
+    pub fn bilinear(&self, px: glam::DVec2) -> [f32; 4] {
+        let (w, h, c) = (self.width as usize, self.height as usize, (self.channels as usize).min(4));
+        let x = px.x.clamp(0.0, (w - 1) as f64);
+        let y = px.y.clamp(0.0, (h - 1) as f64);
+        let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+        let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+        let (fx, fy) = ((x - x0 as f64) as f32, (y - y0 as f64) as f32);
+        let mut out = [0.0f32; 4];
+        for (xx, yy, b) in [
+            (x0, y0, (1.0 - fx) * (1.0 - fy)),
+            (x1, y0, fx * (1.0 - fy)),
+            (x0, y1, (1.0 - fx) * fy),
+            (x1, y1, fx * fy),
+        ] {
+            let i = (yy * w + xx) * self.channels as usize;
+            for (o, &v) in out.iter_mut().zip(&self.data[i..i + c]) {
+                *o += b * v;
+            }
+        }
+        out
+    }
+
     pub fn has_non_finite(&self) -> bool {
         self.data.iter().any(|v| !v.is_finite())
     }

@@ -56,6 +56,27 @@ pub fn pairwise_rotation_errors(est: &[Option<Pose>], truth: &[WorldToCamera]) -
     out
 }
 
+/// Relative rotation errors over the same pairs as `pairwise_rotation_errors`, as rotation
+/// vectors (axis × angle in degrees, camera j's frame), keyed by the pair (i, j): the
+/// components a first-order propagation can add, where the angles are their norms.
+pub fn pairwise_rotation_error_vectors(
+    est: &[Option<Pose>],
+    truth: &[WorldToCamera],
+) -> Vec<((usize, usize), [f64; 3])> {
+    let truth: Vec<Pose> = truth.iter().map(Pose::from).collect();
+    let mut out = Vec::new();
+    for i in 0..est.len() {
+        for j in i + 1..est.len() {
+            if let (Some(a), Some(b)) = (&est[i], &est[j]) {
+                let e = b.r * a.r.transpose() * (truth[j].r * truth[i].r.transpose()).transpose();
+                let v = nalgebra::Rotation3::from_matrix_unchecked(e).scaled_axis().map(f64::to_degrees);
+                out.push(((i, j), [v.x, v.y, v.z]));
+            }
+        }
+    }
+    out
+}
+
 /// Camera-centre errors after aligning the registered centres to the truth's by a
 /// similarity, in the truth's units; None when fewer than 3 are registered.
 pub fn centre_errors(est: &[Option<Pose>], truth: &[WorldToCamera]) -> Option<Vec<f64>> {

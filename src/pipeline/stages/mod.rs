@@ -16,6 +16,7 @@
 //! stage is one file here and one line in `REGISTRY`.
 
 pub mod calibrate;
+pub mod chain;
 pub mod chart;
 pub mod color;
 pub mod hdr;
@@ -23,6 +24,8 @@ pub mod novel_view;
 pub mod photometric;
 pub mod render;
 pub mod sfm;
+
+pub use chain::{from_case, Exports};
 
 /// What a pipeline entry's own settings do: one implementation per kind of entry.
 pub trait Settings: std::fmt::Debug + Send + Sync {
@@ -45,67 +48,6 @@ pub trait Settings: std::fmt::Debug + Send + Sync {
     fn provides(&self) -> &'static [&'static str] {
         &[]
     }
-}
-
-/// What a case hands on to the later cases that name it (`from:CASE`): its estimate, and the
-/// truth beside it, so the later case can say how far off what it inherits is.
-#[derive(Clone, Debug, Default)]
-pub struct Exports {
-    /// `camera`: the calibrated camera, and the true one.
-    pub camera: Option<(crate::math::CameraModel, crate::math::CameraModel)>,
-}
-
-/// A chained case's result: the chained run's metrics under their names, the alone run's as
-/// `alone_<name>`, and for each of the `errors` both runs measured the error inherited,
-/// `inherited_<name>` = chained − alone; `upstream` (what was inherited) and the inherited
-/// errors as a note; the two runs' times added.
-pub fn chained_result(chained: CaseResult, alone: CaseResult, errors: &[&str], upstream: &str) -> CaseResult {
-    let mut metrics = chained.metrics.clone();
-    for a in &alone.metrics {
-        metrics.push(Metric { name: format!("alone_{}", a.name), ..a.clone() });
-    }
-    let mut lines = Vec::new();
-    for name in errors {
-        let value = |r: &CaseResult| r.metrics.iter().find(|m| m.name == *name).and_then(|m| m.value);
-        let metric = chained.metrics.iter().find(|m| m.name == *name);
-        if let (Some(cv), Some(av), Some(m)) = (value(&chained), value(&alone), metric) {
-            metrics.push(Metric::new(&format!("inherited_{name}"), cv - av, &m.unit, m.better));
-            lines.push(format!("{name} {av:.6} alone, {cv:.6} chained ({:+.6} inherited)", cv - av));
-        }
-    }
-    let mut notes = vec![format!("{upstream} {}.", lines.join("; "))];
-    notes.extend(chained.notes);
-    let mut timings_s = chained.timings_s;
-    for (k, v) in alone.timings_s {
-        *timings_s.entry(k).or_insert(0.0) += v;
-    }
-    let mut files = chained.files;
-    files.extend(alone.files);
-    CaseResult { metrics, notes, timings_s, files, exports: chained.exports }
-}
-
-/// What an inherited camera is off by, for a chained case's notes.
-pub fn camera_error(
-    source: &str,
-    estimate: &crate::math::CameraModel,
-    truth: &crate::math::CameraModel,
-) -> String {
-    let (e, t) = (&estimate.intrinsics, &truth.intrinsics);
-    let (ed, td) = (estimate.distortion.to_array(), truth.distortion.to_array());
-    format!(
-        "Chained: the camera from case `{source}` is off the truth by fx {:+.4} %, fy {:+.4} %, cx {:+.3} px, cy {:+.3} px, k1 {:+.5}, k2 {:+.5}; inherited:",
-        100.0 * (e.fx - t.fx) / t.fx,
-        100.0 * (e.fy - t.fy) / t.fy,
-        e.cx - t.cx,
-        e.cy - t.cy,
-        ed[0] - td[0],
-        ed[1] - td[1]
-    )
-}
-
-/// A field's `from:CASE`, the case it names; `None` for any other value.
-pub fn from_case(value: &Option<String>) -> Option<String> {
-    value.as_deref().and_then(|v| v.strip_prefix("from:")).map(str::to_string)
 }
 
 /// A stage of a pipeline entry with its settings.
@@ -341,6 +283,8 @@ pub struct CaseResult {
     pub files: Vec<(PathBuf, Kept)>,
     /// What the case hands on to later cases.
     pub exports: Exports,
+    /// The estimate's errors item by item, for a chained case's prediction (`chain::Linear`).
+    pub linear: Option<chain::Linear>,
 }
 
 /// A file a case asks to keep in the output folder, written with the report.
@@ -358,6 +302,9 @@ pub struct Findings {
     pub metrics: Vec<Metric>,
     pub notes: Vec<String>,
     pub files: Vec<(PathBuf, Kept)>,
+    /// The estimate's errors item by item (`chain::Linear`), from a stage whose chained cases
+    /// predict their inherited error from them.
+    pub linear: Option<chain::Linear>,
 }
 
 /// Runs one case: synthesis (or reading its data), solve, validation, each timed.
@@ -392,12 +339,20 @@ pub fn run_case_exporting<I, T, O>(
     found.metrics.extend(more.metrics);
     found.notes.extend(more.notes);
     found.files.extend(more.files);
+    let linear = more.linear.or(found.linear);
     let timings_s = BTreeMap::from([
         ("render".into(), render_s),
         ("solve".into(), solve_s),
         ("validate".into(), validate_s),
     ]);
-    Ok(CaseResult { metrics: found.metrics, notes: found.notes, timings_s, files: found.files, exports })
+    Ok(CaseResult {
+        metrics: found.metrics,
+        notes: found.notes,
+        timings_s,
+        files: found.files,
+        exports,
+        linear,
+    })
 }
 
 /// Most views (calibrate, sfm) or lights (photometric) one case may ask for: each is a render.

@@ -16,6 +16,17 @@
 //! The solver is `photometric::run`, the function `lumen ps` calls; it never sees the truth.
 //! Each light's render goes through the render cache.
 //!
+//! A chained case (`camera = "from:CASE"`, `chain`) is given a calibrated camera, as a user
+//! who calibrated first is: each render (made through the scene's true camera, as a
+//! photograph is) is undistorted through it onto a pinhole of its own intrinsics (OpenCV's
+//! `undistort` with the same camera matrix), bilinear, and the pinhole's rays give the views.
+//! The truth is taken on those rays, with the true pose: the normal of the surface a pixel's
+//! believed ray meets, which is what a normal map is used as (integrated to depth, fused with
+//! a reconstruction). A wrong calibration so misplaces the normals it recovers, besides
+//! bending the views. The mask is the object on those rays and, as the undistorted image holds
+//! it, at all four taps of the pixel's source. Run alone, the same case undistorts through the
+//! true camera.
+//!
 //! A case with `dataset` instead of `scene` (`DataConfig`) reads a real capture in DiLiGenT's
 //! layout, as `lumen ps --dataset` does, and compares with the dataset's own ground-truth
 //! normals (`Normal_gt.mat`); it has no albedo truth. When the folder is absent (no
@@ -34,12 +45,13 @@ use super::Synthesis;
 use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError, MAX_RENDERS};
 use super::{run_case, CaseResult, Settings};
 use crate::image::Image;
+use crate::math::CameraModel;
 use crate::photometric::{self, Model, Observations};
 use crate::pipeline::cache::scene_digest;
 use crate::pipeline::cache::Pass;
 use crate::pipeline::metric::{Better, Metric};
 use crate::render::{self, scene::Light};
-use glam::{DVec3, Vec3A};
+use glam::{DVec2, DVec3, Vec3A};
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Deserialize)]
@@ -87,6 +99,15 @@ pub struct Config {
     /// orthographic view, so only the Lambertian models give the stage's numbers there.
     #[serde(default)]
     pub save_dataset: bool,
+    /// `"from:CASE"`: the camera an earlier calibrate case estimated (a chained case). The
+    /// renders, made through the scene's true camera, are undistorted through it onto a
+    /// pinhole of its intrinsics, and its rays give the views and the truth (module docs). It
+    /// runs alone too, undistorted through the true camera. The calibrated camera must be
+    /// this scene's.
+    pub camera: Option<String>,
+    /// A deliberate error added to the inherited camera (a chained case only): its focal
+    /// lengths scaled by 1 + `focal_rel`, `k1` added to its k1 (default none).
+    pub perturb: Option<super::chain::Perturb>,
 }
 
 /// Largest angle between a pixel's mean normal and any normal in its footprint for the
@@ -148,6 +169,8 @@ pub fn light_directions(n: usize, elevation_deg: [f64; 2]) -> Vec<DVec3> {
 /// What validation compares with, per masked pixel: the footprint-mean normal (dataset
 /// frame) and the renderer's albedo kd.
 pub struct Truth {
+    /// The masked pixels (row-major indices), as the input has them.
+    pixels: Vec<usize>,
     normals: Vec<DVec3>,
     /// `None` for a real dataset.
     albedo: Option<Vec<[f64; 3]>>,
@@ -173,6 +196,17 @@ struct LightRecipe<'a> {
 }
 
 pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<photometric::Input, Truth>, StageError> {
+    synthesize_given(c, ctx, None)
+}
+
+/// `synthesize`, with the renders undistorted through `given`'s first camera (an upstream
+/// case's estimate, or the truth it had, which is the second) onto a pinhole of its
+/// intrinsics (module docs).
+fn synthesize_given(
+    c: &Config,
+    ctx: &Context,
+    given: Option<(CameraModel, CameraModel)>,
+) -> Result<Synthesis<photometric::Input, Truth>, StageError> {
     let model: Model = c.model.parse()?;
     check_start_iterations(c.start_iterations)?;
     if !(3..=MAX_RENDERS).contains(&c.lights) {
@@ -233,14 +267,48 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<photometric::In
         )));
     }
     let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
+    let true_camera = scene.camera;
+    // Undistorted through a given camera: each pixel's source in the render, and the object
+    // as the render holds it (all four bilinear taps on the object).
+    let (mut sources, mut undistort) = (None, None);
+    if let Some((camera, upstream_truth)) = given {
+        super::chain::check_same_camera(c.camera.as_deref().unwrap_or(""), &upstream_truth, &true_camera)?;
+        if scene.lens.is_some() {
+            return Err(StageError::Config(format!(
+                "{}: a thin lens cannot be undistorted through a calibrated pinhole camera",
+                c.scene
+            )));
+        }
+        let seen = render::truth(&scene, None);
+        let pinhole = CameraModel { distortion: Default::default(), ..camera };
+        let at: Vec<Option<DVec2>> = (0..w * h)
+            .map(|i| {
+                let p = DVec2::new((i % w) as f64, (i / w) as f64);
+                let s = crate::calib::undistort::source_pixel(&camera, &pinhole.intrinsics, p);
+                let inside = s.x >= 0.0 && s.y >= 0.0 && s.x < (w - 1) as f64 && s.y < (h - 1) as f64;
+                let (x0, y0) = (s.x.floor() as usize, s.y.floor() as usize);
+                let object = |x: usize, y: usize| seen.id.data[y * w + x] > 0.0;
+                (inside
+                    && object(x0, y0)
+                    && object(x0 + 1, y0)
+                    && object(x0, y0 + 1)
+                    && object(x0 + 1, y0 + 1))
+                .then_some(s)
+            })
+            .collect();
+        sources = Some(at);
+        undistort = Some((camera, pinhole.intrinsics));
+        scene.camera = pinhole;
+    }
 
-    // Truth and mask.
+    // Truth and mask, in the frame the solver sees.
     let truth = render::truth(&scene, None);
     let object = |x: usize, y: usize| truth.id.data[y * w + x] > 0.0;
     let pixels: Vec<usize> = (1..h.saturating_sub(1))
         .flat_map(|y| (1..w.saturating_sub(1)).map(move |x| (x, y)))
         .filter(|&(x, y)| (0..3).all(|dy| (0..3).all(|dx| object(x + dx - 1, y + dy - 1))))
         .map(|(x, y)| y * w + x)
+        .filter(|&i| sources.as_ref().is_none_or(|s: &Vec<Option<DVec2>>| s[i].is_some()))
         .collect();
     if pixels.is_empty() {
         return Err(StageError::Config(format!("{}: the object covers no whole pixel", c.scene)));
@@ -279,6 +347,8 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<photometric::In
             to_dataset(-ray)
         })
         .collect();
+    // The renders are photographs through the true camera.
+    scene.camera = true_camera;
     let dirs = light_directions(c.lights, c.elevation_deg);
     let rot = scene.t_world_cam.rotation;
     let bar = render::progress_bar(c.lights as u64, &format!("{} lights", ctx.case), ctx.progress);
@@ -309,12 +379,19 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<photometric::In
             return Err(StageError::Config(format!("light {j}: the cached render has the wrong size")));
         };
         for (p, &i) in pixels.iter().enumerate() {
-            let v = &img.data[3 * i..3 * i + 3];
+            let v = match sources.as_ref().and_then(|s| s[i]) {
+                Some(s) => img.bilinear(s),
+                None => [img.data[3 * i], img.data[3 * i + 1], img.data[3 * i + 2], 0.0],
+            };
             // Linear radiance without a sensor: nothing is clipped, whatever its size.
             obs.set_linear(p, j, [v[0], v[1], v[2]], [c.irradiance; 3]);
         }
         if c.save_dataset {
-            kept_images.push((format!("{:03}.exr", j + 1), img.clone()));
+            let kept = match &undistort {
+                Some((camera, new)) => crate::calib::undistort::undistort_image(img, camera, new),
+                None => img.clone(),
+            };
+            kept_images.push((format!("{:03}.exr", j + 1), kept));
         }
         bar.inc(1);
     }
@@ -350,7 +427,8 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<photometric::In
         files.extend(images.into_iter().map(|(n, img)| (folder.join(n), Kept::Image(img))));
         files.extend(bytes.into_iter().map(|(n, b)| (folder.join(n), Kept::Bytes(b))));
     }
-    Ok(Some((input, Truth { normals, albedo }, Findings { notes, files, ..Default::default() })))
+    let pixels = input.pixels.clone();
+    Ok(Some((input, Truth { pixels, normals, albedo }, Findings { notes, files, ..Default::default() })))
 }
 
 /// Reads a real dataset (`DataConfig`), keeping its ground truth apart from the input.
@@ -376,7 +454,8 @@ pub fn read(c: &DataConfig, ctx: &Context) -> Result<(photometric::Input, Truth,
         input.height,
         model.name()
     )];
-    Ok((input, Truth { normals, albedo: None }, Findings { notes, ..Default::default() }))
+    let pixels = input.pixels.clone();
+    Ok((input, Truth { pixels, normals, albedo: None }, Findings { notes, ..Default::default() }))
 }
 
 pub fn solve(c: &Config, input: &photometric::Input) -> Result<Output, StageError> {
@@ -402,6 +481,15 @@ pub fn validate(out: &Output, truth: &Truth) -> Findings {
     let mut f = Findings::default();
     let sm = &out.main.summary;
     let acc = photometric::accuracy(&out.main, &truth.normals);
+    // Per solved pixel its normal and the truth's, for a chained case's prediction.
+    let items = truth
+        .pixels
+        .iter()
+        .zip(&out.main.normals)
+        .zip(&truth.normals)
+        .filter_map(|((&i, n), t)| n.map(|n| (i as u64, vec![n.x, n.y, n.z, t.x, t.y, t.z])))
+        .collect();
+    f.linear = Some(super::chain::Linear { items, headline: mean_angular_error_deg });
     let none = "no solved pixel";
     let m = &mut f.metrics;
     m.push(Metric::maybe(
@@ -478,15 +566,49 @@ pub fn validate(out: &Output, truth: &Truth) -> Findings {
     f
 }
 
+/// `mean_angular_error_deg` from pixels' normals and truth normals (`chain::Linear`), as
+/// `photometric::accuracy` takes it.
+fn mean_angular_error_deg(items: &mut dyn Iterator<Item = &[f64]>) -> Option<f64> {
+    let (normals, truth): (Vec<Option<DVec3>>, Vec<DVec3>) = items
+        .filter(|v| v.len() == 6)
+        .map(|v| (DVec3::new(v[0], v[1], v[2]).try_normalize(), DVec3::new(v[3], v[4], v[5])))
+        .unzip();
+    let errors = photometric::angular_errors(&normals, &truth);
+    (!errors.is_empty()).then(|| errors.iter().sum::<f64>() / errors.len() as f64)
+}
+
 impl Settings for Config {
     fn headline(&self) -> &'static str {
         "mean_angular_error_deg"
     }
     fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
-        run_case(|| synthesize(self, ctx), |i| solve(self, i), validate)
+        let Some((source, estimate, truth)) =
+            super::chain::inherited_camera(&self.camera, self.perturb, ctx)?
+        else {
+            return run_case(|| synthesize(self, ctx), |i| solve(self, i), validate);
+        };
+        let chain = super::chain::Chain {
+            source: &source,
+            estimate,
+            truth,
+            headline: "mean_angular_error_deg",
+            unit: "°",
+            errors: &[
+                "mean_angular_error_deg",
+                "median_angular_error_deg",
+                "mean_albedo_rel_err",
+                "masked_share",
+            ],
+        };
+        super::chain::run_chained(&chain, |given| {
+            run_case(|| synthesize_given(self, ctx, Some((given, truth))), |i| solve(self, i), validate)
+        })
     }
     fn share(&self, ctx: &Context, pass: Pass) -> Option<Result<(), StageError>> {
         (pass == Pass::Renders).then(|| synthesize(self, ctx).map(|_| ()))
+    }
+    fn upstream(&self) -> Vec<(&'static str, String, &'static str)> {
+        super::from_case(&self.camera).map(|s| vec![("camera", s, "camera")]).unwrap_or_default()
     }
 }
 

@@ -30,12 +30,11 @@
 //! `centre_err_max_rel`; with guessed intrinsics `focal_err_rel`, |f − f_true|/f_true against
 //! the true fx, and on renders `k1_err`, |k1 − k1_true|; and the phases' times as a note.
 //!
-//! A chained case (`camera = "from:CASE"`, docs/pipeline.md) runs four times: chained, alone,
-//! and twice for the sensitivity of `rotation_err_median_deg` to the inherited focal length
-//! and k1, each moved alone on the true camera. Its prediction of the inherited error is the
-//! sum of the slopes times the inherited errors; it is first order, and meaningful where the
-//! inherited error is above the solver's own noise (a calibration as good as the session's,
-//! fx −0.007 %, gives both at the noise's scale).
+//! A chained case (`camera = "from:CASE"`, `chain`) is given the calibrated camera as its
+//! intrinsics; it runs alone too, and once per camera parameter for the sensitivity of
+//! `rotation_err_median_deg` (`chain::run_chained`). The prediction is meaningful where the
+//! inherited error is above the solver's own noise: a calibration as good as the session's
+//! gives both at the noise's scale.
 
 use super::Synthesis;
 use super::{apply_overrides, Context, Findings, SettingsKey, StageError, ViewRecipe, MAX_RENDERS};
@@ -97,32 +96,8 @@ pub struct RenderConfig {
     pub camera: Option<String>,
     /// A deliberate error added to the inherited camera (a chained case only): its focal
     /// lengths scaled by 1 + `focal_rel`, `k1` added to its k1 (default none).
-    pub perturb: Option<Perturb>,
+    pub perturb: Option<super::chain::Perturb>,
 }
-
-/// `RenderConfig::perturb`.
-#[derive(Clone, Copy, Debug, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Perturb {
-    #[serde(default)]
-    pub focal_rel: f64,
-    #[serde(default)]
-    pub k1: f64,
-}
-
-/// `camera` with its focal lengths scaled by 1 + `focal_rel` and `k1` added.
-fn perturbed(camera: crate::math::CameraModel, focal_rel: f64, k1: f64) -> crate::math::CameraModel {
-    let mut c = camera;
-    c.intrinsics.fx *= 1.0 + focal_rel;
-    c.intrinsics.fy *= 1.0 + focal_rel;
-    c.distortion.k1 += k1;
-    c
-}
-
-/// The sensitivity steps when the inherited error is smaller: 0.1 % of the focal length and
-/// 0.01 of k1.
-const STEP_FOCAL_REL: f64 = 1e-3;
-const STEP_K1: f64 = 1e-2;
 
 fn default_views() -> usize {
     8
@@ -218,14 +193,7 @@ fn synthesize_given(
     apply_overrides(&mut settings, c.spp, None)?;
     let camera = scene.camera;
     if let Some((_, upstream_truth)) = &inherited {
-        if *upstream_truth != camera {
-            return Err(StageError::Config(format!(
-                "camera = \"{}\": that case calibrated a camera of {}×{} px, fx {}, k1 {}; this scene's is {}×{} px, fx {}, k1 {}: a chained case must see through the camera its source calibrated",
-                c.camera.as_deref().unwrap_or(""),
-                upstream_truth.width, upstream_truth.height, upstream_truth.intrinsics.fx, upstream_truth.distortion.k1,
-                camera.width, camera.height, camera.intrinsics.fx, camera.distortion.k1
-            )));
-        }
+        super::chain::check_same_camera(c.camera.as_deref().unwrap_or(""), upstream_truth, &camera)?;
     }
     let cfg = config(c.max_features, c.guess_intrinsics, &c.refine, c.guided_matching, &c.pairs)?;
     let mut recipes = Vec::new();
@@ -587,6 +555,12 @@ pub fn validate(out: &sfm::Output, truth: &Truth) -> Findings {
     m.push(Metric::maybe("reprojection_rms_px", rms, "px", Better::Lower, "no point"));
     let mut rot = eval::pairwise_rotation_errors(&rec.poses, &truth.poses);
     rot.sort_by(f64::total_cmp);
+    // The same errors as rotation vectors, for a chained case's prediction.
+    let items = eval::pairwise_rotation_error_vectors(&rec.poses, &truth.poses)
+        .into_iter()
+        .map(|((i, j), v)| (((i as u64) << 32) | j as u64, v.to_vec()))
+        .collect();
+    f.linear = Some(super::chain::Linear { items, headline: median_rotation_error_deg });
     let none = "fewer than 2 images registered";
     m.push(Metric::maybe(
         "rotation_err_median_deg",
@@ -646,22 +620,22 @@ pub fn validate(out: &sfm::Output, truth: &Truth) -> Findings {
     f
 }
 
+/// `rotation_err_median_deg` from pairs' rotation-error vectors (`chain::Linear`): the norms'
+/// upper median, as the metric takes it.
+fn median_rotation_error_deg(items: &mut dyn Iterator<Item = &[f64]>) -> Option<f64> {
+    let mut norms: Vec<f64> = items.map(|v| v.iter().map(|x| x * x).sum::<f64>().sqrt()).collect();
+    norms.sort_by(f64::total_cmp);
+    norms.get(norms.len() / 2).copied()
+}
+
 impl Settings for RenderConfig {
     fn headline(&self) -> &'static str {
         "rotation_err_median_deg"
     }
     fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
-        let Some(source) = super::from_case(&self.camera) else {
-            if let Some(v) = &self.camera {
-                return Err(StageError::Config(format!(
-                    "camera = \"{v}\": expected \"from:CASE\", a calibrate case earlier in the file (a rendered case's true camera is its scene's)"
-                )));
-            }
-            if self.perturb.is_some() {
-                return Err(StageError::Config(
-                    "perturb: only on a chained case (camera = \"from:CASE\"), whose inherited camera it moves".into(),
-                ));
-            }
+        let Some((source, estimate, truth)) =
+            super::chain::inherited_camera(&self.camera, self.perturb, ctx)?
+        else {
             return run_case(|| synthesize(self, ctx), |i| solve_render(self, i), validate);
         };
         if self.guess_intrinsics {
@@ -669,89 +643,26 @@ impl Settings for RenderConfig {
                 "camera = \"from:{source}\" and guess_intrinsics = true: a chained case is given its source's camera, not a guess"
             )));
         }
-        let Some((estimate, truth)) = ctx.upstream.get(&source).and_then(|e| e.camera) else {
-            return Err(StageError::Config(format!(
-                "camera = \"from:{source}\": case `{source}` handed on no camera (it failed or ended in a declared error)"
-            )));
+        let chain = super::chain::Chain {
+            source: &source,
+            estimate,
+            truth,
+            headline: "rotation_err_median_deg",
+            unit: "°",
+            errors: &[
+                "rotation_err_median_deg",
+                "rotation_err_max_deg",
+                "centre_err_max_rel",
+                "reprojection_rms_px",
+            ],
         };
-        let estimate = match self.perturb {
-            Some(p)
-                if p.focal_rel.is_finite()
-                    && p.k1.is_finite()
-                    && p.focal_rel.abs() < 0.5
-                    && p.k1.abs() < 1.0 =>
-            {
-                perturbed(estimate, p.focal_rel, p.k1)
-            }
-            Some(p) => {
-                return Err(StageError::Config(format!(
-                    "perturb = {{ focal_rel = {}, k1 = {} }}: expected |focal_rel| < 0.5 and |k1| < 1",
-                    p.focal_rel, p.k1
-                )))
-            }
-            None => estimate,
-        };
-        let run_given = |given: crate::math::CameraModel| {
+        super::chain::run_chained(&chain, |given| {
             run_case(
                 || synthesize_given(self, ctx, Some((given, truth))),
                 |i| solve_render(self, i),
                 validate,
             )
-        };
-        let chained = run_given(estimate)?;
-        let alone = run_case(|| synthesize(self, ctx), |i| solve_render(self, i), validate)?;
-        // Sensitivity of the headline error to each inherited parameter, one at a time: the
-        // true camera with that parameter moved by the inherited error (or by the step, when
-        // the error is smaller, and scaled back), against the alone run.
-        let headline = "rotation_err_median_deg";
-        let value = |r: &CaseResult| r.metrics.iter().find(|m| m.name == headline).and_then(|m| m.value);
-        let focal = (estimate.intrinsics.fx - truth.intrinsics.fx) / truth.intrinsics.fx;
-        let k1 = estimate.distortion.k1 - truth.distortion.k1;
-        let mut sensitivity = Vec::new();
-        for (name, error, step) in [("focal_rel", focal, STEP_FOCAL_REL), ("k1", k1, STEP_K1)] {
-            let delta = if error.abs() > step { error } else { step.copysign(error) };
-            let moved =
-                if name == "k1" { perturbed(truth, 0.0, delta) } else { perturbed(truth, delta, 0.0) };
-            let run = run_given(moved)?;
-            let slope = match (value(&run), value(&alone)) {
-                (Some(e), Some(a)) => Some((e - a) / delta),
-                _ => None,
-            };
-            sensitivity.push((name, error, slope));
-        }
-        let errors =
-            ["rotation_err_median_deg", "rotation_err_max_deg", "centre_err_max_rel", "reprojection_rms_px"];
-        let mut result =
-            super::chained_result(chained, alone, &errors, &super::camera_error(&source, &estimate, &truth));
-        let mut predicted = Some(0.0);
-        for (name, error, slope) in &sensitivity {
-            let metric = format!("sensitivity_{headline}_per_{name}");
-            result.metrics.push(match slope {
-                Some(s) => Metric::new(&metric, *s, "° per unit", Better::Lower),
-                None => Metric::missing(&metric, "° per unit", Better::Lower, "no rotation error to compare"),
-            });
-            predicted = predicted.zip(*slope).map(|(p, s)| p + s * error);
-        }
-        result.metrics.push(Metric::maybe(
-            &format!("predicted_inherited_{headline}"),
-            predicted,
-            "°",
-            Better::Lower,
-            "no sensitivity",
-        ));
-        result.notes.push(format!(
-            "Sensitivity of {headline}: {}; predicted inherited {}.",
-            sensitivity
-                .iter()
-                .map(|(n, e, s)| format!(
-                    "{} ° per unit of {n} (inherited {n} {e:+.5})",
-                    s.map_or("—".into(), |s| format!("{s:.4}"))
-                ))
-                .collect::<Vec<_>>()
-                .join(", "),
-            predicted.map_or("—".into(), |p| format!("{p:+.6}°"))
-        ));
-        Ok(result)
+        })
     }
     fn upstream(&self) -> Vec<(&'static str, String, &'static str)> {
         super::from_case(&self.camera).map(|s| vec![("camera", s, "camera")]).unwrap_or_default()

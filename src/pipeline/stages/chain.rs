@@ -1,0 +1,301 @@
+//! Chained cases (docs/pipeline.md): a case that names an earlier one (`camera =
+//! "from:CASE"`) is given that case's output, never its truth. It also runs alone (upstream
+//! from truth), and the report shows both and the error it inherits, with the sensitivity
+//! that predicts it: the case run again with the true upstream moved by the inherited error
+//! in one parameter at a time (or by a step, when that error is smaller).
+//!
+//! The headline error's secant slope per parameter is reported. The prediction is made one
+//! level down, where the stage gives its errors item by item (`Linear`: per pixel, per pair of
+//! images): each item's error components ε are carried to first order,
+//! ε ≈ ε_alone + Σ_i (ε_i − ε_alone)·e_i/δ_i for the inherited errors e_i and steps δ_i, and
+//! the headline is computed from them. A headline error is a norm, and norms of errors that
+//! partly cancel (a focal length too long, a principal point shifted back) do not add; their
+//! components do. Where a stage gives no items, the prediction is Σ_i slope_i·e_i. Either is
+//! first order, and meaningful where the inherited error is above the stage's own noise.
+
+use super::{CaseResult, Context, StageError};
+use crate::math::CameraModel;
+use crate::pipeline::metric::{Better, Metric};
+use serde::Deserialize;
+
+/// What a case hands on to the later cases that name it (`from:CASE`): its estimate, and the
+/// truth beside it, so the later case can say how far off what it inherits is.
+#[derive(Clone, Debug, Default)]
+pub struct Exports {
+    /// `camera`: the calibrated camera, and the true one.
+    pub camera: Option<(CameraModel, CameraModel)>,
+}
+
+/// A run's errors item by item (module docs): per item (a pixel, a pair of images) by its key,
+/// the components of its error, which move smoothly with the inherited camera; and the
+/// headline error computed from such items.
+#[derive(Clone, Debug)]
+pub struct Linear {
+    pub items: std::collections::BTreeMap<u64, Vec<f64>>,
+    pub headline: fn(&mut dyn Iterator<Item = &[f64]>) -> Option<f64>,
+}
+
+/// The first-order prediction of the headline from the alone run's items and each moved
+/// run's, with its weight e_i/δ_i, over the items every run has; and the alone run's headline
+/// over the same items.
+fn predict(alone: &Linear, moved: &[(&Linear, f64)]) -> Option<(f64, f64)> {
+    let mut base = Vec::new();
+    let mut predicted = Vec::new();
+    'items: for (key, a) in &alone.items {
+        let mut p = a.clone();
+        for (run, weight) in moved {
+            let Some(v) = run.items.get(key).filter(|v| v.len() == a.len()) else {
+                continue 'items;
+            };
+            for ((p, v), a) in p.iter_mut().zip(v).zip(a) {
+                *p += (v - a) * weight;
+            }
+        }
+        base.push(a.as_slice());
+        predicted.push(p);
+    }
+    let alone_value = (alone.headline)(&mut base.into_iter())?;
+    let predicted_value = (alone.headline)(&mut predicted.iter().map(Vec::as_slice))?;
+    Some((predicted_value, alone_value))
+}
+
+/// A field's `from:CASE`, the case it names; `None` for any other value.
+pub fn from_case(value: &Option<String>) -> Option<String> {
+    value.as_deref().and_then(|v| v.strip_prefix("from:")).map(str::to_string)
+}
+
+/// A chained case's `perturb`: a deliberate error added to the inherited camera, its focal
+/// lengths scaled by 1 + `focal_rel` and `k1` added to its k1 (default none).
+#[derive(Clone, Copy, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Perturb {
+    #[serde(default)]
+    pub focal_rel: f64,
+    #[serde(default)]
+    pub k1: f64,
+}
+
+/// `camera` with its focal lengths scaled by 1 + `focal_rel` and `k1` added.
+fn perturbed(camera: CameraModel, focal_rel: f64, k1: f64) -> CameraModel {
+    let mut c = camera;
+    c.intrinsics.fx *= 1.0 + focal_rel;
+    c.intrinsics.fy *= 1.0 + focal_rel;
+    c.distortion.k1 += k1;
+    c
+}
+
+/// The camera parameters the sensitivity moves, one at a time: name, the step when the
+/// inherited error is smaller (0.1 % of a focal length, a quarter pixel of the principal
+/// point, 0.01 of k1 and k2), and how far a camera is off the truth in it.
+const PARAMETERS: [(&str, f64, fn(&CameraModel, &CameraModel) -> f64); 6] = [
+    ("fx_rel", 1e-3, |e, t| (e.intrinsics.fx - t.intrinsics.fx) / t.intrinsics.fx),
+    ("fy_rel", 1e-3, |e, t| (e.intrinsics.fy - t.intrinsics.fy) / t.intrinsics.fy),
+    ("cx_px", 0.25, |e, t| e.intrinsics.cx - t.intrinsics.cx),
+    ("cy_px", 0.25, |e, t| e.intrinsics.cy - t.intrinsics.cy),
+    ("k1", 1e-2, |e, t| e.distortion.k1 - t.distortion.k1),
+    ("k2", 1e-2, |e, t| e.distortion.k2 - t.distortion.k2),
+];
+
+/// `truth` with PARAMETERS[k] moved by `delta`.
+fn moved(truth: CameraModel, k: usize, delta: f64) -> CameraModel {
+    let mut c = truth;
+    match k {
+        0 => c.intrinsics.fx *= 1.0 + delta,
+        1 => c.intrinsics.fy *= 1.0 + delta,
+        2 => c.intrinsics.cx += delta,
+        3 => c.intrinsics.cy += delta,
+        4 => c.distortion.k1 += delta,
+        _ => c.distortion.k2 += delta,
+    }
+    c
+}
+
+/// A case's camera as its `camera` and `perturb` fields give it: `None` for the scene's true
+/// camera (no `camera`), else the source case's name, its estimate (moved by `perturb`) and
+/// the true camera beside it. Refused by name: a `camera` that is not `from:CASE`, `perturb`
+/// without it, a source that handed on no camera, a perturbation out of range.
+pub fn inherited_camera(
+    camera: &Option<String>,
+    perturb: Option<Perturb>,
+    ctx: &Context,
+) -> Result<Option<(String, CameraModel, CameraModel)>, StageError> {
+    let Some(source) = from_case(camera) else {
+        if let Some(v) = camera {
+            return Err(StageError::Config(format!(
+                "camera = \"{v}\": expected \"from:CASE\", a calibrate case earlier in the file (a rendered case's true camera is its scene's)"
+            )));
+        }
+        if perturb.is_some() {
+            return Err(StageError::Config(
+                "perturb: only on a chained case (camera = \"from:CASE\"), whose inherited camera it moves"
+                    .into(),
+            ));
+        }
+        return Ok(None);
+    };
+    let Some((estimate, truth)) = ctx.upstream.get(&source).and_then(|e| e.camera) else {
+        return Err(StageError::Config(format!(
+            "camera = \"from:{source}\": case `{source}` handed on no camera (it failed or ended in a declared error)"
+        )));
+    };
+    let estimate = match perturb {
+        None => estimate,
+        Some(p)
+            if p.focal_rel.is_finite() && p.k1.is_finite() && p.focal_rel.abs() < 0.5 && p.k1.abs() < 1.0 =>
+        {
+            perturbed(estimate, p.focal_rel, p.k1)
+        }
+        Some(p) => {
+            return Err(StageError::Config(format!(
+                "perturb = {{ focal_rel = {}, k1 = {} }}: expected |focal_rel| < 0.5 and |k1| < 1",
+                p.focal_rel, p.k1
+            )))
+        }
+    };
+    Ok(Some((source, estimate, truth)))
+}
+
+/// The one check of a chained case's scene: it must see through the camera its source
+/// calibrated (`field` is the case's `camera` value, for the message).
+pub fn check_same_camera(
+    field: &str,
+    upstream_truth: &CameraModel,
+    camera: &CameraModel,
+) -> Result<(), StageError> {
+    if upstream_truth == camera {
+        return Ok(());
+    }
+    let (u, c) = (upstream_truth, camera);
+    Err(StageError::Config(format!(
+        "camera = \"{field}\": that case calibrated a camera of {}×{} px, fx {}, k1 {}; this scene's is {}×{} px, fx {}, k1 {}: a chained case must see through the camera its source calibrated",
+        u.width, u.height, u.intrinsics.fx, u.distortion.k1, c.width, c.height, c.intrinsics.fx, c.distortion.k1
+    )))
+}
+
+/// What a chained case reports besides its runs.
+pub struct Chain<'a> {
+    /// The source case and the camera it handed on (moved by `perturb`), and the true one.
+    pub source: &'a str,
+    pub estimate: CameraModel,
+    pub truth: CameraModel,
+    /// The headline error the sensitivity is of, and its unit.
+    pub headline: &'a str,
+    pub unit: &'a str,
+    /// The errors whose inherited part is reported.
+    pub errors: &'a [&'a str],
+}
+
+/// A case on an inherited camera, run chained (`run_given(estimate)`), alone
+/// (`run_given(truth)`) and once per inherited parameter for the sensitivity of the headline
+/// error (module docs): the chained metrics, `alone_…`, `inherited_…`,
+/// `sensitivity_<headline>_per_focal_rel`, `…_per_k1` and `predicted_inherited_<headline>`.
+pub fn run_chained(
+    chain: &Chain,
+    run_given: impl Fn(CameraModel) -> Result<CaseResult, StageError>,
+) -> Result<CaseResult, StageError> {
+    let (estimate, truth, headline) = (chain.estimate, chain.truth, chain.headline);
+    let chained = run_given(estimate)?;
+    let alone = run_given(truth)?;
+    let value = |r: &CaseResult| r.metrics.iter().find(|m| m.name == headline).and_then(|m| m.value);
+    let (mut sensitivity, mut linear) = (Vec::new(), Vec::new());
+    for (k, (name, step, off)) in PARAMETERS.iter().enumerate() {
+        let error = off(&estimate, &truth);
+        let delta = if error.abs() > *step { error } else { step.copysign(error) };
+        let run = run_given(moved(truth, k, delta))?;
+        let slope = match (value(&run), value(&alone)) {
+            (Some(e), Some(a)) => Some((e - a) / delta),
+            _ => None,
+        };
+        sensitivity.push((*name, error, slope));
+        linear.push(run.linear.map(|l| (l, error / delta)));
+    }
+    // Item by item where every run gave its items, else from the slopes.
+    let runs: Option<Vec<(&Linear, f64)>> = linear.iter().map(|r| r.as_ref().map(|(l, w)| (l, *w))).collect();
+    let by_items = match (&alone.linear, runs) {
+        (Some(a), Some(runs)) => predict(a, &runs).map(|(p, a)| p - a),
+        _ => None,
+    };
+    let mut result =
+        chained_result(chained, alone, chain.errors, &camera_error(chain.source, &estimate, &truth));
+    let unit = chain.unit;
+    let mut from_slopes = Some(0.0);
+    for (name, error, slope) in &sensitivity {
+        let metric = format!("sensitivity_{headline}_per_{name}");
+        let per = format!("{unit} per unit");
+        result.metrics.push(match slope {
+            Some(s) => Metric::new(&metric, *s, &per, Better::Lower),
+            None => Metric::missing(&metric, &per, Better::Lower, &format!("no {headline} to compare")),
+        });
+        from_slopes = from_slopes.zip(*slope).map(|(p, s)| p + s * error);
+    }
+    let predicted = by_items.or(from_slopes);
+    result.metrics.push(Metric::maybe(
+        &format!("predicted_inherited_{headline}"),
+        predicted,
+        unit,
+        Better::Lower,
+        "no sensitivity",
+    ));
+    result.notes.push(format!(
+        "Sensitivity of {headline}: {}; predicted inherited {} ({}).",
+        sensitivity
+            .iter()
+            .map(|(n, e, s)| format!(
+                "{} {unit} per unit of {n} (inherited {n} {e:+.5})",
+                s.map_or("—".into(), |s| format!("{s:.4}"))
+            ))
+            .collect::<Vec<_>>()
+            .join(", "),
+        predicted.map_or("—".into(), |p| format!("{p:+.6} {unit}")),
+        if by_items.is_some() {
+            "its errors carried item by item to first order"
+        } else {
+            "the slopes times the inherited errors"
+        }
+    ));
+    Ok(result)
+}
+
+/// A chained case's result: the chained run's metrics under their names, the alone run's as
+/// `alone_<name>`, and for each of the `errors` both runs measured the error inherited,
+/// `inherited_<name>` = chained − alone; `upstream` (what was inherited) and the inherited
+/// errors as a note; the two runs' times added.
+pub fn chained_result(chained: CaseResult, alone: CaseResult, errors: &[&str], upstream: &str) -> CaseResult {
+    let mut metrics = chained.metrics.clone();
+    for a in &alone.metrics {
+        metrics.push(Metric { name: format!("alone_{}", a.name), ..a.clone() });
+    }
+    let mut lines = Vec::new();
+    for name in errors {
+        let value = |r: &CaseResult| r.metrics.iter().find(|m| m.name == *name).and_then(|m| m.value);
+        let metric = chained.metrics.iter().find(|m| m.name == *name);
+        if let (Some(cv), Some(av), Some(m)) = (value(&chained), value(&alone), metric) {
+            metrics.push(Metric::new(&format!("inherited_{name}"), cv - av, &m.unit, m.better));
+            lines.push(format!("{name} {av:.6} alone, {cv:.6} chained ({:+.6} inherited)", cv - av));
+        }
+    }
+    let mut notes = vec![format!("{upstream} {}.", lines.join("; "))];
+    notes.extend(chained.notes);
+    let mut timings_s = chained.timings_s;
+    for (k, v) in alone.timings_s {
+        *timings_s.entry(k).or_insert(0.0) += v;
+    }
+    let mut files = chained.files;
+    files.extend(alone.files);
+    CaseResult { metrics, notes, timings_s, files, exports: chained.exports, linear: None }
+}
+
+/// What an inherited camera is off by, for a chained case's notes.
+pub fn camera_error(source: &str, estimate: &CameraModel, truth: &CameraModel) -> String {
+    let (e, t) = (&estimate.intrinsics, &truth.intrinsics);
+    let (ed, td) = (estimate.distortion.to_array(), truth.distortion.to_array());
+    format!(
+        "Chained: the camera from case `{source}` is off the truth by fx {:+.4} %, fy {:+.4} %, cx {:+.3} px, cy {:+.3} px, k1 {:+.5}, k2 {:+.5}; inherited:",
+        100.0 * (e.fx - t.fx) / t.fx,
+        100.0 * (e.fy - t.fy) / t.fy,
+        e.cx - t.cx,
+        e.cy - t.cy,
+        ed[0] - td[0],
+        ed[1] - td[1]
+    )
+}
