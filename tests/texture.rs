@@ -9,7 +9,7 @@ use glam::DVec3;
 use lumen::ibr::texture::{self, Config, Photo};
 use lumen::ibr::View;
 use lumen::image::Image;
-use lumen::math::{CameraModel, CameraToWorld};
+use lumen::math::CameraToWorld;
 use lumen::render;
 use lumen::surface::march::Mesh;
 
