@@ -99,7 +99,9 @@ pub struct PatchResult {
     pub predicted_xyz: [f64; 3],
     pub de2000: f64,
     pub de76: f64,
-    /// The patch predicted by the model fitted without it.
+    /// The patch predicted by the model fitted without it: its XYZ and ΔE2000.
+    #[serde(default)]
+    pub loo_xyz: Option<[f64; 3]>,
     pub loo_de2000: Option<f64>,
     /// Whether the fit used the patch.
     pub used: bool,
@@ -168,7 +170,7 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
     if config.leave_one_out {
         use rayon::prelude::*;
         // One fit per patch, independent of each other: in parallel.
-        let folds: Vec<(usize, Result<f64, models::FitError>)> = used
+        let folds: Vec<(usize, Result<[f64; 3], models::FitError>)> = used
             .par_iter()
             .enumerate()
             .filter(|&(j, _)| !(config.model == Model::WhitePreserving && Some(j) == white_patch))
@@ -178,7 +180,7 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
                 };
                 let wp = white_patch.map(|w| if w > j { w - 1 } else { w });
                 let fit = models::fit(config.model, &keep(&rgb), &keep(&xyz), input.white, wp);
-                (i, fit.map(|f| delta_e2000(lab(f.apply(rgb[j]), input.white), lab(xyz[j], input.white))))
+                (i, fit.map(|f| f.apply(rgb[j])))
             })
             .collect();
         if let Some(w) = white_patch.filter(|_| config.model == Model::WhitePreserving) {
@@ -190,7 +192,7 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
         let mut failed = Vec::new();
         for (i, r) in folds {
             match r {
-                Ok(d) => loo[i] = Some(d),
+                Ok(x) => loo[i] = Some(x),
                 Err(e) => failed.push(format!("{} ({e})", i + 1)),
             }
         }
@@ -214,7 +216,8 @@ pub fn run(input: &Input, config: &Config) -> Result<Output, Error> {
                 predicted_xyz: predicted,
                 de2000: delta_e2000(a, b),
                 de76: delta_e76(a, b),
-                loo_de2000: loo[i],
+                loo_xyz: loo[i],
+                loo_de2000: loo[i].map(|x| delta_e2000(lab(x, input.white), b)),
                 used: p.flag.is_none(),
                 flag: p.flag,
             }

@@ -222,10 +222,12 @@ fn resolve_upstream(cases: &mut [Case], path: &Path) -> Result<(), Error> {
         let mut found = Vec::new();
         for (field, name, kind) in cases[i].stage.upstream() {
             let c = &cases[i];
+            // A camera is named by its case alone, any other output as CASE/OUTPUT.
+            let reference = if kind == "camera" { name.clone() } else { format!("{name}/{kind}") };
             let err = |message: String| Error::Parse {
                 path: path.into(),
                 message: format!(
-                    "stages[{}] (line {}, case {}): `{field}` = \"from:{name}\": {message}",
+                    "stages[{}] (line {}, case {}): `{field}` = \"from:{reference}\": {message}",
                     c.entry - 1,
                     c.line,
                     c.common.case
@@ -246,6 +248,7 @@ fn resolve_upstream(cases: &mut [Case], path: &Path) -> Result<(), Error> {
                     cases[j].stage.name(),
                     match kind {
                         "camera" => " (a calibrate case on renders does)",
+                        "radiance" => " (an hdr case on renders does)",
                         _ => "",
                     }
                 )));

@@ -563,7 +563,7 @@ impl Settings for Config {
             || synthesize(self, ctx),
             |i| solve(self, i),
             |o, t| validate(self, o, t),
-            |o, t| super::Exports { camera: Some((o.calibration.camera(), t.camera)) },
+            |o, t| super::Exports { camera: Some((o.calibration.camera(), t.camera)), ..Default::default() },
         )
     }
     fn share(&self, ctx: &Context, pass: Pass) -> Option<Result<(), StageError>> {

@@ -24,6 +24,21 @@ use serde::Deserialize;
 pub struct Exports {
     /// `camera`: the calibrated camera, and the true one.
     pub camera: Option<(CameraModel, CameraModel)>,
+    /// `radiance`: an hdr case's merged radiance.
+    pub radiance: Option<Radiance>,
+}
+
+/// An hdr case's merged radiance and what a later case checks and predicts with.
+#[derive(Clone, Debug)]
+pub struct Radiance {
+    /// The merged radiance (an arbitrary scale per channel) and the true radiance.
+    pub estimate: crate::image::Image,
+    pub truth: crate::image::Image,
+    /// The scene file, resolved, and for a chart's camera signal its camera and illuminant.
+    pub scene: std::path::PathBuf,
+    pub spectral: Option<super::hdr::Spectral>,
+    /// Per channel, the estimate's log–log slope against the truth less 1.
+    pub slope_err: [f64; 3],
 }
 
 /// A run's errors item by item (module docs): per item (a pixel, a pair of images) by its key,
@@ -174,10 +189,8 @@ pub fn check_same_camera(
 
 /// What a chained case reports besides its runs.
 pub struct Chain<'a> {
-    /// The source case and the camera it handed on (moved by `perturb`), and the true one.
-    pub source: &'a str,
-    pub estimate: CameraModel,
-    pub truth: CameraModel,
+    /// What was inherited and how far off it is (the note's start, `camera_error`).
+    pub upstream: String,
     /// The headline error the sensitivity is of, and its unit.
     pub headline: &'a str,
     pub unit: &'a str,
@@ -185,29 +198,62 @@ pub struct Chain<'a> {
     pub errors: &'a [&'a str],
 }
 
-/// A case on an inherited camera, run chained (`run_given(estimate)`), alone
-/// (`run_given(truth)`) and once per inherited parameter for the sensitivity of the headline
-/// error (module docs): the chained metrics, `alone_…`, `inherited_…`,
-/// `sensitivity_<headline>_per_focal_rel`, `…_per_k1` and `predicted_inherited_<headline>`.
-pub fn run_chained(
-    chain: &Chain,
+/// One inherited quantity the sensitivity moves: its name, how far the inherited value is off
+/// the truth in it, and the step when that is smaller.
+pub struct Parameter {
+    pub name: &'static str,
+    pub error: f64,
+    pub step: f64,
+}
+
+/// A case on an inherited camera (`run_chained`): the parameters `PARAMETERS` names, each
+/// moved on the true camera.
+pub fn run_chained_camera(
+    source: &str,
+    estimate: CameraModel,
+    truth: CameraModel,
+    chain: Chain,
     run_given: impl Fn(CameraModel) -> Result<CaseResult, StageError>,
 ) -> Result<CaseResult, StageError> {
-    let (estimate, truth, headline) = (chain.estimate, chain.truth, chain.headline);
-    let chained = run_given(estimate)?;
-    let alone = run_given(truth)?;
+    let parameters: Vec<Parameter> = PARAMETERS
+        .iter()
+        .map(|(name, step, off)| Parameter { name, error: off(&estimate, &truth), step: *step })
+        .collect();
+    let chain = Chain { upstream: camera_error(source, &estimate, &truth), ..chain };
+    run_chained(
+        &chain,
+        &parameters,
+        || run_given(estimate),
+        || run_given(truth),
+        |k, delta| run_given(moved(truth, k, delta)),
+    )
+}
+
+/// A chained case run chained (`run_estimate`), alone (`run_truth`) and once per inherited
+/// parameter, moved on the truth (`run_moved(k, δ)`), for the sensitivity of the headline
+/// error (module docs): the chained metrics, `alone_…`, `inherited_…`,
+/// `sensitivity_<headline>_per_<parameter>` and `predicted_inherited_<headline>`.
+pub fn run_chained(
+    chain: &Chain,
+    parameters: &[Parameter],
+    run_estimate: impl FnOnce() -> Result<CaseResult, StageError>,
+    run_truth: impl FnOnce() -> Result<CaseResult, StageError>,
+    run_moved: impl Fn(usize, f64) -> Result<CaseResult, StageError>,
+) -> Result<CaseResult, StageError> {
+    let headline = chain.headline;
+    let chained = run_estimate()?;
+    let alone = run_truth()?;
     let value = |r: &CaseResult| r.metrics.iter().find(|m| m.name == headline).and_then(|m| m.value);
     let (mut sensitivity, mut linear) = (Vec::new(), Vec::new());
-    for (k, (name, step, off)) in PARAMETERS.iter().enumerate() {
-        let error = off(&estimate, &truth);
-        let delta = if error.abs() > *step { error } else { step.copysign(error) };
-        let run = run_given(moved(truth, k, delta))?;
+    for (k, p) in parameters.iter().enumerate() {
+        let delta = if p.error.abs() > p.step { p.error } else { p.step.copysign(p.error) };
+        let run = run_moved(k, delta)?;
         let slope = match (value(&run), value(&alone)) {
             (Some(e), Some(a)) => Some((e - a) / delta),
             _ => None,
         };
-        sensitivity.push((*name, error, slope));
-        linear.push(run.linear.map(|l| (l, error / delta)));
+        sensitivity.push((p.name, p.error, slope));
+        linear.push(run.linear.map(|l| (l, p.error / delta)));
     }
     // Item by item where every run gave its items, else from the slopes.
     let runs: Option<Vec<(&Linear, f64)>> = linear.iter().map(|r| r.as_ref().map(|(l, w)| (l, *w))).collect();
@@ -215,8 +261,7 @@ pub fn run_chained(
         (Some(a), Some(runs)) => predict(a, &runs).map(|(p, a)| p - a),
         _ => None,
     };
-    let mut result =
-        chained_result(chained, alone, chain.errors, &camera_error(chain.source, &estimate, &truth));
+    let mut result = chained_result(chained, alone, chain.errors, &chain.upstream);
     let unit = chain.unit;
     let mut from_slopes = Some(0.0);
     for (name, error, slope) in &sensitivity {

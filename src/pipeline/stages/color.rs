@@ -80,7 +80,27 @@ pub struct Config {
     /// `lumen color fit` can be run on it; its corners are in the report's notes.
     #[serde(default)]
     pub save_image: bool,
+    /// `"from:CASE/radiance"`: fit on the radiance an earlier hdr case merged from its
+    /// exposures of this chart (`spectral` with this case's camera and illuminant), instead of
+    /// one exposure through the sensor (a chained case; no sensor setting, `spp` or `denoise`
+    /// then). It runs alone too, on the true radiance, and once per channel with the true
+    /// radiance raised to the power 1 + that channel's inherited slope error (or ± 2 % where
+    /// smaller), for the sensitivity (`chain`).
+    pub image: Option<String>,
+    /// A deliberate error added to the inherited radiance (a chained case only): every
+    /// channel raised to the power 1 + `slope` (default none).
+    pub perturb: Option<SlopePerturb>,
 }
+
+/// `Config::perturb`.
+#[derive(Clone, Copy, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SlopePerturb {
+    pub slope: f64,
+}
+
+/// The steps of the sensitivity to a merged radiance's log–log slope per channel.
+const STEP_SLOPE: f64 = 0.02;
 
 fn default_camera() -> String {
     "nikon-d5100".into()
@@ -99,8 +119,9 @@ pub struct Truth {
     /// Noise-free camera value of each patch at the sensor (full scale = 1).
     rgb: Vec<[f64; 3]>,
     /// The variance of one pixel the sensor model predicts for each patch:
-    /// (t·FW + read²)/FW² + q²/12 (photon and read noise, quantisation step q).
-    pixel_variance: Vec<[f64; 3]>,
+    /// (t·FW + read²)/FW² + q²/12 (photon and read noise, quantisation step q); `None` for an
+    /// image that did not come through the sensor in one exposure (a merged radiance).
+    pixel_variance: Option<Vec<[f64; 3]>>,
     /// The pixels each patch was sampled from.
     pixels: Vec<usize>,
 }
@@ -155,55 +176,97 @@ pub(super) fn chart_grid(scene_path: &std::path::Path) -> Result<(DVec3, DVec3, 
     Ok((c1 - 0.5 * (step_u + step_v), step_u, step_v, n.normalize()))
 }
 
-pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<color::Input, Truth>, StageError> {
-    let cam = spectra::camera(&c.camera).ok_or_else(|| {
-        StageError::Config(format!(
-            "camera = \"{}\": expected one of {}",
-            c.camera,
-            spectra::CAMERAS.join(", ")
-        ))
+/// A colour chart's scene, as the stage renders it (module docs).
+pub(super) struct Chart {
+    /// The scene as loaded (its camera, pose and sensor), the patches' materials flat.
+    pub scene: render::Scene,
+    digest: String,
+    /// The chart's cell grid in the world (`chart_grid`).
+    grid: (DVec3, DVec3, DVec3, DVec3),
+    to_light: Vec3A,
+    /// Each patch's material.
+    patch_material: Vec<usize>,
+    /// The cosine of the light's angle off the chart's normal.
+    pub cos_theta: f64,
+    pub camera: [spectra::Spectrum; 3],
+    pub illuminant: spectra::Spectrum,
+}
+
+/// A chart's camera signal: per pixel c = Σ_λ L_λ·c̄(λ), a perfect white facing the light
+/// at 1 in the camera's strongest channel; the samples per pixel and renders it took.
+pub(super) struct Signal {
+    pub image: Image,
+    pub spp: u32,
+    pub bands: usize,
+}
+
+impl Chart {
+    /// The corners of the cell grid in the image (OpenCV pixels).
+    pub fn corners(&self, scene_name: &str) -> Result<[[f64; 2]; 4], StageError> {
+        let (origin, step_u, step_v, _) = self.grid;
+        let t_cam_world = self.scene.t_world_cam.inverse();
+        let project = |p: DVec3| self.scene.camera.project(t_cam_world.transform_point(p));
+        let world =
+            [origin, origin + 6.0 * step_u, origin + 6.0 * step_u + 4.0 * step_v, origin + 4.0 * step_v];
+        let mut corners = [[0.0; 2]; 4];
+        for (k, p) in world.iter().enumerate() {
+            let px: DVec2 = project(*p).ok_or_else(|| {
+                StageError::Config(format!(
+                    "{scene_name}: chart corner {} is not in front of the camera",
+                    k + 1
+                ))
+            })?;
+            corners[k] = [px.x, px.y];
+        }
+        Ok(corners)
+    }
+
+    /// Each patch's noise-free camera value, the light's cos θ included (in the signal's units).
+    pub fn patch_rgb(&self) -> Vec<[f64; 3]> {
+        spectra::chart()
+            .iter()
+            .map(|(_, r)| spectra::camera_rgb(r, &self.illuminant, &self.camera).map(|v| v * self.cos_theta))
+            .collect()
+    }
+}
+
+/// The camera and illuminant by name, refused by name when unknown.
+fn camera_and_illuminant(
+    camera: &str,
+    illuminant: &str,
+) -> Result<([spectra::Spectrum; 3], spectra::Spectrum), StageError> {
+    let cam = spectra::camera(camera).ok_or_else(|| {
+        StageError::Config(format!("camera = \"{camera}\": expected one of {}", spectra::CAMERAS.join(", ")))
     })?;
-    let ill = spectra::illuminant(&c.illuminant).ok_or_else(|| {
+    let ill = spectra::illuminant(illuminant).ok_or_else(|| {
         StageError::Config(format!(
-            "illuminant = \"{}\": expected one of {}",
-            c.illuminant,
+            "illuminant = \"{illuminant}\": expected one of {}",
             spectra::ILLUMINANTS.join(", ")
         ))
     })?;
-    c.model.parse::<Model>()?;
-    if !["spectral", "published"].contains(&c.reference.as_str()) {
-        return Err(StageError::Config(format!(
-            "reference = \"{}\": expected spectral or published",
-            c.reference
-        )));
-    }
-    let scene_path = ctx.dir.join(&c.scene);
+    Ok((cam, ill))
+}
+
+/// Loads the chart of `scene_file` (relative to the pipeline file): its patches, grid and
+/// light, refused by name where the stage cannot render it.
+pub(super) fn load_chart(
+    scene_file: &str,
+    camera: &str,
+    illuminant: &str,
+    ctx: &Context,
+) -> Result<Chart, StageError> {
+    let (cam, ill) = camera_and_illuminant(camera, illuminant)?;
+    let scene_path = ctx.dir.join(scene_file);
     let mut scene = render::load(&scene_path)?;
     let digest = scene_digest(&scene_path)?;
-    let (origin, step_u, step_v, normal) = chart_grid(&scene_path)?;
-
-    let mut sensor = scene.sensor.clone().unwrap_or_default();
-    if let Some(e) = c.exposure {
-        if !(1e-6..=1e6).contains(&e) {
-            return Err(StageError::Config(format!("exposure = {e}: expected a number from 1e-6 to 1e6")));
-        }
-        sensor.exposure = e;
-    }
-    sensor.bits = c.bits.unwrap_or(sensor.bits);
-    sensor.read_noise = c.read_noise.unwrap_or(sensor.read_noise);
-    sensor.full_well = c.full_well.unwrap_or(sensor.full_well);
-    sensor.validate()?;
-
+    let grid = chart_grid(&scene_path)?;
     let to_light = match scene.lights.as_slice() {
         [Light::Directional { to_light, .. }] => to_light.normalize(),
-        _ => {
-            return Err(StageError::Config(format!(
-                "{}: the colour stage needs exactly one directional light (it replaces its spectrum)",
-                c.scene
-            )))
-        }
+        _ => return Err(StageError::Config(format!(
+            "{scene_file}: the colour stage needs exactly one directional light (it replaces its spectrum)"
+        ))),
     };
-    let cos_theta = normal.dot(DVec3::from(to_light.as_dvec3())).abs();
+    let cos_theta = grid.3.dot(DVec3::from(to_light.as_dvec3())).abs();
 
     // Materials: the patches by name; the others keep a flat spectrum.
     let mut patch_material = vec![None; 24];
@@ -226,14 +289,31 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<color::Input, T
         }
     }
     if let Some(k) = patch_material.iter().position(Option::is_none) {
-        return Err(StageError::Config(format!("{}: no material patch-{:02}", c.scene, k + 1)));
+        return Err(StageError::Config(format!("{}: no material patch-{:02}", scene_file, k + 1)));
     }
     for (m, mean) in &flat {
         scene.materials[*m].albedo = Texture::Constant(Vec3A::splat(*mean));
     }
 
+    let patch_material = patch_material.into_iter().map(|m| m.unwrap_or(0)).collect();
+    Ok(Chart { scene, digest, grid, to_light, patch_material, cos_theta, camera: cam, illuminant: ill })
+}
+
+/// Renders the chart spectrally and integrates the renders against the camera's
+/// sensitivities (module docs); `None` in a share of the shard passes, which only asks for
+/// the renders.
+pub(super) fn chart_signal(
+    chart: &mut Chart,
+    spp: Option<u32>,
+    denoise: &super::Denoise,
+    ctx: &Context,
+) -> Result<Option<Signal>, StageError> {
+    let (cam, ill, to_light) = (chart.camera, chart.illuminant, chart.to_light);
+    let scene = &mut chart.scene;
+    let digest = &chart.digest;
+    let patch_material = &chart.patch_material;
     let mut settings = render::Settings::from_scene(&scene);
-    apply_overrides(&mut settings, c.spp, None)?;
+    apply_overrides(&mut settings, spp, None)?;
     settings.seed = ctx.seed;
     let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
     let chart = spectra::chart();
@@ -250,18 +330,18 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<color::Input, T
         let irradiance = pick(&ill.map(|s| std::f64::consts::PI * s / norm));
         let patches: Vec<[f32; 3]> = chart.iter().map(|(_, r)| pick(r)).collect();
         for (k, m) in patch_material.iter().enumerate() {
-            scene.materials[m.unwrap_or(0)].albedo = Texture::Constant(Vec3A::from_array(patches[k]));
+            scene.materials[*m].albedo = Texture::Constant(Vec3A::from_array(patches[k]));
         }
         scene.replace_lights(&[Light::Directional { to_light, irradiance: Vec3A::from_array(irradiance) }]);
         let recipe = BandRecipe {
             product: "color-band",
-            scene: &digest,
+            scene: digest,
             patches: patches.clone(),
             irradiance,
-            settings: SettingsKey::denoised(&settings, &c.denoise),
+            settings: SettingsKey::denoised(&settings, denoise),
         };
         let film = ctx.cache.images(ctx.case, &format!("wavelengths {}", b), &recipe, || {
-            Ok::<_, StageError>(vec![super::truth_render(&scene, &settings, &c.denoise)?])
+            Ok::<_, StageError>(vec![super::truth_render(scene, &settings, denoise)?])
         })?;
         let Some(film) = film else { continue };
         let Some(img) = film.first().filter(|f: &&Image| f.data.len() == 3 * w * h) else {
@@ -281,50 +361,49 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<color::Input, T
         return Ok(None);
     }
 
-    let radiance = Image {
+    let image = Image {
         width: w as u32,
         height: h as u32,
         channels: 3,
         data: signal.iter().map(|&v| v as f32).collect(),
     };
-    let max = sensor.max_code() as f32;
-    let codes = sensor.expose(&radiance, render::sampler::mix64(ctx.seed ^ 0xc0_10e5));
-    let exposed = Image {
-        width: w as u32,
-        height: h as u32,
-        channels: 3,
-        data: codes.iter().map(|&v| v as f32 / max).collect(),
-    };
+    Ok(Some(Signal { image, spp: settings.spp, bands }))
+}
 
-    // Corners of the cell grid in the image (OpenCV pixels).
-    let t_cam_world = scene.t_world_cam.inverse();
-    let project = |p: DVec3| scene.camera.project(t_cam_world.transform_point(p));
-    let world = [origin, origin + 6.0 * step_u, origin + 6.0 * step_u + 4.0 * step_v, origin + 4.0 * step_v];
-    let mut corners = [[0.0; 2]; 4];
-    for (k, p) in world.iter().enumerate() {
-        let px: DVec2 = project(*p).ok_or_else(|| {
-            StageError::Config(format!("{}: chart corner {} is not in front of the camera", c.scene, k + 1))
-        })?;
-        corners[k] = [px.x, px.y];
+pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<color::Input, Truth>, StageError> {
+    camera_and_illuminant(&c.camera, &c.illuminant)?;
+    c.model.parse::<Model>()?;
+    if !["spectral", "published"].contains(&c.reference.as_str()) {
+        return Err(StageError::Config(format!(
+            "reference = \"{}\": expected spectral or published",
+            c.reference
+        )));
     }
-    let samples =
-        chart::sample(&exposed, corners, 1.0).map_err(|m| StageError::Config(format!("{}: {m}", c.scene)))?;
+    let scene_path = ctx.dir.join(&c.scene);
+    let mut sensor = render::load(&scene_path)?.sensor.unwrap_or_default();
+    if let Some(e) = c.exposure {
+        if !(1e-6..=1e6).contains(&e) {
+            return Err(StageError::Config(format!("exposure = {e}: expected a number from 1e-6 to 1e6")));
+        }
+        sensor.exposure = e;
+    }
+    sensor.bits = c.bits.unwrap_or(sensor.bits);
+    sensor.read_noise = c.read_noise.unwrap_or(sensor.read_noise);
+    sensor.full_well = c.full_well.unwrap_or(sensor.full_well);
+    sensor.validate()?;
 
-    let (reference, white) = if c.reference == "spectral" {
-        (chart.iter().map(|(_, r)| spectra::xyz(r, &ill)).collect::<Vec<_>>(), spectra::white(&ill))
-    } else {
-        let (published, d50) = color::published_reference();
-        (published.into_iter().map(|(_, x)| x).collect(), d50)
+    let mut chart = load_chart(&c.scene, &c.camera, &c.illuminant, ctx)?;
+    let Some(signal) = chart_signal(&mut chart, c.spp, &c.denoise, ctx)? else {
+        return Ok(None);
     };
-    let input = color::Input::from_samples(
-        &samples,
-        chart.iter().map(|(name, _)| name.as_str()).zip(reference.iter().copied()),
-        white,
-    );
-    let truth_rgb: Vec<[f64; 3]> = chart
-        .iter()
-        .map(|(_, r)| spectra::camera_rgb(r, &ill, &cam).map(|v| v * sensor.exposure * cos_theta))
-        .collect();
+    let (w, h) = (signal.image.width, signal.image.height);
+    let max = sensor.max_code() as f32;
+    let codes = sensor.expose(&signal.image, render::sampler::mix64(ctx.seed ^ 0xc0_10e5));
+    let exposed =
+        Image { width: w, height: h, channels: 3, data: codes.iter().map(|&v| v as f32 / max).collect() };
+    let corners = chart.corners(&c.scene)?;
+    let (input, pixels) = chart_input(c, &chart, &exposed, corners, 1.0)?;
+    let truth_rgb: Vec<[f64; 3]> = chart.patch_rgb().iter().map(|t| t.map(|v| v * sensor.exposure)).collect();
     let fw = sensor.full_well;
     let q = 1.0 / sensor.max_code() as f64;
     let shot = if sensor.photon_noise { 1.0 } else { 0.0 };
@@ -332,26 +411,25 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<color::Input, T
         .iter()
         .map(|t| t.map(|v| (shot * v * fw + sensor.read_noise.powi(2)) / (fw * fw) + q * q / 12.0))
         .collect();
-    let pixels = samples.iter().map(|s| s.pixels).collect();
     let corner_text: Vec<String> = corners.iter().map(|p| format!("{:.3},{:.3}", p[0], p[1])).collect();
     let mut notes = vec![format!(
         "{} under {}, camera {}, {} renders of three wavelengths, {}×{} px, {} spp; sensor exposure {}, {} bits, full well {} e⁻, read noise {} e⁻; light {:.1}° off the chart's normal; reference {}; grid corners {}.",
         scene_path.file_name().map_or(c.scene.clone(), |n| n.to_string_lossy().into_owned()),
         c.illuminant,
         c.camera,
-        bands,
+        signal.bands,
         w,
         h,
-        settings.spp,
+        signal.spp,
         sensor.exposure,
         sensor.bits,
         sensor.full_well,
         sensor.read_noise,
-        cos_theta.acos().to_degrees(),
+        chart.cos_theta.acos().to_degrees(),
         c.reference,
         corner_text.join(",")
     )];
-    notes.extend(super::denoise_note(&c.denoise, settings.spp));
+    notes.extend(super::denoise_note(&c.denoise, signal.spp));
     let mut files = Vec::new();
     if c.save_image {
         let name = format!("{}.exr", crate::pipeline::names::file_stem(ctx.case));
@@ -363,9 +441,39 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<color::Input, T
     }
     Ok(Some((
         input,
-        Truth { rgb: truth_rgb, pixel_variance, pixels },
+        Truth { rgb: truth_rgb, pixel_variance: Some(pixel_variance), pixels },
         Findings { notes, files, ..Default::default() },
     )))
+}
+
+/// The solver's input from a chart image: its patches sampled inside the grid's `corners`
+/// (`saturation`: the image's full scale), with the reference the entry names; and the pixels
+/// each patch was sampled from.
+fn chart_input(
+    c: &Config,
+    chart: &Chart,
+    image: &Image,
+    corners: [[f64; 2]; 4],
+    saturation: f64,
+) -> Result<(color::Input, Vec<usize>), StageError> {
+    let samples = chart::sample(image, corners, saturation)
+        .map_err(|m| StageError::Config(format!("{}: {m}", c.scene)))?;
+    let patches = spectra::chart();
+    let (reference, white) = if c.reference == "spectral" {
+        (
+            patches.iter().map(|(_, r)| spectra::xyz(r, &chart.illuminant)).collect::<Vec<_>>(),
+            spectra::white(&chart.illuminant),
+        )
+    } else {
+        let (published, d50) = color::published_reference();
+        (published.into_iter().map(|(_, x)| x).collect(), d50)
+    };
+    let input = color::Input::from_samples(
+        &samples,
+        patches.iter().map(|(name, _)| name.as_str()).zip(reference.iter().copied()),
+        white,
+    );
+    Ok((input, samples.iter().map(|s| s.pixels).collect()))
 }
 
 pub fn solve(c: &Config, input: &color::Input) -> Result<color::Output, StageError> {
@@ -387,45 +495,51 @@ pub fn validate(_c: &Config, out: &color::Output, truth: &Truth) -> Findings {
     ));
     m.push(Metric::new("mean_de76", out.mean_de76, "ΔE*ab", Better::Lower));
     m.push(Metric::new("used_patches", out.used_patches as f64, "patches", Better::Higher));
+    // A merged radiance has an arbitrary scale per channel (the response's offset): one scale
+    // per channel, the median ratio over the used patches, is taken out first.
+    let scale: [f64; 3] = match &truth.pixel_variance {
+        Some(_) => [1.0; 3],
+        None => std::array::from_fn(|ch| {
+            let mut r: Vec<f64> = out
+                .patches
+                .iter()
+                .zip(&truth.rgb)
+                .filter(|(p, t)| p.used && t[ch] > 0.0)
+                .map(|(p, t)| p.rgb[ch] / t[ch])
+                .collect();
+            crate::math::stats::median(&mut r).filter(|k| *k > 0.0).unwrap_or(1.0)
+        }),
+    };
     let rel: Vec<f64> = out
         .patches
         .iter()
         .zip(&truth.rgb)
         .filter(|(p, _)| p.used)
-        .flat_map(|(p, t)| (0..3).map(move |ch| (p.rgb[ch] - t[ch]).abs() / t[ch].max(1e-12)))
+        .flat_map(|(p, t)| (0..3).map(move |ch| (p.rgb[ch] / scale[ch] - t[ch]).abs() / t[ch].max(1e-12)))
         .collect();
     let mean_rel = (!rel.is_empty()).then(|| rel.iter().sum::<f64>() / rel.len() as f64);
     m.push(Metric::maybe("patch_rgb_rel_err", mean_rel, "", Better::Lower, "no usable patch"));
-    // (sampled − truth)²/σ² over the used patches' channels, σ² the sensor model's: about 1
-    // when the render, sensor and sampling chain is right and unbiased.
-    let z2: Vec<f64> = out
+    match &truth.pixel_variance {
+        Some(variance) => sensor_metrics(m, out, truth, variance),
+        None => {
+            let why = "the image is a merged radiance, not one exposure through the sensor model";
+            m.push(Metric::missing("patch_rgb_chi2", "", Better::Lower, why));
+            m.push(Metric::missing("misflagged_clipped_patches", "patches", Better::Lower, why));
+        }
+    }
+    // Per patch its leave-one-out prediction, reference and white, for a chained case's
+    // prediction.
+    let items = out
         .patches
         .iter()
-        .zip(truth.rgb.iter().zip(&truth.pixel_variance).zip(&truth.pixels))
-        .filter(|(p, _)| p.used)
-        .flat_map(|(p, ((t, v), &n))| {
-            (0..3).map(move |ch| {
-                (p.rgb[ch] - t[ch]).powi(2) * TRIMMED_MEAN_EFFICIENCY * n as f64 / v[ch].max(1e-300)
-            })
+        .enumerate()
+        .filter(|(_, p)| p.used)
+        .filter_map(|(k, p)| {
+            let x = p.loo_xyz?;
+            Some((k as u64, [x, p.reference_xyz, out.white].concat()))
         })
         .collect();
-    let chi2 = (!z2.is_empty()).then(|| z2.iter().sum::<f64>() / z2.len() as f64);
-    m.push(Metric::maybe("patch_rgb_chi2", chi2, "", Better::Lower, "no usable patch"));
-    // A patch is surely clipped when its noise-free value is 3σ (of one pixel) above full
-    // scale, surely not when 3σ below; the sampler's flag must agree where it is sure.
-    let misflagged = out
-        .patches
-        .iter()
-        .zip(truth.rgb.iter().zip(&truth.pixel_variance))
-        .filter(|(p, (t, v))| {
-            let pixel_sd = |ch: usize| v[ch].sqrt();
-            let over = (0..3).any(|ch| t[ch] > 1.0 + 3.0 * pixel_sd(ch));
-            let under = (0..3).all(|ch| t[ch] < 1.0 - 3.0 * pixel_sd(ch));
-            let flagged = p.flag == Some(color::Flag::Clipped);
-            (over && !flagged) || (under && flagged)
-        })
-        .count();
-    m.push(Metric::new("misflagged_clipped_patches", misflagged as f64, "patches", Better::Lower));
+    f.linear = Some(super::chain::Linear { items, headline: loo_mean_de2000 });
     m.push(Metric::new("fit_s", out.fit_s, "s", Better::Lower));
     m.push(Metric::new("loo_s", out.loo_s, "s", Better::Lower));
     f.notes.extend(out.warnings.iter().map(|w| format!("warning: {w}")));
@@ -441,14 +555,212 @@ pub fn validate(_c: &Config, out: &color::Output, truth: &Truth) -> Findings {
     f
 }
 
+/// The metrics of a chart exposed once through the sensor model, whose noise it predicts
+/// (`variance`: per patch, one pixel's).
+fn sensor_metrics(m: &mut Vec<Metric>, out: &color::Output, truth: &Truth, variance: &[[f64; 3]]) {
+    // (sampled − truth)²/σ² over the used patches' channels, σ² the sensor model's: about 1
+    // when the render, sensor and sampling chain is right and unbiased.
+    let z2: Vec<f64> = out
+        .patches
+        .iter()
+        .zip(truth.rgb.iter().zip(variance).zip(&truth.pixels))
+        .filter(|(p, _)| p.used)
+        .flat_map(|(p, ((t, v), &n))| {
+            (0..3).map(move |ch| {
+                (p.rgb[ch] - t[ch]).powi(2) * TRIMMED_MEAN_EFFICIENCY * n as f64 / v[ch].max(1e-300)
+            })
+        })
+        .collect();
+    let chi2 = (!z2.is_empty()).then(|| z2.iter().sum::<f64>() / z2.len() as f64);
+    m.push(Metric::maybe("patch_rgb_chi2", chi2, "", Better::Lower, "no usable patch"));
+    // A patch is surely clipped when its noise-free value is 3σ (of one pixel) above full
+    // scale, surely not when 3σ below; the sampler's flag must agree where it is sure.
+    let misflagged = out
+        .patches
+        .iter()
+        .zip(truth.rgb.iter().zip(variance))
+        .filter(|(p, (t, v))| {
+            let pixel_sd = |ch: usize| v[ch].sqrt();
+            let over = (0..3).any(|ch| t[ch] > 1.0 + 3.0 * pixel_sd(ch));
+            let under = (0..3).all(|ch| t[ch] < 1.0 - 3.0 * pixel_sd(ch));
+            let flagged = p.flag == Some(color::Flag::Clipped);
+            (over && !flagged) || (under && flagged)
+        })
+        .count();
+    m.push(Metric::new("misflagged_clipped_patches", misflagged as f64, "patches", Better::Lower));
+}
+
+/// `loo_mean_de2000` from patches' leave-one-out XYZ, reference XYZ and white
+/// (`chain::Linear`), as `color::run` takes it.
+fn loo_mean_de2000(items: &mut dyn Iterator<Item = &[f64]>) -> Option<f64> {
+    use crate::color::delta_e::{delta_e2000, lab};
+    let errors: Vec<f64> = items
+        .filter(|v| v.len() == 9)
+        .map(|v| {
+            let white = [v[6], v[7], v[8]];
+            delta_e2000(lab([v[0], v[1], v[2]], white), lab([v[3], v[4], v[5]], white))
+        })
+        .collect();
+    (!errors.is_empty()).then(|| errors.iter().sum::<f64>() / errors.len() as f64)
+}
+
+/// The case and output a `from:CASE/OUTPUT` field names (`OUTPUT` defaults to `radiance`).
+fn image_source(image: &Option<String>) -> Option<(String, String)> {
+    let reference = super::from_case(image)?;
+    Some(match reference.rsplit_once('/') {
+        Some((case, output)) => (case.to_string(), output.to_string()),
+        None => (reference, "radiance".to_string()),
+    })
+}
+
+/// A chained case's input: the chart sampled in `image`, a merged radiance of it (module docs).
+fn synthesize_radiance(
+    c: &Config,
+    ctx: &Context,
+    image: &Image,
+    source: &str,
+) -> Result<Synthesis<color::Input, Truth>, StageError> {
+    let chart = load_chart(&c.scene, &c.camera, &c.illuminant, ctx)?;
+    let (w, h) = (chart.scene.camera.width, chart.scene.camera.height);
+    if (image.width, image.height) != (w, h) {
+        return Err(StageError::Config(format!(
+            "image = \"from:{source}/radiance\": a {}×{} radiance for a {w}×{h} chart image",
+            image.width, image.height
+        )));
+    }
+    let corners = chart.corners(&c.scene)?;
+    // A merged radiance has no full scale: nothing in it is clipped.
+    let (input, pixels) = chart_input(c, &chart, image, corners, f64::INFINITY)?;
+    let notes = vec![format!(
+        "{} under {}, camera {}: the chart sampled in the radiance case `{source}` merged; reference {}.",
+        c.scene, c.illuminant, c.camera, c.reference
+    )];
+    let truth = Truth { rgb: chart.patch_rgb(), pixel_variance: None, pixels };
+    Ok(Some((input, truth, Findings { notes, ..Default::default() })))
+}
+
+/// Raises an RGB image's channel `channel` (every channel for `None`) to the power 1 + `s`.
+fn raise(image: &mut Image, channel: Option<usize>, s: f64) {
+    for (k, v) in image.data.iter_mut().enumerate() {
+        if channel.is_none_or(|c| k % 3 == c) {
+            *v = v.max(0.0).powf(1.0 + s as f32);
+        }
+    }
+}
+
+impl Config {
+    /// A chained case (`image = "from:CASE/radiance"`, module docs).
+    fn run_chained(&self, ctx: &Context, source: &str, output: &str) -> Result<CaseResult, StageError> {
+        let field = format!("image = \"from:{source}/{output}\"");
+        if output != "radiance" {
+            return Err(StageError::Config(format!("{field}: expected from:CASE/radiance")));
+        }
+        let sensor_settings = [
+            ("exposure", self.exposure.is_some()),
+            ("bits", self.bits.is_some()),
+            ("read_noise", self.read_noise.is_some()),
+            ("full_well", self.full_well.is_some()),
+            ("spp", self.spp.is_some()),
+            ("denoise", self.denoise.0.is_some()),
+            ("save_image", self.save_image),
+        ];
+        if let Some((name, _)) = sensor_settings.iter().find(|(_, given)| *given) {
+            return Err(StageError::Config(format!(
+                "{field} and {name}: a chained colour case fits the merged radiance, which renders and exposes nothing of its own"
+            )));
+        }
+        let Some(mut r) = ctx.upstream.get(source).and_then(|e| e.radiance.clone()) else {
+            return Err(StageError::Config(format!(
+                "{field}: case `{source}` handed on no radiance (it failed or ended in a declared error)"
+            )));
+        };
+        if let Some(p) = self.perturb {
+            if !(p.slope.is_finite() && p.slope.abs() < 0.5) {
+                return Err(StageError::Config(format!(
+                    "perturb = {{ slope = {} }}: expected |slope| < 0.5",
+                    p.slope
+                )));
+            }
+            raise(&mut r.estimate, None, p.slope);
+            // (x^a)^(1+s) against x: the slope a(1 + s).
+            r.slope_err = r.slope_err.map(|e| (1.0 + e) * (1.0 + p.slope) - 1.0);
+        }
+        let here = super::render::clean(&ctx.dir.join(&self.scene));
+        let same_chart = r
+            .spectral
+            .as_ref()
+            .is_some_and(|sp| sp.camera == self.camera && sp.illuminant == self.illuminant);
+        if r.scene != here || !same_chart {
+            return Err(StageError::Config(format!(
+                "{field}: that case merged {} ({}); this case's chart is {} ({} under {}): a chained colour case must fit the chart its source merged",
+                r.scene.display(),
+                r.spectral.as_ref().map_or("RGB radiance, not spectral".into(), |sp| format!("{} under {}", sp.camera, sp.illuminant)),
+                here.display(),
+                self.camera,
+                self.illuminant
+            )));
+        }
+        let run_on = |image: &Image| {
+            run_case(
+                || synthesize_radiance(self, ctx, image, source),
+                |i| solve(self, i),
+                |o, t| validate(self, o, t),
+            )
+        };
+        let parameters: Vec<super::chain::Parameter> = ["slope_r", "slope_g", "slope_b"]
+            .iter()
+            .zip(r.slope_err)
+            .map(|(name, error)| super::chain::Parameter { name, error, step: STEP_SLOPE })
+            .collect();
+        let chain = super::chain::Chain {
+            upstream: format!(
+                "Chained: the radiance merged by case `{source}` is off the truth in log–log slope by {:+.5} (R), {:+.5} (G), {:+.5} (B); inherited:",
+                r.slope_err[0], r.slope_err[1], r.slope_err[2]
+            ),
+            headline: "loo_mean_de2000",
+            unit: "ΔE00",
+            errors: &["loo_mean_de2000", "mean_de2000", "max_de2000", "patch_rgb_rel_err"],
+        };
+        super::chain::run_chained(
+            &chain,
+            &parameters,
+            || run_on(&r.estimate),
+            || run_on(&r.truth),
+            |k, delta| {
+                let mut moved = r.truth.clone();
+                raise(&mut moved, Some(k), delta);
+                run_on(&moved)
+            },
+        )
+    }
+}
+
 impl Settings for Config {
     fn headline(&self) -> &'static str {
         "loo_mean_de2000"
     }
     fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
-        run_case(|| synthesize(self, ctx), |i| solve(self, i), |o, t| validate(self, o, t))
+        match image_source(&self.image) {
+            Some((source, output)) => self.run_chained(ctx, &source, &output),
+            None if self.image.is_some() => Err(StageError::Config(format!(
+                "image = \"{}\": expected \"from:CASE/radiance\", an hdr case earlier in the file",
+                self.image.as_deref().unwrap_or("")
+            ))),
+            None if self.perturb.is_some() => Err(StageError::Config(
+                "perturb: only on a chained case (image = \"from:CASE/radiance\"), whose inherited radiance it moves"
+                    .into(),
+            )),
+            None => run_case(|| synthesize(self, ctx), |i| solve(self, i), |o, t| validate(self, o, t)),
+        }
     }
+    fn upstream(&self) -> Vec<(&'static str, String, &'static str)> {
+        match image_source(&self.image) {
+            Some((source, output)) if output == "radiance" => vec![("image", source, "radiance")],
+            _ => Vec::new(),
+        }
+    }
+    /// A chained case renders nothing: its source did.
     fn share(&self, ctx: &Context, pass: Pass) -> Option<Result<(), StageError>> {
-        (pass == Pass::Renders).then(|| synthesize(self, ctx).map(|_| ()))
+        (pass == Pass::Renders && self.image.is_none()).then(|| synthesize(self, ctx).map(|_| ()))
     }
 }

@@ -101,6 +101,28 @@ pub struct Config {
     /// Denoise the truth render (`stages::truth_render`): `true` or the filter's settings.
     #[serde(default)]
     pub denoise: super::Denoise,
+    /// The scene is a colour chart, and the radiance is its camera signal rendered spectrally
+    /// as the `color` stage renders it (`{ camera = "nikon-d5100", illuminant = "d65" }`,
+    /// those the defaults): a later colour case can then take the merged radiance
+    /// (`image = "from:CASE/radiance"`). Default: the scene's RGB radiance.
+    pub spectral: Option<Spectral>,
+}
+
+/// `Config::spectral`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Spectral {
+    #[serde(default = "default_camera")]
+    pub camera: String,
+    #[serde(default = "default_illuminant")]
+    pub illuminant: String,
+}
+
+fn default_camera() -> String {
+    "nikon-d5100".into()
+}
+fn default_illuminant() -> String {
+    "d65".into()
 }
 
 fn default_exposures() -> usize {
@@ -179,23 +201,35 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<hdr::Input, Tru
     sensor.validate()?;
     // Settings checked before the render; the weights also serve the noise floor below.
     let (_, weights) = method(c)?;
-    let scene_path = ctx.dir.join(&c.scene);
-    let scene = render::load(&scene_path)?;
-    let digest = scene_digest(&scene_path)?;
-    let mut settings = render::Settings::from_scene(&scene);
-    apply_overrides(&mut settings, c.spp, None)?;
-    settings.seed = ctx.seed;
-    let recipe = FilmRecipe {
-        product: "hdr-film",
-        scene: &digest,
-        settings: SettingsKey::denoised(&settings, &c.denoise),
-    };
-    let film = ctx.cache.images(ctx.case, "radiance", &recipe, || {
-        Ok::<_, StageError>(vec![super::truth_render(&scene, &settings, &c.denoise)?])
-    })?;
-    let Some(film) = film else { return Ok(None) };
-    let Some(radiance) = film.into_iter().next() else {
-        return Err(StageError::Config("the cached render is empty".into()));
+    let (radiance, spp) = match &c.spectral {
+        Some(sp) => {
+            let mut chart = super::color::load_chart(&c.scene, &sp.camera, &sp.illuminant, ctx)?;
+            let Some(signal) = super::color::chart_signal(&mut chart, c.spp, &c.denoise, ctx)? else {
+                return Ok(None);
+            };
+            (signal.image, signal.spp)
+        }
+        None => {
+            let scene_path = ctx.dir.join(&c.scene);
+            let scene = render::load(&scene_path)?;
+            let digest = scene_digest(&scene_path)?;
+            let mut settings = render::Settings::from_scene(&scene);
+            apply_overrides(&mut settings, c.spp, None)?;
+            settings.seed = ctx.seed;
+            let recipe = FilmRecipe {
+                product: "hdr-film",
+                scene: &digest,
+                settings: SettingsKey::denoised(&settings, &c.denoise),
+            };
+            let film = ctx.cache.images(ctx.case, "radiance", &recipe, || {
+                Ok::<_, StageError>(vec![super::truth_render(&scene, &settings, &c.denoise)?])
+            })?;
+            let Some(film) = film else { return Ok(None) };
+            let Some(radiance) = film.into_iter().next() else {
+                return Err(StageError::Config("the cached render is empty".into()));
+            };
+            (radiance, settings.spp)
+        }
     };
     let max_code = sensor.max_code() as f64;
     let frames: Vec<Frame> = (0..c.exposures)
@@ -253,7 +287,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<hdr::Input, Tru
         c.scene,
         radiance.width,
         radiance.height,
-        settings.spp,
+        spp,
         c.exposures,
         c.stop_step,
         c.bits,
@@ -261,7 +295,13 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<hdr::Input, Tru
         c.full_well,
         c.read_noise
     )];
-    notes.extend(super::denoise_note(&c.denoise, settings.spp));
+    if let Some(sp) = &c.spectral {
+        notes.push(format!(
+            "The radiance is the chart's camera signal ({} under {}), rendered spectrally.",
+            sp.camera, sp.illuminant
+        ));
+    }
+    notes.extend(super::denoise_note(&c.denoise, spp));
     let mut truth = Truth {
         radiance,
         response: c.response,
@@ -710,12 +750,54 @@ pub fn validate_data(out: &hdr::Output, stack: &Stack) -> Findings {
     f
 }
 
+/// What an hdr case hands on (`chain::Exports::radiance`): the merged radiance and the true
+/// one, the scene, and per channel how far the merged radiance's slope against the truth in
+/// log–log is from 1, over the well-exposed pixel channels (least squares).
+fn export(c: &Config, ctx: &Context, out: &hdr::Output, truth: &Truth) -> super::Exports {
+    let slope_err = std::array::from_fn(|ch| {
+        let pairs: Vec<(f64, f64)> = (0..truth.well_exposed[ch].len())
+            .filter(|&i| truth.well_exposed[ch][i])
+            .map(|i| (truth.radiance.data[3 * i + ch] as f64, out.radiance[3 * i + ch] as f64))
+            .filter(|(t, e)| *t > 0.0 && *e > 0.0)
+            .map(|(t, e)| (t.ln(), e.ln()))
+            .collect();
+        let n = pairs.len() as f64;
+        let (mx, my) = pairs.iter().fold((0.0, 0.0), |(a, b), (x, y)| (a + x / n, b + y / n));
+        let (sxy, sxx) =
+            pairs.iter().fold((0.0, 0.0), |(a, b), (x, y)| (a + (x - mx) * (y - my), b + (x - mx).powi(2)));
+        if sxx > 0.0 {
+            sxy / sxx - 1.0
+        } else {
+            0.0
+        }
+    });
+    let r = &truth.radiance;
+    super::Exports {
+        radiance: Some(super::chain::Radiance {
+            estimate: Image { width: r.width, height: r.height, channels: 3, data: out.radiance.clone() },
+            truth: r.clone(),
+            scene: super::render::clean(&ctx.dir.join(&c.scene)),
+            spectral: c.spectral.clone(),
+            slope_err,
+        }),
+        ..Default::default()
+    }
+}
+
 impl Settings for Config {
     fn headline(&self) -> &'static str {
         "radiance_median_rel_err"
     }
     fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
-        run_case(|| synthesize(self, ctx), |i| solve(self, i), |o, t| validate(self, o, t))
+        super::run_case_exporting(
+            || synthesize(self, ctx),
+            |i| solve(self, i),
+            |o, t| validate(self, o, t),
+            |o, t| export(self, ctx, o, t),
+        )
+    }
+    fn provides(&self) -> &'static [&'static str] {
+        &["radiance"]
     }
     fn share(&self, ctx: &Context, pass: Pass) -> Option<Result<(), StageError>> {
         (pass == Pass::Renders).then(|| synthesize(self, ctx).map(|_| ()))

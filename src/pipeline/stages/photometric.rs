@@ -588,9 +588,7 @@ impl Settings for Config {
             return run_case(|| synthesize(self, ctx), |i| solve(self, i), validate);
         };
         let chain = super::chain::Chain {
-            source: &source,
-            estimate,
-            truth,
+            upstream: String::new(),
             headline: "mean_angular_error_deg",
             unit: "°",
             errors: &[
@@ -600,7 +598,7 @@ impl Settings for Config {
                 "masked_share",
             ],
         };
-        super::chain::run_chained(&chain, |given| {
+        super::chain::run_chained_camera(&source, estimate, truth, chain, |given| {
             run_case(|| synthesize_given(self, ctx, Some((given, truth))), |i| solve(self, i), validate)
         })
     }

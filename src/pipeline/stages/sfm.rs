@@ -644,9 +644,7 @@ impl Settings for RenderConfig {
             )));
         }
         let chain = super::chain::Chain {
-            source: &source,
-            estimate,
-            truth,
+            upstream: String::new(),
             headline: "rotation_err_median_deg",
             unit: "°",
             errors: &[
@@ -656,7 +654,7 @@ impl Settings for RenderConfig {
                 "reprojection_rms_px",
             ],
         };
-        super::chain::run_chained(&chain, |given| {
+        super::chain::run_chained_camera(&source, estimate, truth, chain, |given| {
             run_case(
                 || synthesize_given(self, ctx, Some((given, truth))),
                 |i| solve_render(self, i),
