@@ -765,6 +765,71 @@ sweep = {{ denoise = [false, true] }}
     }
 }
 
+/// A colour case chained to an hdr case fits the chart in the merged radiance: with the hdr
+/// case's seed changed (its frames' noise) the chained fit changes and the alone one (on the
+/// true radiance) does not. With the inherited radiance raised to the power 1.02, the
+/// inherited error shows and the sensitivity predicts it within a factor of 2. A source of
+/// another chart, or of RGB radiance, and sensor settings on a chained case are named.
+#[test]
+fn chained_colour_case_fits_the_merged_radiance() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let chart = common::root().join("pipelines/scenes/color-chart.toml");
+    let session = |seed: u64, colour: &str| {
+        format!(
+            "[[stages]]\nstage = \"hdr\"\ncase = \"h\"\nseed = {seed}\nscene = \"{}\"\nspectral = {{ camera = \"nikon-d5100\", illuminant = \"d65\" }}\nexposure = 8.0\nspp = 1\n\
+             [[stages]]\nstage = \"color\"\ncase = \"k\"\nscene = \"{}\"\nimage = \"from:h/radiance\"\n{colour}",
+            chart.display(),
+            chart.display()
+        )
+    };
+    let metrics = |text: &str| {
+        let (code, err) = run(text, &out);
+        assert_eq!(code, 0, "{err}");
+        let j: serde_json::Value = read_json(&out.join("report.json"));
+        assert_eq!(j["stages"][1]["mode"], "chained");
+        let value = |name: &str| {
+            j["stages"][1]["metrics"].as_array().unwrap().iter().find(|m| m["name"] == name).unwrap()["value"]
+                .as_f64()
+        };
+        [
+            "loo_mean_de2000",
+            "alone_loo_mean_de2000",
+            "inherited_loo_mean_de2000",
+            "predicted_inherited_loo_mean_de2000",
+        ]
+        .map(|n| value(n).unwrap_or_else(|| panic!("{n} is missing")))
+    };
+    let [c1, a1, i1, _] = metrics(&session(1, ""));
+    let [c2, a2, _, _] = metrics(&session(2, ""));
+    assert_eq!(a1, a2, "the alone run does not depend on the upstream");
+    assert_ne!(c1, c2, "the chained run takes the upstream's estimate");
+    // A power of 1.02 bends the patches' chromaticities by up to 2 % of their log ratios,
+    // against the merge's own error of about 0.2 % per patch.
+    let [_, _, inherited, predicted] = metrics(&session(1, "perturb = { slope = 0.02 }\n"));
+    assert!(
+        inherited > 0.05 && inherited > 2.0 * i1.abs(),
+        "slope +2 %: inherited {inherited} (unperturbed {i1})"
+    );
+    assert!(
+        predicted > 0.5 * inherited && predicted < 2.0 * inherited,
+        "predicted {predicted}, measured {inherited}"
+    );
+    // Bad input: another chart, RGB radiance, a sensor setting on a chained case, perturb
+    // without a source.
+    let other = session(1, "").replace("illuminant = \"d65\" }", "illuminant = \"a\" }");
+    let (code, err) = run(&other, &out);
+    assert!(code == 1 && err.contains("a chained colour case must fit the chart its source merged"), "{err}");
+    let rgb = session(1, "").replace("spectral = { camera = \"nikon-d5100\", illuminant = \"d65\" }\n", "");
+    let (code, err) = run(&rgb, &out);
+    assert!(code == 1 && err.contains("RGB radiance, not spectral"), "{err}");
+    let (code, err) = run(&session(1, "bits = 8\n"), &out);
+    assert!(code == 1 && err.contains("image = \"from:h/radiance\" and bits"), "{err}");
+    let (code, err) =
+        run(&session(1, "perturb = { slope = 0.02 }\n").replace("image = \"from:h/radiance\"\n", ""), &out);
+    assert!(code == 1 && err.contains("perturb: only on a chained case"), "{err}");
+}
+
 /// A chained case is given its source's output, never the truth: with the calibration's seed
 /// changed, the chained sfm case's errors change and its alone ones do not. With the inherited
 /// focal length made 2 % long, the inherited error shows in the sfm and the photometric case,

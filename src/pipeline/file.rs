@@ -345,6 +345,20 @@ mod tests {
         assert!(e.contains("case `s` is this case"), "{e}");
         let e = parse_str(&format!("{ENTRY}{}", sfm("f"))).unwrap_err().to_string();
         assert!(e.contains("case `f` is a render case, which hands on no camera"), "{e}");
+        // A radiance is named as CASE/radiance, and only an hdr case on renders hands one on.
+        let color = |from: &str| {
+            format!(
+                "[[stages]]\nstage = \"color\"\ncase = \"k\"\nscene = \"d.toml\"\nimage = \"from:{from}\"\n"
+            )
+        };
+        let hdr = "[[stages]]\nstage = \"hdr\"\ncase = \"h\"\nscene = \"d.toml\"\n";
+        let f = parse_str(&format!("{hdr}{}", color("h/radiance"))).unwrap();
+        assert_eq!(f.cases[1].upstream, vec![0]);
+        let e = parse_str(&format!("{cal}{}", color("cal/radiance"))).unwrap_err().to_string();
+        assert!(
+            e.contains("`image` = \"from:cal/radiance\": case `cal` is a calibrate case, which hands on no radiance (an hdr case on renders does)"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -262,9 +262,11 @@ pub(super) fn load_chart(
     let grid = chart_grid(&scene_path)?;
     let to_light = match scene.lights.as_slice() {
         [Light::Directional { to_light, .. }] => to_light.normalize(),
-        _ => return Err(StageError::Config(format!(
+        _ => {
+            return Err(StageError::Config(format!(
             "{scene_file}: the colour stage needs exactly one directional light (it replaces its spectrum)"
-        ))),
+        )))
+        }
     };
     let cos_theta = grid.3.dot(DVec3::from(to_light.as_dvec3())).abs();
 
