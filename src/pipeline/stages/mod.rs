@@ -19,6 +19,7 @@ pub mod calibrate;
 pub mod chain;
 pub mod chart;
 pub mod color;
+pub mod color_chain;
 pub mod hdr;
 pub mod novel_view;
 pub mod photometric;
