@@ -765,56 +765,66 @@ sweep = {{ denoise = [false, true] }}
     }
 }
 
-/// A colour case chained to an hdr case fits the chart in the merged radiance: with the hdr
-/// case's seed changed (its frames' noise) the chained fit changes and the alone one (on the
-/// true radiance) does not. With the inherited radiance raised to the power 1.02, the
-/// inherited error shows and the sensitivity predicts it within a factor of 2. A source of
-/// another chart, or of RGB radiance, and sensor settings on a chained case are named.
+/// Colour cases chained to an hdr case: one fits the chart in the merged radiance, one
+/// photographs it through the stack's camera and makes it linear through the recovered
+/// response. With the hdr case's seed changed (its frames' noise) the chained fits change and
+/// the alone ones (on the true radiance, through the true response) do not. With what they
+/// inherit raised to the power 1.02, the error that adds shows and the sensitivity predicts it
+/// within a factor of 2. A source of another chart, or of RGB radiance, and sensor settings
+/// on a chained case are named.
 #[test]
-fn chained_colour_case_fits_the_merged_radiance() {
+fn chained_colour_cases_take_the_merged_radiance_and_the_response() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
     let chart = common::root().join("pipelines/scenes/color-chart.toml");
     let session = |seed: u64, colour: &str| {
         format!(
-            "[[stages]]\nstage = \"hdr\"\ncase = \"h\"\nseed = {seed}\nscene = \"{}\"\nspectral = {{ camera = \"nikon-d5100\", illuminant = \"d65\" }}\nexposure = 8.0\nspp = 1\n\
-             [[stages]]\nstage = \"color\"\ncase = \"k\"\nscene = \"{}\"\nimage = \"from:h/radiance\"\n{colour}",
-            chart.display(),
+            "[[stages]]\nstage = \"hdr\"\ncase = \"h\"\nseed = {seed}\nscene = \"{0}\"\nspectral = {{ camera = \"nikon-d5100\", illuminant = \"d65\" }}\nexposure = 8.0\nspp = 1\n\
+             [[stages]]\nstage = \"color\"\ncase = \"k\"\nscene = \"{0}\"\nimage = \"from:h/radiance\"\n{colour}\
+             [[stages]]\nstage = \"color\"\ncase = \"r\"\nscene = \"{0}\"\nspp = 1\nresponse = \"from:h\"\n{colour}",
             chart.display()
         )
     };
+    // Per chained case: chained, alone, inherited and predicted inherited headline errors.
     let metrics = |text: &str| {
         let (code, err) = run(text, &out);
         assert_eq!(code, 0, "{err}");
         let j: serde_json::Value = read_json(&out.join("report.json"));
-        assert_eq!(j["stages"][1]["mode"], "chained");
-        let value = |name: &str| {
-            j["stages"][1]["metrics"].as_array().unwrap().iter().find(|m| m["name"] == name).unwrap()["value"]
-                .as_f64()
-        };
-        [
-            "loo_mean_de2000",
-            "alone_loo_mean_de2000",
-            "inherited_loo_mean_de2000",
-            "predicted_inherited_loo_mean_de2000",
-        ]
-        .map(|n| value(n).unwrap_or_else(|| panic!("{n} is missing")))
+        [1, 2].map(|k| {
+            assert_eq!(j["stages"][k]["mode"], "chained");
+            let value = |name: &str| {
+                j["stages"][k]["metrics"].as_array().unwrap().iter().find(|m| m["name"] == name).unwrap()
+                    ["value"]
+                    .as_f64()
+                    .unwrap_or_else(|| panic!("{name} is missing"))
+            };
+            [
+                "loo_mean_de2000",
+                "alone_loo_mean_de2000",
+                "inherited_loo_mean_de2000",
+                "predicted_inherited_loo_mean_de2000",
+            ]
+            .map(value)
+        })
     };
-    let [c1, a1, i1, _] = metrics(&session(1, ""));
-    let [c2, a2, _, _] = metrics(&session(2, ""));
-    assert_eq!(a1, a2, "the alone run does not depend on the upstream");
-    assert_ne!(c1, c2, "the chained run takes the upstream's estimate");
+    let m1 = metrics(&session(1, ""));
+    let m2 = metrics(&session(2, ""));
+    for (a, b) in m1.iter().zip(&m2) {
+        assert_eq!(a[1], b[1], "the alone run does not depend on the upstream");
+        assert_ne!(a[0], b[0], "the chained run takes the upstream's estimate");
+    }
     // A power of 1.02 bends the patches' chromaticities by up to 2 % of their log ratios,
-    // against the merge's own error of about 0.2 % per patch.
-    let [_, _, inherited, predicted] = metrics(&session(1, "perturb = { slope = 0.02 }\n"));
-    assert!(
-        inherited > 0.05 && inherited > 2.0 * i1.abs(),
-        "slope +2 %: inherited {inherited} (unperturbed {i1})"
-    );
-    assert!(
-        predicted > 0.5 * inherited && predicted < 2.0 * inherited,
-        "predicted {predicted}, measured {inherited}"
-    );
+    // against the merge's and the response's own errors of about 0.2 % per patch. What it
+    // adds to the inherited error is what the slopes predict.
+    let wrong = metrics(&session(1, "perturb = { slope = 0.02 }\n"));
+    for (case, (w, m)) in ["radiance", "response"].iter().zip(wrong.iter().zip(&m1)) {
+        let (added, predicted) = (w[2] - m[2], w[3] - m[3]);
+        assert!(added > 0.05, "{case}, slope +2 %: inherited {} (unperturbed {})", w[2], m[2]);
+        assert!(
+            predicted > 0.5 * added && predicted < 2.0 * added,
+            "{case}: the slope adds {added}, predicted {predicted}"
+        );
+    }
     // Bad input: another chart, RGB radiance, a sensor setting on a chained case, perturb
     // without a source.
     let other = session(1, "").replace("illuminant = \"d65\" }", "illuminant = \"a\" }");
@@ -825,8 +835,14 @@ fn chained_colour_case_fits_the_merged_radiance() {
     assert!(code == 1 && err.contains("RGB radiance, not spectral"), "{err}");
     let (code, err) = run(&session(1, "bits = 8\n"), &out);
     assert!(code == 1 && err.contains("image = \"from:h/radiance\" and bits"), "{err}");
-    let (code, err) =
-        run(&session(1, "perturb = { slope = 0.02 }\n").replace("image = \"from:h/radiance\"\n", ""), &out);
+    let (code, err) = run(&session(1, "").replace("spp = 1\nresponse", "full_well = 100.0\nresponse"), &out);
+    assert!(code == 1 && err.contains("response = \"from:h\" and full_well"), "{err}");
+    let (code, err) = run(
+        &session(1, "perturb = { slope = 0.02 }\n")
+            .replace("image = \"from:h/radiance\"\n", "")
+            .replace("response = \"from:h\"\n", ""),
+        &out,
+    );
     assert!(code == 1 && err.contains("perturb: only on a chained case"), "{err}");
 }
 

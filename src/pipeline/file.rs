@@ -222,8 +222,8 @@ fn resolve_upstream(cases: &mut [Case], path: &Path) -> Result<(), Error> {
         let mut found = Vec::new();
         for (field, name, kind) in cases[i].stage.upstream() {
             let c = &cases[i];
-            // A camera is named by its case alone, any other output as CASE/OUTPUT.
-            let reference = if kind == "camera" { name.clone() } else { format!("{name}/{kind}") };
+            // A radiance is named as CASE/radiance, a camera or a response by its case alone.
+            let reference = if kind == "radiance" { format!("{name}/radiance") } else { name.clone() };
             let err = |message: String| Error::Parse {
                 path: path.into(),
                 message: format!(
@@ -354,6 +354,17 @@ mod tests {
         let hdr = "[[stages]]\nstage = \"hdr\"\ncase = \"h\"\nscene = \"d.toml\"\n";
         let f = parse_str(&format!("{hdr}{}", color("h/radiance"))).unwrap();
         assert_eq!(f.cases[1].upstream, vec![0]);
+        let f = parse_str(&format!("{hdr}{}", color("h").replace("image", "response"))).unwrap();
+        assert_eq!(f.cases[1].upstream, vec![0]);
+        let e = parse_str(&format!("{cal}{}", color("cal").replace("image", "response")))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(
+                "`response` = \"from:cal\": case `cal` is a calibrate case, which hands on no response"
+            ),
+            "{e}"
+        );
         let e = parse_str(&format!("{cal}{}", color("cal/radiance"))).unwrap_err().to_string();
         assert!(
             e.contains("`image` = \"from:cal/radiance\": case `cal` is a calibrate case, which hands on no radiance (an hdr case on renders does)"),

@@ -26,6 +26,73 @@ pub struct Exports {
     pub camera: Option<(CameraModel, CameraModel)>,
     /// `radiance`: an hdr case's merged radiance.
     pub radiance: Option<Radiance>,
+    /// `response`: an hdr case's recovered response.
+    pub response: Option<InheritedResponse>,
+}
+
+/// An hdr case's recovered response, with the sensor that made its stack (the camera a later
+/// case photographs through).
+#[derive(Clone, Debug)]
+pub struct InheritedResponse {
+    /// Per channel and code value, the recovered ln exposure g(z) (its offset arbitrary).
+    pub g: Vec<Vec<f64>>,
+    pub sensor: crate::render::sensor::Sensor,
+    /// The error of g against the true g.
+    pub error: LnError,
+}
+
+/// An error e(u) in ln exposure against the true ln exposure u (a recovered response's or a
+/// merged radiance's), per channel, as its least-squares line e ≈ a + slope·(u − c) about the
+/// middle c of the range it was measured on; the offset a is free (a scale), the slope is the
+/// log–log slope less 1. (Bend and twist terms were tried too: they explain no more of the
+/// error a colour fit inherits, which sits in the curve's wiggles at the patches' own values.)
+#[derive(Clone, Debug, Default)]
+pub struct LnError {
+    pub centre: [f64; 3],
+    pub slope: [f64; 3],
+}
+
+/// The sensitivity's step: a slope of 2 %.
+const SLOPE_STEP: f64 = 0.02;
+
+impl LnError {
+    /// Fits each channel's (u, e) pairs; a channel with fewer than 2 pairs or no spread in u
+    /// keeps a slope of 0.
+    pub fn fit(pairs: [Vec<(f64, f64)>; 3]) -> LnError {
+        let mut out = LnError::default();
+        for (ch, p) in pairs.iter().enumerate() {
+            let n = p.len() as f64;
+            let (mu, me) = p.iter().fold((0.0, 0.0), |(a, b), (u, e)| (a + u / n, b + e / n));
+            let (sue, suu) =
+                p.iter().fold((0.0, 0.0), |(a, b), (u, e)| (a + (u - mu) * (e - me), b + (u - mu).powi(2)));
+            if p.len() >= 2 && suu > 0.0 {
+                out.centre[ch] = mu;
+                out.slope[ch] = sue / suu;
+            }
+        }
+        out
+    }
+
+    /// The sensitivity's parameters, one per channel.
+    pub fn parameters(&self) -> Vec<Parameter> {
+        ["slope_r", "slope_g", "slope_b"]
+            .iter()
+            .zip(self.slope)
+            .map(|(name, error)| Parameter { name, error, step: SLOPE_STEP })
+            .collect()
+    }
+
+    /// After the estimate is raised to the power 1 + `s` (ln scaled by 1 + s): u + e becomes
+    /// (1 + s)(u + e), so the slope becomes (1 + s)(1 + slope) − 1.
+    pub fn raised(&mut self, s: f64) {
+        self.slope = self.slope.map(|k| (1.0 + s) * (1.0 + k) - 1.0);
+    }
+
+    /// The slopes as a note.
+    pub fn describe(&self) -> String {
+        let [r, g, b] = self.slope;
+        format!("slope {r:+.5} (R), {g:+.5} (G), {b:+.5} (B)")
+    }
 }
 
 /// An hdr case's merged radiance and what a later case checks and predicts with.
@@ -37,8 +104,8 @@ pub struct Radiance {
     /// The scene file, resolved, and for a chart's camera signal its camera and illuminant.
     pub scene: std::path::PathBuf,
     pub spectral: Option<super::hdr::Spectral>,
-    /// Per channel, the estimate's log–log slope against the truth less 1.
-    pub slope_err: [f64; 3],
+    /// The estimate's error in ln radiance against the truth's ln radiance.
+    pub error: LnError,
 }
 
 /// A run's errors item by item (module docs): per item (a pixel, a pair of images) by its key,

@@ -87,8 +87,15 @@ pub struct Config {
     /// radiance raised to the power 1 + that channel's inherited slope error (or ± 2 % where
     /// smaller), for the sensitivity (`chain`).
     pub image: Option<String>,
-    /// A deliberate error added to the inherited radiance (a chained case only): every
-    /// channel raised to the power 1 + `slope` (default none).
+    /// `"from:CASE"`: photograph the chart once through the camera an earlier hdr case's
+    /// stack came from (its sensor: response curve, bits, full well, read noise; this case's
+    /// exposure), and make the codes linear through the response that case recovered, not
+    /// the true one (a chained case; no `bits`, `read_noise` or `full_well` then). It runs
+    /// alone too, linear through the true response, and once per channel with the true g
+    /// scaled by 1 + that channel's inherited slope error (or ± 2 % where smaller).
+    pub response: Option<String>,
+    /// A deliberate error added to the inherited radiance or response (a chained case only):
+    /// every channel raised to the power 1 + `slope` (default none).
     pub perturb: Option<super::color_chain::SlopePerturb>,
 }
 
@@ -601,6 +608,14 @@ impl Settings for Config {
         "loo_mean_de2000"
     }
     fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
+        if let Some(source) = super::from_case(&self.response) {
+            return super::color_chain::run_response(self, ctx, &source);
+        }
+        if let Some(v) = &self.response {
+            return Err(StageError::Config(format!(
+                "response = \"{v}\": expected \"from:CASE\", an hdr case earlier in the file"
+            )));
+        }
         match super::color_chain::image_source(&self.image) {
             Some((source, output)) => super::color_chain::run_radiance(self, ctx, &source, &output),
             None if self.image.is_some() => Err(StageError::Config(format!(
@@ -615,13 +630,20 @@ impl Settings for Config {
         }
     }
     fn upstream(&self) -> Vec<(&'static str, String, &'static str)> {
-        match super::color_chain::image_source(&self.image) {
-            Some((source, output)) if output == "radiance" => vec![("image", source, "radiance")],
-            _ => Vec::new(),
+        let mut from = Vec::new();
+        if let Some((source, output)) = super::color_chain::image_source(&self.image) {
+            if output == "radiance" {
+                from.push(("image", source, "radiance"));
+            }
         }
+        if let Some(source) = super::from_case(&self.response) {
+            from.push(("response", source, "response"));
+        }
+        from
     }
-    /// A chained case renders nothing: its source did.
+    /// A chained case's renders are made when it runs (a radiance's: by its source).
     fn share(&self, ctx: &Context, pass: Pass) -> Option<Result<(), StageError>> {
-        (pass == Pass::Renders && self.image.is_none()).then(|| synthesize(self, ctx).map(|_| ()))
+        (pass == Pass::Renders && self.image.is_none() && self.response.is_none())
+            .then(|| synthesize(self, ctx).map(|_| ()))
     }
 }

@@ -1,11 +1,17 @@
-//! The colour stage's chained cases (docs/pipeline.md): the correction fitted on a chart
-//! inside the radiance an earlier hdr case merged (`image = "from:CASE/radiance"`), alone on
-//! the true radiance, with the sensitivity to each channel's log–log slope (`chain`).
+//! The colour stage's chained cases (docs/pipeline.md), each with the sensitivity to each
+//! channel's log–log slope of what it inherits (`chain::LnError`):
+//! - the correction fitted on a chart inside the radiance an earlier hdr case merged
+//!   (`image = "from:CASE/radiance"`), alone on the true radiance;
+//! - the chart photographed once through the camera of an earlier hdr case's stack and made
+//!   linear through the response that case recovered (`response = "from:CASE"`), alone
+//!   through the true response. The codes are drawn once; each run only linearises them.
 
-use super::color::{chart_input, load_chart, solve, validate, Config, Truth};
+use super::chain::{run_chained, Chain};
+use super::color::{chart_input, chart_signal, load_chart, solve, validate, Config, Truth};
 use super::{run_case, CaseResult, Context, Findings, StageError, Synthesis};
 use crate::color;
 use crate::image::Image;
+use crate::render;
 use serde::Deserialize;
 
 /// `Config::perturb`.
@@ -14,9 +20,6 @@ use serde::Deserialize;
 pub struct SlopePerturb {
     pub slope: f64,
 }
-
-/// The steps of the sensitivity to a merged radiance's log–log slope per channel.
-const STEP_SLOPE: f64 = 0.02;
 
 /// The case and output a `from:CASE/OUTPUT` field names (`OUTPUT` defaults to `radiance`).
 pub(super) fn image_source(image: &Option<String>) -> Option<(String, String)> {
@@ -53,15 +56,6 @@ fn synthesize_radiance(
     Ok(Some((input, truth, Findings { notes, ..Default::default() })))
 }
 
-/// Raises an RGB image's channel `channel` (every channel for `None`) to the power 1 + `s`.
-fn raise(image: &mut Image, channel: Option<usize>, s: f64) {
-    for (k, v) in image.data.iter_mut().enumerate() {
-        if channel.is_none_or(|c| k % 3 == c) {
-            *v = v.max(0.0).powf(1.0 + s as f32);
-        }
-    }
-}
-
 /// A chained case on a merged radiance (`image = "from:CASE/radiance"`, module docs).
 pub(super) fn run_radiance(
     c: &Config,
@@ -93,15 +87,11 @@ pub(super) fn run_radiance(
         )));
     };
     if let Some(p) = c.perturb {
-        if !(p.slope.is_finite() && p.slope.abs() < 0.5) {
-            return Err(StageError::Config(format!(
-                "perturb = {{ slope = {} }}: expected |slope| < 0.5",
-                p.slope
-            )));
+        let s = check_perturb(p)?;
+        for v in &mut r.estimate.data {
+            *v = v.max(0.0).powf(1.0 + s as f32);
         }
-        raise(&mut r.estimate, None, p.slope);
-        // (x^a)^(1+s) against x: the slope a(1 + s).
-        r.slope_err = r.slope_err.map(|e| (1.0 + e) * (1.0 + p.slope) - 1.0);
+        r.error.raised(s);
     }
     let here = super::render::clean(&ctx.dir.join(&c.scene));
     let same_chart =
@@ -119,29 +109,139 @@ pub(super) fn run_radiance(
     let run_on = |image: &Image| {
         run_case(|| synthesize_radiance(c, ctx, image, source), |i| solve(c, i), |o, t| validate(c, o, t))
     };
-    let parameters: Vec<super::chain::Parameter> = ["slope_r", "slope_g", "slope_b"]
-        .iter()
-        .zip(r.slope_err)
-        .map(|(name, error)| super::chain::Parameter { name, error, step: STEP_SLOPE })
-        .collect();
-    let chain = super::chain::Chain {
+    let chain = Chain {
         upstream: format!(
-            "Chained: the radiance merged by case `{source}` is off the truth in log–log slope by {:+.5} (R), {:+.5} (G), {:+.5} (B); inherited:",
-            r.slope_err[0], r.slope_err[1], r.slope_err[2]
+            "Chained: the radiance merged by case `{source}` is off the truth in ln by {}; inherited:",
+            r.error.describe()
         ),
         headline: "loo_mean_de2000",
         unit: "ΔE00",
         errors: &["loo_mean_de2000", "mean_de2000", "max_de2000", "patch_rgb_rel_err"],
     };
-    super::chain::run_chained(
+    run_chained(
         &chain,
-        &parameters,
+        &r.error.parameters(),
         || run_on(&r.estimate),
         || run_on(&r.truth),
-        |k, delta| {
+        |ch, delta| {
+            // The true radiance with one channel's slope moved: raised to the power 1 + δ.
             let mut moved = r.truth.clone();
-            raise(&mut moved, Some(k), delta);
+            for v in moved.data.iter_mut().skip(ch).step_by(3) {
+                *v = v.max(0.0).powf(1.0 + delta as f32);
+            }
             run_on(&moved)
         },
     )
+}
+
+/// A chained case on a recovered response (`response = "from:CASE"`, module docs).
+pub(super) fn run_response(c: &Config, ctx: &Context, source: &str) -> Result<CaseResult, StageError> {
+    let field = format!("response = \"from:{source}\"");
+    let refused = [
+        ("image", c.image.is_some()),
+        ("bits", c.bits.is_some()),
+        ("read_noise", c.read_noise.is_some()),
+        ("full_well", c.full_well.is_some()),
+        ("save_image", c.save_image),
+    ];
+    if let Some((name, _)) = refused.iter().find(|(_, given)| *given) {
+        return Err(StageError::Config(format!(
+            "{field} and {name}: a case on an inherited response photographs through its source's camera, whose sensor that case describes"
+        )));
+    }
+    let Some(mut r) = ctx.upstream.get(source).and_then(|e| e.response.clone()) else {
+        return Err(StageError::Config(format!(
+            "{field}: case `{source}` handed on no response (it failed or ended in a declared error)"
+        )));
+    };
+    if let Some(p) = c.perturb {
+        let s = check_perturb(p)?;
+        for g in &mut r.g {
+            g.iter_mut().for_each(|v| *v *= 1.0 + s);
+        }
+        r.error.raised(s);
+    }
+    let mut sensor = r.sensor;
+    let scene_exposure = render::load(&ctx.dir.join(&c.scene))?.sensor.unwrap_or_default().exposure;
+    sensor.exposure = c.exposure.unwrap_or(scene_exposure);
+    sensor.validate()?;
+    let levels = sensor.max_code() as usize + 1;
+    if r.g.len() != 3 || r.g.iter().any(|g| g.len() != levels) {
+        return Err(StageError::Config(format!("{field}: the response has no 3 × {levels} values")));
+    }
+    // The chart, photographed once.
+    let t = std::time::Instant::now();
+    let mut chart = load_chart(&c.scene, &c.camera, &c.illuminant, ctx)?;
+    let Some(signal) = chart_signal(&mut chart, c.spp, &c.denoise, ctx)? else {
+        return Err(StageError::Config("the case's renders were asked for, but none came back".into()));
+    };
+    let codes = sensor.expose(&signal.image, render::sampler::mix64(ctx.seed ^ 0xc0_10e5));
+    let render_s = t.elapsed().as_secs_f64();
+    let corners = chart.corners(&c.scene)?;
+    let truth_rgb: Vec<[f64; 3]> = chart.patch_rgb().iter().map(|t| t.map(|v| v * sensor.exposure)).collect();
+    let max = sensor.max_code() as f64;
+    let g_true: Vec<Vec<f64>> = (0..3)
+        .map(|ch| {
+            (0..levels)
+                .map(|z| sensor.response.inverse_channel(ch, z as f64 / max).max(1e-300).ln())
+                .collect()
+        })
+        .collect();
+    let (w, h) = (signal.image.width, signal.image.height);
+    // The codes made linear through `g` (ln exposure per channel and code).
+    let run_on = |g: &[Vec<f64>]| {
+        let mut result = run_case(
+            || {
+                // Each channel scaled so its top code is 1 (a scale the fit is blind to), so
+                // the top code is where a patch is clipped.
+                let data = codes
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &z)| (g[k % 3][z as usize] - g[k % 3][levels - 1]).exp() as f32)
+                    .collect();
+                let image = Image { width: w, height: h, channels: 3, data };
+                let (input, pixels) = chart_input(c, &chart, &image, corners, 1.0)?;
+                let notes = vec![format!(
+                    "{} under {}, camera {}, {} spp: one exposure of {} through the sensor of case `{source}` ({} bits, response {:?}), made linear through a response.",
+                    c.scene, c.illuminant, c.camera, signal.spp, sensor.exposure, sensor.bits, sensor.response
+                )];
+                let truth = Truth { rgb: truth_rgb.clone(), pixel_variance: None, pixels };
+                Ok(Some((input, truth, Findings { notes, ..Default::default() })))
+            },
+            |i| solve(c, i),
+            |o, t| validate(c, o, t),
+        )?;
+        *result.timings_s.entry("render".into()).or_insert(0.0) += render_s;
+        Ok(result)
+    };
+    let chain = Chain {
+        upstream: format!(
+            "Chained: the response recovered by case `{source}` is off the truth (g against the true g) by {}; inherited:",
+            r.error.describe()
+        ),
+        headline: "loo_mean_de2000",
+        unit: "ΔE00",
+        errors: &["loo_mean_de2000", "mean_de2000", "max_de2000", "patch_rgb_rel_err"],
+    };
+    run_chained(
+        &chain,
+        &r.error.parameters(),
+        || run_on(&r.g),
+        || run_on(&g_true),
+        |ch, delta| {
+            // The true g with one channel's slope moved.
+            let mut moved = g_true.clone();
+            moved[ch].iter_mut().for_each(|v| *v *= 1.0 + delta);
+            run_on(&moved)
+        },
+    )
+}
+
+/// A `perturb`'s slope, checked.
+fn check_perturb(p: SlopePerturb) -> Result<f64, StageError> {
+    if p.slope.is_finite() && p.slope.abs() < 0.5 {
+        Ok(p.slope)
+    } else {
+        Err(StageError::Config(format!("perturb = {{ slope = {} }}: expected |slope| < 0.5", p.slope)))
+    }
 }

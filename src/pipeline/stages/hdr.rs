@@ -466,19 +466,16 @@ fn quantile(sorted: &[f64], q: f64) -> Option<f64> {
     (!sorted.is_empty()).then(|| sorted[((sorted.len() - 1) as f64 * q) as usize])
 }
 
-pub fn validate(_c: &Config, out: &hdr::Output, truth: &Truth) -> Findings {
-    let mut f = Findings::default();
-    let levels = out.response.levels;
-    // The response against the truth, over the values a single observation pins down
-    // (module docs), and over every value that occurs.
+/// Per channel and value, the true g(z) = ln f⁻¹(z/max), and whether a single observation
+/// pins the value down (module docs: its noise in ln exposure below 0.1, outside the end bins).
+fn true_response(truth: &Truth, levels: usize) -> (Vec<Vec<f64>>, Vec<Vec<bool>>) {
     let true_g = |c: usize, z: f64| {
         truth.response.inverse_channel(c, (z / truth.max_code).clamp(0.0, 1.0)).max(1e-300).ln()
     };
     // The fit's resolution: above 1024 levels it works on bins (`hdr::response`).
     let bin = (levels / hdr::response::MAX_FIT_LEVELS).max(1);
-    // The truth per channel and value, and whether a single observation pins it down.
     let g_true: Vec<Vec<f64>> = (0..3).map(|c| (0..levels).map(|z| true_g(c, z as f64)).collect()).collect();
-    let pinned: Vec<Vec<bool>> = (0..3)
+    let pinned = (0..3)
         .map(|c| {
             (0..levels)
                 .map(|z| {
@@ -491,6 +488,16 @@ pub fn validate(_c: &Config, out: &hdr::Output, truth: &Truth) -> Findings {
                 .collect()
         })
         .collect();
+    (g_true, pinned)
+}
+
+pub fn validate(_c: &Config, out: &hdr::Output, truth: &Truth) -> Findings {
+    let mut f = Findings::default();
+    let levels = out.response.levels;
+    // The response against the truth, over the values a single observation pins down
+    // (module docs), and over every value that occurs.
+    let (g_true, pinned) = true_response(truth, levels);
+    let bin = (levels / hdr::response::MAX_FIT_LEVELS).max(1);
     // Per channel, the values that occur and `keep` holds, and the fit's mean offset from the
     // truth over them (the offset every recovery is free to choose); `None` when there are none.
     let offset_over = |c: usize, keep: &dyn Fn(usize, usize) -> bool| {
@@ -750,27 +757,28 @@ pub fn validate_data(out: &hdr::Output, stack: &Stack) -> Findings {
     f
 }
 
-/// What an hdr case hands on (`chain::Exports::radiance`): the merged radiance and the true
-/// one, the scene, and per channel how far the merged radiance's slope against the truth in
-/// log–log is from 1, over the well-exposed pixel channels (least squares).
+/// What an hdr case hands on (`chain::Exports`): the merged radiance and the true one, the
+/// scene, and the merged radiance's error in ln against the true ln radiance over the
+/// well-exposed pixel channels; the recovered response with the sensor that made the stack,
+/// and its error against the true g over the values that occur and a single observation pins
+/// down (`chain::LnError` both).
 fn export(c: &Config, ctx: &Context, out: &hdr::Output, truth: &Truth) -> super::Exports {
-    let slope_err = std::array::from_fn(|ch| {
-        let pairs: Vec<(f64, f64)> = (0..truth.well_exposed[ch].len())
+    let radiance_error = super::chain::LnError::fit(std::array::from_fn(|ch| {
+        (0..truth.well_exposed[ch].len())
             .filter(|&i| truth.well_exposed[ch][i])
             .map(|i| (truth.radiance.data[3 * i + ch] as f64, out.radiance[3 * i + ch] as f64))
             .filter(|(t, e)| *t > 0.0 && *e > 0.0)
-            .map(|(t, e)| (t.ln(), e.ln()))
-            .collect();
-        let n = pairs.len() as f64;
-        let (mx, my) = pairs.iter().fold((0.0, 0.0), |(a, b), (x, y)| (a + x / n, b + y / n));
-        let (sxy, sxx) =
-            pairs.iter().fold((0.0, 0.0), |(a, b), (x, y)| (a + (x - mx) * (y - my), b + (x - mx).powi(2)));
-        if sxx > 0.0 {
-            sxy / sxx - 1.0
-        } else {
-            0.0
-        }
-    });
+            .map(|(t, e)| (t.ln(), e.ln() - t.ln()))
+            .collect()
+    }));
+    let levels = out.response.levels;
+    let (g_true, pinned) = true_response(truth, levels);
+    let response_error = super::chain::LnError::fit(std::array::from_fn(|ch| {
+        (0..levels)
+            .filter(|&z| truth.occurs[ch][z] && pinned[ch][z])
+            .map(|z| (g_true[ch][z], out.response.g[ch][z] - g_true[ch][z]))
+            .collect()
+    }));
     let r = &truth.radiance;
     super::Exports {
         radiance: Some(super::chain::Radiance {
@@ -778,7 +786,19 @@ fn export(c: &Config, ctx: &Context, out: &hdr::Output, truth: &Truth) -> super:
             truth: r.clone(),
             scene: super::render::clean(&ctx.dir.join(&c.scene)),
             spectral: c.spectral.clone(),
-            slope_err,
+            error: radiance_error,
+        }),
+        response: Some(super::chain::InheritedResponse {
+            g: out.response.g.clone(),
+            sensor: render::sensor::Sensor {
+                exposure: c.exposure,
+                full_well: c.full_well,
+                photon_noise: true,
+                read_noise: c.read_noise,
+                bits: c.bits,
+                response: c.response,
+            },
+            error: response_error,
         }),
         ..Default::default()
     }
@@ -797,7 +817,7 @@ impl Settings for Config {
         )
     }
     fn provides(&self) -> &'static [&'static str] {
-        &["radiance"]
+        &["radiance", "response"]
     }
     fn share(&self, ctx: &Context, pass: Pass) -> Option<Result<(), StageError>> {
         (pass == Pass::Renders).then(|| synthesize(self, ctx).map(|_| ()))
