@@ -13,6 +13,9 @@
 //! 4. the textured mesh drawn into the held-out camera, and `warp` (backward) from the two
 //!    training views nearest it, their depth the mesh's.
 //!
+//! A chained case (`camera = "from:CASE"`) gives structure from motion the calibrated camera
+//! as the photographs' intrinsics (`chain`).
+//!
 //! Validation aligns the reconstruction to the truth by the similarity of the camera centres
 //! (`sfm::eval::similarity`), then measures:
 //! - `chamfer_rel`: the mean of accuracy (mesh vertices to the nearest true surface point) and
@@ -79,6 +82,14 @@ pub struct Config {
     /// Grid cells across the surface's extent (default 96).
     #[serde(default = "default_resolution")]
     pub surface_resolution: usize,
+    /// `"from:CASE"`: the camera an earlier calibrate case estimated, given to structure from
+    /// motion as the photographs' intrinsics instead of the true camera (a chained case; the
+    /// texture and the warp take the cameras SfM hands on). It runs alone too, with the true
+    /// camera (`chain`). The calibrated camera must be this scene's.
+    pub camera: Option<String>,
+    /// A deliberate error added to the inherited camera (a chained case only): its focal
+    /// lengths scaled by 1 + `focal_rel`, `k1` added to its k1 (default none).
+    pub perturb: Option<super::chain::Perturb>,
 }
 
 fn default_views() -> usize {
@@ -148,6 +159,16 @@ fn check(c: &Config) -> Result<(), StageError> {
 }
 
 pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<Input, Truth>, StageError> {
+    synthesize_given(c, ctx, None)
+}
+
+/// `synthesize`, the photographs' intrinsics `given`'s first camera (an upstream case's
+/// estimate, or the truth it had, which is the second) instead of the scene's.
+fn synthesize_given(
+    c: &Config,
+    ctx: &Context,
+    given: Option<(crate::math::CameraModel, crate::math::CameraModel)>,
+) -> Result<Synthesis<Input, Truth>, StageError> {
     check(c)?;
     let scene_path = ctx.dir.join(&c.scene);
     let mut scene = render::load(&scene_path)?;
@@ -155,6 +176,10 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<Input, Truth>, 
     let mut settings = render::Settings::from_scene(&scene);
     apply_overrides(&mut settings, c.spp, None)?;
     let camera = scene.camera;
+    if let Some((_, upstream_truth)) = &given {
+        super::chain::check_same_camera(c.camera.as_deref().unwrap_or(""), upstream_truth, &camera)?;
+    }
+    let intrinsics = given.map_or(camera, |(g, _)| g);
     // Training views over the arc (all round, the last does not repeat the first), then the
     // held-out one.
     let span = if c.arc_deg >= 360.0 { c.views } else { c.views - 1 };
@@ -181,7 +206,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<Input, Truth>, 
         })?;
         bar.inc(1);
         let Some(rendered) = rendered else { continue };
-        let photo = super::sfm::photograph(name, rendered, &camera, camera)?;
+        let photo = super::sfm::photograph(name, rendered, &camera, intrinsics)?;
         // The photograph as the texture reads it: its 8-bit codes, decoded.
         let lin = Image {
             width: camera.width,
@@ -569,9 +594,31 @@ impl Settings for Config {
         "texture_psnr_db"
     }
     fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
-        run_case(|| synthesize(self, ctx), |i| solve(self, i), validate)
+        let Some((source, estimate, truth)) =
+            super::chain::inherited_camera(&self.camera, self.perturb, ctx)?
+        else {
+            return run_case(|| synthesize(self, ctx), |i| solve(self, i), validate);
+        };
+        let chain = super::chain::Chain {
+            upstream: String::new(),
+            headline: "texture_psnr_db",
+            unit: "dB",
+            errors: &[
+                "texture_psnr_db",
+                "view_psnr_db",
+                "warp_psnr_db",
+                "chamfer_rel",
+                "normal_err_median_deg",
+            ],
+        };
+        super::chain::run_chained_camera(&source, estimate, truth, chain, |given| {
+            run_case(|| synthesize_given(self, ctx, Some((given, truth))), |i| solve(self, i), validate)
+        })
     }
     fn share(&self, ctx: &Context, pass: Pass) -> Option<Result<(), StageError>> {
         (pass == Pass::Renders).then(|| synthesize(self, ctx).map(|_| ()))
+    }
+    fn upstream(&self) -> Vec<(&'static str, String, &'static str)> {
+        super::from_case(&self.camera).map(|s| vec![("camera", s, "camera")]).unwrap_or_default()
     }
 }
