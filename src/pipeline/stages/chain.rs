@@ -256,7 +256,8 @@ pub fn check_same_camera(
 
 /// What a chained case reports besides its runs.
 pub struct Chain<'a> {
-    /// What was inherited and how far off it is (the note's start, `camera_error`).
+    /// What was inherited and how far off it is: the note's start (`run_chained_camera`
+    /// writes a camera's, `camera_error`).
     pub upstream: String,
     /// The headline error the sensitivity is of, and its unit.
     pub headline: &'a str,
