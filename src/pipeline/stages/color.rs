@@ -30,6 +30,9 @@
 //! the variance the sensor model predicts for them: about 1 when the chain is unbiased),
 //! `misflagged_clipped_patches` (the sampler's clipped flags against the truth, where it is
 //! 3σ sure), `fit_s` and `loo_s`.
+//!
+//! A chained case fits the chart in an earlier hdr case's merged radiance (`image`) or in
+//! one exposure made linear through the response it recovered (`response`): `color_chain`.
 
 use super::Synthesis;
 use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError};
