@@ -166,10 +166,13 @@ fn perturbed(camera: CameraModel, focal_rel: f64, k1: f64) -> CameraModel {
     c
 }
 
+/// How far a camera (first) is off the true one (second) in one parameter.
+type Off = fn(&CameraModel, &CameraModel) -> f64;
+
 /// The camera parameters the sensitivity moves, one at a time: name, the step when the
 /// inherited error is smaller (0.1 % of a focal length, a quarter pixel of the principal
 /// point, 0.01 of k1 and k2), and how far a camera is off the truth in it.
-const PARAMETERS: [(&str, f64, fn(&CameraModel, &CameraModel) -> f64); 6] = [
+const PARAMETERS: [(&str, f64, Off); 6] = [
     ("fx_rel", 1e-3, |e, t| (e.intrinsics.fx - t.intrinsics.fx) / t.intrinsics.fx),
     ("fy_rel", 1e-3, |e, t| (e.intrinsics.fy - t.intrinsics.fy) / t.intrinsics.fy),
     ("cx_px", 0.25, |e, t| e.intrinsics.cx - t.intrinsics.cx),
@@ -256,9 +259,6 @@ pub fn check_same_camera(
 
 /// What a chained case reports besides its runs.
 pub struct Chain<'a> {
-    /// What was inherited and how far off it is: the note's start (`run_chained_camera`
-    /// writes a camera's, `camera_error`).
-    pub upstream: String,
     /// The headline error the sensitivity is of, and its unit.
     pub headline: &'a str,
     pub unit: &'a str,
@@ -274,34 +274,46 @@ pub struct Parameter {
     pub step: f64,
 }
 
-/// A case on an inherited camera (`run_chained`): the parameters `PARAMETERS` names, each
-/// moved on the true camera.
-pub fn run_chained_camera(
-    source: &str,
-    estimate: CameraModel,
-    truth: CameraModel,
-    chain: Chain,
-    run_given: impl Fn(CameraModel) -> Result<CaseResult, StageError>,
+/// A case with a `camera` field and `perturb`: run on the scene's true camera when the field
+/// names no source (`run_given(None)`), else chained on the source's camera (`run_chained`),
+/// its parameters those `PARAMETERS` names, each moved on the true camera. `run_given` is
+/// given the camera to use and the true one.
+pub fn run_on_camera(
+    camera: &Option<String>,
+    perturb: Option<Perturb>,
+    ctx: &Context,
+    chain: &Chain,
+    run_given: impl Fn(Option<(CameraModel, CameraModel)>) -> Result<CaseResult, StageError>,
 ) -> Result<CaseResult, StageError> {
+    let Some((source, estimate, truth)) = inherited_camera(camera, perturb, ctx)? else {
+        return run_given(None);
+    };
     let parameters: Vec<Parameter> = PARAMETERS
         .iter()
         .map(|(name, step, off)| Parameter { name, error: off(&estimate, &truth), step: *step })
         .collect();
-    let chain = Chain { upstream: camera_error(source, &estimate, &truth), ..chain };
     run_chained(
-        &chain,
+        &camera_error(&source, &estimate, &truth),
+        chain,
         &parameters,
-        || run_given(estimate),
-        || run_given(truth),
-        |k, delta| run_given(moved(truth, k, delta)),
+        || run_given(Some((estimate, truth))),
+        || run_given(Some((truth, truth))),
+        |k, delta| run_given(Some((moved(truth, k, delta), truth))),
     )
+}
+
+/// The `upstream` of a case with a `camera` field: the case its `from:CASE` names.
+pub fn camera_upstream(camera: &Option<String>) -> Vec<(&'static str, String, &'static str)> {
+    from_case(camera).map(|s| vec![("camera", s, "camera")]).unwrap_or_default()
 }
 
 /// A chained case run chained (`run_estimate`), alone (`run_truth`) and once per inherited
 /// parameter, moved on the truth (`run_moved(k, δ)`), for the sensitivity of the headline
 /// error (module docs): the chained metrics, `alone_…`, `inherited_…`,
-/// `sensitivity_<headline>_per_<parameter>` and `predicted_inherited_<headline>`.
+/// `sensitivity_<headline>_per_<parameter>` and `predicted_inherited_<headline>`. `upstream`
+/// (what was inherited and how far off it is) starts the note.
 pub fn run_chained(
+    upstream: &str,
     chain: &Chain,
     parameters: &[Parameter],
     run_estimate: impl FnOnce() -> Result<CaseResult, StageError>,
@@ -329,7 +341,7 @@ pub fn run_chained(
         (Some(a), Some(runs)) => predict(a, &runs).map(|(p, a)| p - a),
         _ => None,
     };
-    let mut result = chained_result(chained, alone, chain.errors, &chain.upstream);
+    let mut result = chained_result(chained, alone, chain.errors, upstream);
     let unit = chain.unit;
     let mut from_slopes = Some(0.0);
     for (name, error, slope) in &sensitivity {
@@ -337,7 +349,7 @@ pub fn run_chained(
         let per = format!("{unit} per unit");
         result.metrics.push(match slope {
             Some(s) => Metric::new(&metric, *s, &per, Better::Lower),
-            None => Metric::missing(&metric, &per, Better::Lower, &format!("no {headline} to compare")),
+            None => Metric::missing(&metric, &per, Better::Lower, format!("no {headline} to compare")),
         });
         from_slopes = from_slopes.zip(*slope).map(|(p, s)| p + s * error);
     }

@@ -268,7 +268,7 @@ pub(super) fn load_chart(
         )))
         }
     };
-    let cos_theta = grid.3.dot(DVec3::from(to_light.as_dvec3())).abs();
+    let cos_theta = grid.3.dot(to_light.as_dvec3()).abs();
 
     // Materials: the patches by name; the others keep a flat spectrum.
     let mut patch_material = vec![None; 24];
@@ -314,7 +314,7 @@ pub(super) fn chart_signal(
     let scene = &mut chart.scene;
     let digest = &chart.digest;
     let patch_material = &chart.patch_material;
-    let mut settings = render::Settings::from_scene(&scene);
+    let mut settings = render::Settings::from_scene(scene);
     apply_overrides(&mut settings, spp, None)?;
     settings.seed = ctx.seed;
     let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);

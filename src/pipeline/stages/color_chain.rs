@@ -14,6 +14,13 @@ use crate::image::Image;
 use crate::render;
 use serde::Deserialize;
 
+/// What a chained colour case reports of what it inherits.
+const CHAIN: Chain = Chain {
+    headline: "loo_mean_de2000",
+    unit: "ΔE00",
+    errors: &["loo_mean_de2000", "mean_de2000", "max_de2000", "patch_rgb_rel_err"],
+};
+
 /// `Config::perturb`.
 #[derive(Clone, Copy, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -67,25 +74,21 @@ pub(super) fn run_radiance(
     if output != "radiance" {
         return Err(StageError::Config(format!("{field}: expected from:CASE/radiance")));
     }
-    let sensor_settings = [
-        ("exposure", c.exposure.is_some()),
-        ("bits", c.bits.is_some()),
-        ("read_noise", c.read_noise.is_some()),
-        ("full_well", c.full_well.is_some()),
-        ("spp", c.spp.is_some()),
-        ("denoise", c.denoise.0.is_some()),
-        ("save_image", c.save_image),
-    ];
-    if let Some((name, _)) = sensor_settings.iter().find(|(_, given)| *given) {
-        return Err(StageError::Config(format!(
-            "{field} and {name}: a chained colour case fits the merged radiance, which renders and exposes nothing of its own"
-        )));
-    }
-    let Some(mut r) = ctx.upstream.get(source).and_then(|e| e.radiance.clone()) else {
-        return Err(StageError::Config(format!(
-            "{field}: case `{source}` handed on no radiance (it failed or ended in a declared error)"
-        )));
-    };
+    refuse_given(
+        &field,
+        &[
+            ("exposure", c.exposure.is_some()),
+            ("bits", c.bits.is_some()),
+            ("read_noise", c.read_noise.is_some()),
+            ("full_well", c.full_well.is_some()),
+            ("spp", c.spp.is_some()),
+            ("denoise", c.denoise.0.is_some()),
+            ("save_image", c.save_image),
+        ],
+        "a chained colour case fits the merged radiance, which renders and exposes nothing of its own",
+    )?;
+    let mut r =
+        handed_on(ctx.upstream.get(source).and_then(|e| e.radiance.clone()), &field, source, "radiance")?;
     if let Some(p) = c.perturb {
         let s = check_perturb(p)?;
         for v in &mut r.estimate.data {
@@ -109,17 +112,12 @@ pub(super) fn run_radiance(
     let run_on = |image: &Image| {
         run_case(|| synthesize_radiance(c, ctx, image, source), |i| solve(c, i), |o, t| validate(c, o, t))
     };
-    let chain = Chain {
-        upstream: format!(
+    run_chained(
+        &format!(
             "Chained: the radiance merged by case `{source}` is off the truth in ln by {}; inherited:",
             r.error.describe()
         ),
-        headline: "loo_mean_de2000",
-        unit: "ΔE00",
-        errors: &["loo_mean_de2000", "mean_de2000", "max_de2000", "patch_rgb_rel_err"],
-    };
-    run_chained(
-        &chain,
+        &CHAIN,
         &r.error.parameters(),
         || run_on(&r.estimate),
         || run_on(&r.truth),
@@ -137,23 +135,19 @@ pub(super) fn run_radiance(
 /// A chained case on a recovered response (`response = "from:CASE"`, module docs).
 pub(super) fn run_response(c: &Config, ctx: &Context, source: &str) -> Result<CaseResult, StageError> {
     let field = format!("response = \"from:{source}\"");
-    let refused = [
-        ("image", c.image.is_some()),
-        ("bits", c.bits.is_some()),
-        ("read_noise", c.read_noise.is_some()),
-        ("full_well", c.full_well.is_some()),
-        ("save_image", c.save_image),
-    ];
-    if let Some((name, _)) = refused.iter().find(|(_, given)| *given) {
-        return Err(StageError::Config(format!(
-            "{field} and {name}: a case on an inherited response photographs through its source's camera, whose sensor that case describes"
-        )));
-    }
-    let Some(mut r) = ctx.upstream.get(source).and_then(|e| e.response.clone()) else {
-        return Err(StageError::Config(format!(
-            "{field}: case `{source}` handed on no response (it failed or ended in a declared error)"
-        )));
-    };
+    refuse_given(
+        &field,
+        &[
+            ("image", c.image.is_some()),
+            ("bits", c.bits.is_some()),
+            ("read_noise", c.read_noise.is_some()),
+            ("full_well", c.full_well.is_some()),
+            ("save_image", c.save_image),
+        ],
+        "a case on an inherited response photographs through its source's camera, whose sensor that case describes",
+    )?;
+    let mut r =
+        handed_on(ctx.upstream.get(source).and_then(|e| e.response.clone()), &field, source, "response")?;
     if let Some(p) = c.perturb {
         let s = check_perturb(p)?;
         for g in &mut r.g {
@@ -214,17 +208,9 @@ pub(super) fn run_response(c: &Config, ctx: &Context, source: &str) -> Result<Ca
         *result.timings_s.entry("render".into()).or_insert(0.0) += render_s;
         Ok(result)
     };
-    let chain = Chain {
-        upstream: format!(
-            "Chained: the response recovered by case `{source}` is off the truth (g against the true g) by {}; inherited:",
-            r.error.describe()
-        ),
-        headline: "loo_mean_de2000",
-        unit: "ΔE00",
-        errors: &["loo_mean_de2000", "mean_de2000", "max_de2000", "patch_rgb_rel_err"],
-    };
     run_chained(
-        &chain,
+        &format!("Chained: the response recovered by case `{source}` is off the truth (g against the true g) by {}; inherited:", r.error.describe()),
+        &CHAIN,
         &r.error.parameters(),
         || run_on(&r.g),
         || run_on(&g_true),
@@ -235,6 +221,24 @@ pub(super) fn run_response(c: &Config, ctx: &Context, source: &str) -> Result<Ca
             run_on(&moved)
         },
     )
+}
+
+/// Refuses the first setting of `given` (its name, and whether the entry gives it) that the
+/// entry gives beside `field`, saying `why`.
+fn refuse_given(field: &str, given: &[(&str, bool)], why: &str) -> Result<(), StageError> {
+    match given.iter().find(|(_, g)| *g) {
+        Some((name, _)) => Err(StageError::Config(format!("{field} and {name}: {why}"))),
+        None => Ok(()),
+    }
+}
+
+/// What the source case `source` handed on of `kind`, or the refusal naming it.
+fn handed_on<T>(output: Option<T>, field: &str, source: &str, kind: &str) -> Result<T, StageError> {
+    output.ok_or_else(|| {
+        StageError::Config(format!(
+            "{field}: case `{source}` handed on no {kind} (it failed or ended in a declared error)"
+        ))
+    })
 }
 
 /// A `perturb`'s slope, checked.

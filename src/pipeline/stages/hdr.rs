@@ -170,6 +170,10 @@ pub struct Truth {
     occurs: Vec<Vec<bool>>,
     /// Per channel and pixel: some frame holds it well exposed (10 % to 90 % of the full well).
     well_exposed: Vec<Vec<bool>>,
+    /// Per channel and value, the true g(z) and whether one observation pins it down
+    /// (`true_response`).
+    g_true: Vec<Vec<f64>>,
+    pinned: Vec<Vec<bool>>,
     /// The radiance's darkest and brightest positive luminance.
     luminance_range: Option<(f64, f64)>,
     /// The median and 95th-percentile errors of the frames merged through the true curve.
@@ -183,6 +187,18 @@ struct FilmRecipe<'a> {
     settings: SettingsKey,
 }
 
+/// The sensor an entry describes (the longest frame's exposure).
+fn sensor(c: &Config) -> render::sensor::Sensor {
+    render::sensor::Sensor {
+        exposure: c.exposure,
+        full_well: c.full_well,
+        photon_noise: true,
+        read_noise: c.read_noise,
+        bits: c.bits,
+        response: c.response,
+    }
+}
+
 pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<hdr::Input, Truth>, StageError> {
     if c.exposures < 2 || c.exposures > 64 {
         return Err(StageError::Config(format!("exposures = {}: expected 2 to 64", c.exposures)));
@@ -190,14 +206,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<hdr::Input, Tru
     if !(c.stop_step.is_finite() && c.stop_step > 0.0 && c.stop_step <= 10.0) {
         return Err(StageError::Config(format!("stop_step = {}: expected a number in (0, 10]", c.stop_step)));
     }
-    let sensor = render::sensor::Sensor {
-        exposure: c.exposure,
-        full_well: c.full_well,
-        photon_noise: true,
-        read_noise: c.read_noise,
-        bits: c.bits,
-        response: c.response,
-    };
+    let sensor = sensor(c);
     sensor.validate()?;
     // Settings checked before the render; the weights also serve the noise floor below.
     let (_, weights) = method(c)?;
@@ -269,10 +278,8 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<hdr::Input, Tru
     };
     let luminance_range = crate::image::luminance_range(radiance.data.chunks_exact(3));
     // The noise floor: the stack merged through the true curve with the stage's weights.
-    let g_true = |ch: usize| -> Vec<f64> {
-        (0..levels).map(|z| c.response.inverse_channel(ch, z as f64 / max_code).max(1e-300).ln()).collect()
-    };
-    let true_curve = hdr::Response { levels, g: (0..3).map(g_true).collect() };
+    let (g_true, pinned) = true_response(&c.response, max_code, c.full_well, c.read_noise, levels);
+    let true_curve = hdr::Response { levels, g: g_true.clone() };
     let codes: Vec<&[u16]> = input.frames.iter().map(|f| f.codes.as_slice()).collect();
     let times: Vec<f64> = input.frames.iter().map(|f| f.time_s).collect();
     // Weights from the stack are judged against the sensor's true constants.
@@ -310,6 +317,8 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<hdr::Input, Tru
         read_noise: c.read_noise,
         occurs,
         well_exposed,
+        g_true,
+        pinned,
         luminance_range,
         floor: None,
     };
@@ -468,10 +477,17 @@ fn quantile(sorted: &[f64], q: f64) -> Option<f64> {
 
 /// Per channel and value, the true g(z) = ln f⁻¹(z/max), and whether a single observation
 /// pins the value down (module docs: its noise in ln exposure below 0.1, outside the end bins).
-fn true_response(truth: &Truth, levels: usize) -> (Vec<Vec<f64>>, Vec<Vec<bool>>) {
-    let true_g = |c: usize, z: f64| {
-        truth.response.inverse_channel(c, (z / truth.max_code).clamp(0.0, 1.0)).max(1e-300).ln()
-    };
+/// `response` is the sensor's, reaching code `max_code` at full scale, with `full_well`
+/// electrons there and `read_noise` electrons of read noise.
+fn true_response(
+    response: &Response,
+    max_code: f64,
+    full_well: f64,
+    read_noise: f64,
+    levels: usize,
+) -> (Vec<Vec<f64>>, Vec<Vec<bool>>) {
+    let true_g =
+        |c: usize, z: f64| response.inverse_channel(c, (z / max_code).clamp(0.0, 1.0)).max(1e-300).ln();
     // The fit's resolution: above 1024 levels it works on bins (`hdr::response`).
     let bin = (levels / hdr::response::MAX_FIT_LEVELS).max(1);
     let g_true: Vec<Vec<f64>> = (0..3).map(|c| (0..levels).map(|z| true_g(c, z as f64)).collect()).collect();
@@ -481,8 +497,8 @@ fn true_response(truth: &Truth, levels: usize) -> (Vec<Vec<f64>>, Vec<Vec<bool>>
                 .map(|z| {
                     let half = 0.5 * bin as f64;
                     let sigma_q = (true_g(c, z as f64 + half) - true_g(c, z as f64 - half)) / 12f64.sqrt();
-                    let e = g_true[c][z].exp() * truth.full_well;
-                    let sigma_e = (e + truth.read_noise.powi(2)).sqrt() / e;
+                    let e = g_true[c][z].exp() * full_well;
+                    let sigma_e = (e + read_noise.powi(2)).sqrt() / e;
                     z >= bin && z + bin < levels && (sigma_q.powi(2) + sigma_e.powi(2)).sqrt() < 0.1
                 })
                 .collect()
@@ -496,7 +512,7 @@ pub fn validate(_c: &Config, out: &hdr::Output, truth: &Truth) -> Findings {
     let levels = out.response.levels;
     // The response against the truth, over the values a single observation pins down
     // (module docs), and over every value that occurs.
-    let (g_true, pinned) = true_response(truth, levels);
+    let (g_true, pinned) = (&truth.g_true, &truth.pinned);
     let bin = (levels / hdr::response::MAX_FIT_LEVELS).max(1);
     // Per channel, the values that occur and `keep` holds, and the fit's mean offset from the
     // truth over them (the offset every recovery is free to choose); `None` when there are none.
@@ -772,7 +788,7 @@ fn export(c: &Config, ctx: &Context, out: &hdr::Output, truth: &Truth) -> super:
             .collect()
     }));
     let levels = out.response.levels;
-    let (g_true, pinned) = true_response(truth, levels);
+    let (g_true, pinned) = (&truth.g_true, &truth.pinned);
     let response_error = super::chain::LnError::fit(std::array::from_fn(|ch| {
         (0..levels)
             .filter(|&z| truth.occurs[ch][z] && pinned[ch][z])
@@ -790,14 +806,7 @@ fn export(c: &Config, ctx: &Context, out: &hdr::Output, truth: &Truth) -> super:
         }),
         response: Some(super::chain::InheritedResponse {
             g: out.response.g.clone(),
-            sensor: render::sensor::Sensor {
-                exposure: c.exposure,
-                full_well: c.full_well,
-                photon_noise: true,
-                read_noise: c.read_noise,
-                bits: c.bits,
-                response: c.response,
-            },
+            sensor: sensor(c),
             error: response_error,
         }),
         ..Default::default()

@@ -594,13 +594,7 @@ impl Settings for Config {
         "texture_psnr_db"
     }
     fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
-        let Some((source, estimate, truth)) =
-            super::chain::inherited_camera(&self.camera, self.perturb, ctx)?
-        else {
-            return run_case(|| synthesize(self, ctx), |i| solve(self, i), validate);
-        };
         let chain = super::chain::Chain {
-            upstream: String::new(),
             headline: "texture_psnr_db",
             unit: "dB",
             errors: &[
@@ -611,14 +605,14 @@ impl Settings for Config {
                 "normal_err_median_deg",
             ],
         };
-        super::chain::run_chained_camera(&source, estimate, truth, chain, |given| {
-            run_case(|| synthesize_given(self, ctx, Some((given, truth))), |i| solve(self, i), validate)
+        super::chain::run_on_camera(&self.camera, self.perturb, ctx, &chain, |given| {
+            run_case(|| synthesize_given(self, ctx, given), |i| solve(self, i), validate)
         })
     }
     fn share(&self, ctx: &Context, pass: Pass) -> Option<Result<(), StageError>> {
         (pass == Pass::Renders).then(|| synthesize(self, ctx).map(|_| ()))
     }
     fn upstream(&self) -> Vec<(&'static str, String, &'static str)> {
-        super::from_case(&self.camera).map(|s| vec![("camera", s, "camera")]).unwrap_or_default()
+        super::chain::camera_upstream(&self.camera)
     }
 }

@@ -633,18 +633,12 @@ impl Settings for RenderConfig {
         "rotation_err_median_deg"
     }
     fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
-        let Some((source, estimate, truth)) =
-            super::chain::inherited_camera(&self.camera, self.perturb, ctx)?
-        else {
-            return run_case(|| synthesize(self, ctx), |i| solve_render(self, i), validate);
-        };
-        if self.guess_intrinsics {
+        if let (Some(source), true) = (super::from_case(&self.camera), self.guess_intrinsics) {
             return Err(StageError::Config(format!(
                 "camera = \"from:{source}\" and guess_intrinsics = true: a chained case is given its source's camera, not a guess"
             )));
         }
         let chain = super::chain::Chain {
-            upstream: String::new(),
             headline: "rotation_err_median_deg",
             unit: "°",
             errors: &[
@@ -654,16 +648,12 @@ impl Settings for RenderConfig {
                 "reprojection_rms_px",
             ],
         };
-        super::chain::run_chained_camera(&source, estimate, truth, chain, |given| {
-            run_case(
-                || synthesize_given(self, ctx, Some((given, truth))),
-                |i| solve_render(self, i),
-                validate,
-            )
+        super::chain::run_on_camera(&self.camera, self.perturb, ctx, &chain, |given| {
+            run_case(|| synthesize_given(self, ctx, given), |i| solve_render(self, i), validate)
         })
     }
     fn upstream(&self) -> Vec<(&'static str, String, &'static str)> {
-        super::from_case(&self.camera).map(|s| vec![("camera", s, "camera")]).unwrap_or_default()
+        super::chain::camera_upstream(&self.camera)
     }
     /// Both passes: the views' renders and features, then the pairs (`synthesize`).
     fn share(&self, ctx: &Context, _pass: Pass) -> Option<Result<(), StageError>> {
