@@ -25,6 +25,26 @@ pub fn run_with(
     (o.status.code().unwrap_or(-1), err, report)
 }
 
+/// Runs `lumen run` on the pipeline text (written beside OUT as p.toml) with `--out OUT` and
+/// the render cache beside it: the exit code and stderr.
+pub fn run(pipeline: &str, out: &std::path::Path) -> (i32, String) {
+    let dir = out.parent().unwrap();
+    let p = dir.join("p.toml");
+    std::fs::write(&p, pipeline).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_lumen"))
+        .args([
+            "run",
+            p.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--cache",
+            dir.join("cache").to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    (o.status.code().unwrap_or(-1), String::from_utf8_lossy(&o.stderr).into_owned())
+}
+
 /// The JSON file at PATH (a report, a shard's fragment, a summary), parsed.
 pub fn read_json(path: &std::path::Path) -> serde_json::Value {
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
