@@ -155,8 +155,10 @@ pub(super) fn run_response(c: &Config, ctx: &Context, source: &str) -> Result<Ca
         }
         r.error.raised(s);
     }
+    let t = std::time::Instant::now();
+    let mut chart = load_chart(&c.scene, &c.camera, &c.illuminant, ctx)?;
     let mut sensor = r.sensor;
-    let scene_exposure = render::load(&ctx.dir.join(&c.scene))?.sensor.unwrap_or_default().exposure;
+    let scene_exposure = chart.scene.sensor.clone().unwrap_or_default().exposure;
     sensor.exposure = c.exposure.unwrap_or(scene_exposure);
     sensor.validate()?;
     let levels = sensor.max_code() as usize + 1;
@@ -164,8 +166,6 @@ pub(super) fn run_response(c: &Config, ctx: &Context, source: &str) -> Result<Ca
         return Err(StageError::Config(format!("{field}: the response has no 3 × {levels} values")));
     }
     // The chart, photographed once.
-    let t = std::time::Instant::now();
-    let mut chart = load_chart(&c.scene, &c.camera, &c.illuminant, ctx)?;
     let Some(signal) = chart_signal(&mut chart, c.spp, &c.denoise, ctx)? else {
         return Err(StageError::Config("the case's renders were asked for, but none came back".into()));
     };
