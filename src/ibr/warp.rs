@@ -23,7 +23,7 @@
 
 use super::{Error, Projector, Source, View};
 use crate::image::Image;
-use crate::math::{CameraModel, Pose};
+use crate::math::Pose;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
@@ -74,16 +74,6 @@ pub struct Output {
     pub hole_fraction: f64,
 }
 
-/// The undistorted ray n(x) (n_z = 1) of every pixel, row by row; `None` where the
-/// distortion cannot be inverted.
-fn rays(camera: &CameraModel) -> Vec<Option<DVec2>> {
-    let (w, h) = (camera.width as usize, camera.height as usize);
-    (0..w * h)
-        .into_par_iter()
-        .map(|i| camera.undistort_pixel(DVec2::new((i % w) as f64, (i / w) as f64)))
-        .collect()
-}
-
 /// The angle weight 1/(θ + 1°) of a source whose centre is `c_source` (target frame) for the
 /// point `p` (target frame). θ is taken as the chord |â − b̂| = 2·sin(θ/2), equal to θ within
 /// 1 % below 20° and, unlike acos, cheap and exact near 0.
@@ -103,28 +93,26 @@ fn for_each_splat(
 ) {
     let cam = &source.view.camera;
     let w = cam.width as usize;
-    let ray_table = (!cam.distortion.is_zero()).then(|| rays(cam));
     let tw = target.camera.width as usize;
-    source.depth.data.par_chunks(w).enumerate().for_each(|(y, row)| {
-        for (x, &z) in row.iter().enumerate() {
-            if z <= 0.0 {
-                continue;
+    source.depth.data.par_chunks(w).enumerate().for_each_init(
+        || vec![None; w],
+        |rays, (y, row)| {
+            cam.undistort_row(y as u32, rays);
+            for ((x, &z), n) in row.iter().enumerate().zip(rays.iter()) {
+                let Some(n) = n.filter(|_| z > 0.0) else {
+                    continue;
+                };
+                let i = y * w + x;
+                let p = t_tgt_src.transform_point(DVec3::new(n.x, n.y, 1.0) * z as f64);
+                if let Some(px) = target.project(p) {
+                    // `project` keeps both coordinates above −0.5: truncating x + 0.5 rounds
+                    // (a conversion instruction, where `round` is a call into libm).
+                    let (u, v) = ((px.x + 0.5) as usize, (px.y + 0.5) as usize);
+                    visit(v * tw + u, p.z as f32, i);
+                }
             }
-            let i = y * w + x;
-            let n = match &ray_table {
-                Some(t) => match t[i] {
-                    Some(n) => n,
-                    None => continue,
-                },
-                None => cam.pixel_to_normalized(DVec2::new(x as f64, y as f64)),
-            };
-            let p = t_tgt_src.transform_point(DVec3::new(n.x, n.y, 1.0) * z as f64);
-            if let Some(px) = target.project(p) {
-                let (u, v) = (px.x.round() as usize, px.y.round() as usize);
-                visit(v * tw + u, p.z as f32, i);
-            }
-        }
-    });
+        },
+    );
 }
 
 /// The pose carrying source-camera coordinates into target-camera coordinates.
@@ -319,7 +307,6 @@ fn backward(
     let cam = &target.camera;
     let (w, h) = (cam.width, cam.height);
     let c = channels as usize;
-    let ray_table = (!cam.distortion.is_zero()).then(|| rays(cam));
     // Per source: its projection, the pose into it, and its centre in the target's frame.
     let lookups: Vec<(Projector, Pose, DVec3)> = sources
         .iter()
@@ -328,21 +315,14 @@ fn backward(
         .collect();
     let mut sum = vec![0.0f32; zbuf.len() * c];
     let mut weight = vec![0.0f32; zbuf.len()];
-    sum.par_chunks_mut(w as usize * c).zip(weight.par_chunks_mut(w as usize)).enumerate().for_each(
-        |(y, (sum_row, weight_row))| {
-            let mut colour = vec![0.0f32; c];
-            for x in 0..w as usize {
-                let i = y * w as usize + x;
-                let z = zbuf[i];
-                if !z.is_finite() {
+    sum.par_chunks_mut(w as usize * c).zip(weight.par_chunks_mut(w as usize)).enumerate().for_each_init(
+        || (vec![None; w as usize], vec![0.0f32; c]),
+        |(rays, colour), (y, (sum_row, weight_row))| {
+            cam.undistort_row(y as u32, rays);
+            for (x, n) in rays.iter().enumerate() {
+                let z = zbuf[y * w as usize + x];
+                let Some(n) = n.filter(|_| z.is_finite()) else {
                     continue;
-                }
-                let n = match &ray_table {
-                    Some(t) => match t[i] {
-                        Some(n) => n,
-                        None => continue,
-                    },
-                    None => cam.pixel_to_normalized(DVec2::new(x as f64, y as f64)),
                 };
                 let p_tgt = DVec3::new(n.x, n.y, 1.0) * z as f64;
                 for (source, (projector, t_src_tgt, c_source)) in sources.iter().zip(&lookups) {
@@ -350,12 +330,12 @@ fn backward(
                     let Some(px) = projector.project(p) else {
                         continue;
                     };
-                    let agreed = lookup(source, px, p.z as f32, tolerance as f32, &mut colour);
+                    let agreed = lookup(source, px, p.z as f32, tolerance as f32, colour);
                     if agreed <= 0.0 {
                         continue;
                     }
                     let wt = angle_weight(p_tgt, *c_source) * agreed;
-                    for (acc, v) in sum_row[x * c..][..c].iter_mut().zip(&colour) {
+                    for (acc, v) in sum_row[x * c..][..c].iter_mut().zip(colour.iter()) {
                         *acc += wt * v;
                     }
                     weight_row[x] += wt;
@@ -371,7 +351,8 @@ fn backward(
 /// carry (0: the source does not see the point).
 fn lookup(source: &Source, px: DVec2, z: f32, tolerance: f32, colour: &mut [f32]) -> f32 {
     let (w, h) = (source.depth.width as i64, source.depth.height as i64);
-    let (x0, y0) = (px.x.floor() as i64, px.y.floor() as i64);
+    // `project` keeps both coordinates above −0.5: truncating x + 1 and taking 1 away floors.
+    let (x0, y0) = ((px.x + 1.0) as i64 - 1, (px.y + 1.0) as i64 - 1);
     let (fx, fy) = ((px.x - x0 as f64) as f32, (px.y - y0 as f64) as f32);
     let c = colour.len();
     colour.iter_mut().for_each(|v| *v = 0.0);

@@ -166,6 +166,40 @@ impl CameraModel {
         self.distortion.undistort(self.pixel_to_normalized(px))
     }
 
+    /// `undistort_pixel` of the pixels (x, y), x = 0, 1, …, `out.len()` − 1, into `out`.
+    ///
+    /// Neighbouring pixels have neighbouring solutions: each pixel's Newton iteration starts
+    /// from the quadratic through its three left neighbours' solutions, 3·p₋₁ − 3·p₋₂ + p₋₃,
+    /// off the root by about |∂³p|·(1/f)³ (10⁻¹⁰ for a focal length of 1000 px). One step
+    /// from there lands within rounding of the root (Newton converges quadratically), and a
+    /// step longer than 10⁻⁸ falls back to the full iteration, as does every pixel without
+    /// three solved neighbours. An image's rays cost one evaluation of the distortion and its
+    /// Jacobian per pixel instead of five to eight.
+    pub fn undistort_row(&self, y: u32, out: &mut [Option<DVec2>]) {
+        let d = &self.distortion;
+        for x in 0..out.len() {
+            let pd = self.pixel_to_normalized(DVec2::new(x as f64, y as f64));
+            if d.is_zero() {
+                out[x] = Some(pd);
+                continue;
+            }
+            let fast = match x.checked_sub(3).map(|x3| (out[x3], out[x3 + 1], out[x3 + 2])) {
+                Some((Some(p3), Some(p2), Some(p1))) => {
+                    let guess = 3.0 * (p1 - p2) + p3;
+                    let (dg, j) = d.distort_with_jacobian(guess);
+                    let det = j[0][0] * j[1][1] - j[0][1] * j[1][0];
+                    let r = dg - pd;
+                    let step =
+                        DVec2::new(j[1][1] * r.x - j[0][1] * r.y, -j[1][0] * r.x + j[0][0] * r.y) / det;
+                    let p = guess - step;
+                    (det > 1e-12 && step.length_squared() < 1e-16 && p.is_finite()).then_some(p)
+                }
+                _ => None,
+            };
+            out[x] = fast.or_else(|| d.undistort(pd));
+        }
+    }
+
     /// Unit ray direction in the camera frame through pixel `px` (OpenCV pixel coordinates).
     pub fn pixel_ray(&self, px: DVec2) -> Option<DVec3> {
         self.undistort_pixel(px).map(|n| DVec3::new(n.x, n.y, 1.0).normalize())
@@ -200,6 +234,39 @@ impl CameraModel {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn undistort_row_matches_undistort_pixel() {
+        // A strong barrel distortion whose fold lies inside the frame's corners, with
+        // tangential terms, and none.
+        for distortion in [
+            Distortion { k1: -0.45, k2: 0.05, p1: 0.002, p2: -0.003, k3: 0.0 },
+            Distortion { k1: -0.12, ..Distortion::default() },
+            Distortion::default(),
+        ] {
+            let cam = CameraModel { distortion, ..CameraModel::centred(160, 120, 70.0) };
+            let mut row = vec![None; 160];
+            let (mut solved, mut refused) = (0, 0);
+            for y in 0..120 {
+                cam.undistort_row(y, &mut row);
+                for (x, got) in row.iter().enumerate() {
+                    let want = cam.undistort_pixel(DVec2::new(x as f64, y as f64));
+                    match (got, want) {
+                        (Some(g), Some(w)) => {
+                            assert!((*g - w).length() < 1e-13, "({x}, {y}): {g} against {w}");
+                            solved += 1;
+                        }
+                        (None, None) => refused += 1,
+                        _ => panic!("({x}, {y}): {got:?} against {want:?}"),
+                    }
+                }
+            }
+            assert!(solved > 0);
+            if distortion.k1 < -0.4 {
+                assert!(refused > 0, "the fold should lie inside the frame");
+            }
+        }
+    }
 
     #[test]
     fn jacobian_matches_finite_differences() {
