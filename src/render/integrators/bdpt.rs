@@ -45,6 +45,11 @@ use super::particle::{adjoint, shading};
 use super::{camera_path, render_rows, Settings};
 use glam::Vec3A;
 
+thread_local! {
+    /// The splat pass's light subpath, kept from path to path on each thread.
+    static LIGHT_PATH: std::cell::RefCell<Vec<Vertex>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
 /// Keeps the light subpaths' random streams apart from camera paths' with the same seed.
 const STREAM: u64 = 0x6264_7074_6c69_6768;
 
@@ -97,12 +102,15 @@ impl Vertex {
 pub fn render(scene: &Scene, settings: &Settings, film: &mut Film) {
     let width = scene.camera.width as u64;
     render_rows(settings, film, |y, x0, x1| {
+        // The subpaths' vertices, kept from sample to sample (an allocation per subpath cost
+        // a tenth of the time).
+        let (mut camera, mut light) = (Vec::new(), Vec::new());
         (x0..x1)
             .map(|x| {
                 pixel_stats((0..settings.spp).map(|k| {
                     let (mut s, ray) = camera_path(scene, settings, x, y, k);
                     let Some(ray) = ray else { return Vec3A::ZERO };
-                    let camera = camera_subpath(scene, settings, ray, &mut s);
+                    camera_subpath(scene, settings, ray, &mut s, &mut camera);
                     let pass = (settings.first_sample + k) as u64;
                     let mut ls = Sampler::with_kind(
                         settings.sampler,
@@ -110,7 +118,7 @@ pub fn render(scene: &Scene, settings: &Settings, film: &mut Film) {
                         y as u64 * width + x as u64,
                         pass,
                     );
-                    let light = light_subpath(scene, settings, &mut ls);
+                    light_subpath(scene, settings, &mut ls, &mut light);
                     camera_strategies(scene, settings, &camera, &light, &mut s)
                 }))
             })
@@ -126,32 +134,34 @@ pub fn render(scene: &Scene, settings: &Settings, film: &mut Film) {
     };
     super::light::splat_passes(scene, settings, &mut splats, |path, pass, splat| {
         let mut ls = Sampler::with_kind(settings.sampler, settings.seed ^ STREAM, path, pass);
-        let light = light_subpath(scene, settings, &mut ls);
-        // s = 1, t = 1 (a light's point seen directly) is left to the camera sample's s = 0,
-        // as in pbrt: the weight of a two-vertex path is 1.
-        for s in 2..=light.len() {
-            if s as u32 > settings.max_depth {
-                break;
+        LIGHT_PATH.with_borrow_mut(|light| {
+            light_subpath(scene, settings, &mut ls, light);
+            // s = 1, t = 1 (a light's point seen directly) is left to the camera sample's s = 0,
+            // as in pbrt: the weight of a two-vertex path is 1.
+            for s in 2..=light.len() {
+                if s as u32 > settings.max_depth {
+                    break;
+                }
+                let qs = &light[s - 1];
+                if is_delta_bsdf(scene, qs) || (qs.role != Role::Surface && qs.delta) {
+                    continue;
+                }
+                let Some(link) = link_point(scene, qs.p, ls.next2()) else { continue };
+                let to_cam = link.dir;
+                let value = qs.beta * f(scene, qs, to_cam, (light[s - 2].p - qs.p).normalize());
+                if value.max_element() <= 0.0 {
+                    continue;
+                }
+                let cos = if qs.n == Vec3A::ZERO { 1.0 } else { qs.n.dot(to_cam).abs() };
+                let side = if qs.n.dot(to_cam) >= 0.0 { qs.n } else { -qs.n };
+                if !scene.unoccluded(qs.p + side * epsilon(qs.p), qs.p, to_cam, link.dist) {
+                    continue;
+                }
+                let camera_vertex = Vertex::point(Role::Camera, link.aperture, Vec3A::ZERO);
+                let w = mis(scene, &[camera_vertex], &light[..s], 1, Some(&camera_vertex), None);
+                splat(link.pixel, value * (cos * link.importance / (link.dist * link.dist) * w));
             }
-            let qs = &light[s - 1];
-            if is_delta_bsdf(scene, qs) || (qs.role != Role::Surface && qs.delta) {
-                continue;
-            }
-            let Some(link) = link_point(scene, qs.p, ls.next2()) else { continue };
-            let to_cam = link.dir;
-            let value = qs.beta * f(scene, qs, to_cam, (light[s - 2].p - qs.p).normalize());
-            if value.max_element() <= 0.0 {
-                continue;
-            }
-            let cos = if qs.n == Vec3A::ZERO { 1.0 } else { qs.n.dot(to_cam).abs() };
-            let side = if qs.n.dot(to_cam) >= 0.0 { qs.n } else { -qs.n };
-            if !scene.unoccluded(qs.p + side * epsilon(qs.p), qs.p, to_cam, link.dist) {
-                continue;
-            }
-            let camera_vertex = Vertex::point(Role::Camera, link.aperture, Vec3A::ZERO);
-            let w = mis(scene, &[camera_vertex], &light[..s], 1, Some(&camera_vertex), None);
-            splat(link.pixel, value * (cos * link.importance / (link.dist * link.dist) * w));
-        }
+        });
     });
     for i in 0..film.mean.data.len() {
         film.mean.data[i] += splats.mean.data[i];
@@ -236,24 +246,26 @@ fn camera_strategies(
 }
 
 /// The camera subpath of a camera ray: the aperture point, then up to `max_depth` surfaces.
-fn camera_subpath(scene: &Scene, settings: &Settings, ray: Ray, s: &mut Sampler) -> Vec<Vertex> {
-    let mut path = vec![Vertex::point(Role::Camera, ray.origin, Vec3A::ZERO)];
+/// into `path`.
+fn camera_subpath(scene: &Scene, settings: &Settings, ray: Ray, s: &mut Sampler, path: &mut Vec<Vertex>) {
+    path.clear();
+    path.push(Vertex::point(Role::Camera, ray.origin, Vec3A::ZERO));
     let pdf_dir = camera_pdf(scene, ray.origin, ray.origin + ray.dir);
-    extend(scene, ray, Vec3A::ONE, pdf_dir, false, s, &mut path, settings.max_depth as usize + 1);
-    path
+    extend(scene, ray, Vec3A::ONE, pdf_dir, false, s, path, settings.max_depth as usize + 1);
 }
 
 /// The light subpath: a light's point, then up to `max_depth − 1` surfaces.
-fn light_subpath(scene: &Scene, settings: &Settings, s: &mut Sampler) -> Vec<Vertex> {
+/// into `path` (empty where no light emits).
+fn light_subpath(scene: &Scene, settings: &Settings, s: &mut Sampler, path: &mut Vec<Vertex>) {
+    path.clear();
     let (u_pick, u_pos, u_dir) = (s.next(), s.next2(), s.next2());
-    let Some(e) = scene.sample_emission(u_pick, u_pos, u_dir) else { return Vec::new() };
+    let Some(e) = scene.sample_emission(u_pick, u_pos, u_dir) else { return };
     let (pdf_pos, pdf_dir) = scene.emission_pdf(e.light, e.n, e.ray.dir);
     let mut v = Vertex::point(Role::Light(e.light), e.p, e.n);
     v.delta = matches!(scene.lights[e.light], Light::Point { .. } | Light::Spot { .. });
     v.pdf_fwd = scene.pick_probability(e.light) * pdf_pos;
-    let mut path = vec![v];
-    extend(scene, e.ray, e.beta, pdf_dir, true, s, &mut path, settings.max_depth as usize);
-    path
+    path.push(v);
+    extend(scene, e.ray, e.beta, pdf_dir, true, s, path, settings.max_depth as usize);
 }
 
 /// A random walk from `path`'s last vertex along `ray` (drawn with solid-angle density
