@@ -38,7 +38,14 @@ pub fn pixel_stats(samples: impl ExactSizeIterator<Item = Vec3A>) -> ([f32; 3], 
             sum2[c] += v * v;
         }
     }
-    let n = (spp - dropped).max(1) as f64;
+    let (mean, var) = mean_and_variance(sum, sum2, spp - dropped);
+    (mean, var, dropped)
+}
+
+/// The mean of n samples of a pixel from their sum and sum of squares, and the variance of
+/// that mean (the samples' unbiased variance over n; 0 for one sample, and all 0 for none).
+pub fn mean_and_variance(sum: [f64; 3], sum2: [f64; 3], n: u64) -> ([f32; 3], [f32; 3]) {
+    let n = n.max(1) as f64;
     let mut mean = [0.0f32; 3];
     let mut var = [0.0f32; 3];
     for c in 0..3 {
@@ -46,5 +53,5 @@ pub fn pixel_stats(samples: impl ExactSizeIterator<Item = Vec3A>) -> ([f32; 3], 
         mean[c] = m as f32;
         var[c] = if n > 1.0 { ((sum2[c] - n * m * m).max(0.0) / (n - 1.0) / n) as f32 } else { 0.0 };
     }
-    (mean, var, dropped)
+    (mean, var)
 }

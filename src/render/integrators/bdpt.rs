@@ -27,27 +27,30 @@
 //! which changes the densities the weights see by the survival probabilities only (the
 //! weights of a path still sum to one, so the estimate stays unbiased).
 //!
-//! The light subpath of pixel p and sample k is drawn from the stream (p, k) in both passes
-//! (the camera samples' strategies and the splats), so each is the same path. The film is the
-//! sum of the camera samples' mean and the splats' mean, its variance the sum of their
-//! variances (the covariance of the two, through the shared light subpaths, is left out).
+//! Light path p of pass k (`light::splat_passes`) is traced once and serves both: its splats
+//! (t = 1), and the strategies t ≥ 2 of sample k of image pixel p, whose camera subpath is
+//! traced beside it. The film is the sum of the camera samples' mean and the splats' mean,
+//! its variance the sum of their variances (the covariance of the two, through the shared
+//! light subpaths, is left out).
 //! Participating media and lights at infinity (environment, directional) are refused
 //! (`Kind::media`, `Kind::infinite_lights`).
 
 use super::super::bsdf::Bsdf;
 use super::super::camera_ray::{importance, link_point};
-use super::super::film::{pixel_stats, Film, RR_START};
+use super::super::film::{Film, RR_START};
 use super::super::geometry::{Hit, Ray};
 use super::super::sampler::Sampler;
 use super::super::scene::{spot_falloff, Light, Scene};
 use super::super::transport::{self, epsilon};
 use super::particle::{adjoint, shading};
-use super::{camera_path, render_rows, Settings};
+use super::{camera_path, Settings};
 use glam::Vec3A;
 
 thread_local! {
-    /// The splat pass's light subpath, kept from path to path on each thread.
-    static LIGHT_PATH: std::cell::RefCell<Vec<Vertex>> = const { std::cell::RefCell::new(Vec::new()) };
+    /// The camera and light subpaths' vertices, kept from sample to sample on each thread (an
+    /// allocation per subpath cost a tenth of the time).
+    static PATHS: std::cell::RefCell<(Vec<Vertex>, Vec<Vertex>)> =
+        const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
 }
 
 /// Keeps the light subpaths' random streams apart from camera paths' with the same seed.
@@ -100,44 +103,12 @@ impl Vertex {
 }
 
 pub fn render(scene: &Scene, settings: &Settings, film: &mut Film) {
-    let width = scene.camera.width as u64;
-    render_rows(settings, film, |y, x0, x1| {
-        // The subpaths' vertices, kept from sample to sample (an allocation per subpath cost
-        // a tenth of the time).
-        let (mut camera, mut light) = (Vec::new(), Vec::new());
-        (x0..x1)
-            .map(|x| {
-                pixel_stats((0..settings.spp).map(|k| {
-                    let (mut s, ray) = camera_path(scene, settings, x, y, k);
-                    let Some(ray) = ray else { return Vec3A::ZERO };
-                    camera_subpath(scene, settings, ray, &mut s, &mut camera);
-                    let pass = (settings.first_sample + k) as u64;
-                    let mut ls = Sampler::with_kind(
-                        settings.sampler,
-                        settings.seed ^ STREAM,
-                        y as u64 * width + x as u64,
-                        pass,
-                    );
-                    light_subpath(scene, settings, &mut ls, &mut light);
-                    camera_strategies(scene, settings, &camera, &light, &mut s)
-                }))
-            })
-            .collect()
-    });
-    // The strategies t = 1, splatted.
-    let mut splats = Film {
-        mean: crate::image::Image::new(film.mean.width, film.mean.height, 3),
-        variance: crate::image::Image::new(film.mean.width, film.mean.height, 3),
-        origin: film.origin,
-        dropped_samples: 0,
-        samples: film.samples,
-    };
-    super::light::splat_passes(scene, settings, &mut splats, |path, pass, splat| {
-        let mut ls = Sampler::with_kind(settings.sampler, settings.seed ^ STREAM, path, pass);
-        LIGHT_PATH.with_borrow_mut(|light| {
+    super::light::splat_passes(scene, settings, film, true, |path, pass, pixel, splat| {
+        PATHS.with_borrow_mut(|(camera, light)| {
+            let mut ls = Sampler::with_kind(settings.sampler, settings.seed ^ STREAM, path, pass);
             light_subpath(scene, settings, &mut ls, light);
-            // s = 1, t = 1 (a light's point seen directly) is left to the camera sample's s = 0,
-            // as in pbrt: the weight of a two-vertex path is 1.
+            // The strategies t = 1, splatted. s = 1, t = 1 (a light's point seen directly) is
+            // left to the camera sample's s = 0, as in pbrt: the weight of a two-vertex path is 1.
             for s in 2..=light.len() {
                 if s as u32 > settings.max_depth {
                     break;
@@ -161,13 +132,15 @@ pub fn render(scene: &Scene, settings: &Settings, film: &mut Film) {
                 let w = mis(scene, &[camera_vertex], &light[..s], 1, Some(&camera_vertex), None);
                 splat(link.pixel, value * (cos * link.importance / (link.dist * link.dist) * w));
             }
-        });
+            // The strategies t ≥ 2: the camera sample of this pass at the path's own pixel.
+            let Some([x, y]) = pixel else { return Vec3A::ZERO };
+            let (mut s, ray) =
+                camera_path(scene, settings, x, y, (pass - settings.first_sample as u64) as u32);
+            let Some(ray) = ray else { return Vec3A::ZERO };
+            camera_subpath(scene, settings, ray, &mut s, camera);
+            camera_strategies(scene, settings, camera, light, &mut s)
+        })
     });
-    for i in 0..film.mean.data.len() {
-        film.mean.data[i] += splats.mean.data[i];
-        film.variance.data[i] += splats.variance.data[i];
-    }
-    film.dropped_samples += splats.dropped_samples;
 }
 
 /// The strategies with t ≥ 2 for one camera sample: their weighted sum.

@@ -35,7 +35,7 @@
 //! pixels. Media are not supported (`Kind::media`).
 
 use super::super::camera_ray::{camera_ray, link_point, needs_lens_sample};
-use super::super::film::Film;
+use super::super::film::{mean_and_variance, Film};
 use super::super::filter;
 use super::super::sampler::Sampler;
 use super::super::scene::{Light, Scene};
@@ -58,18 +58,30 @@ const STREAM: u64 = 0x6c69_6768_7470_7468;
 type Splat = (u32, [f32; 3]);
 
 pub fn render(scene: &Scene, settings: &Settings, film: &mut Film) {
-    splat_passes(scene, settings, film, |path, pass, splat| trace(scene, settings, path, pass, splat));
+    splat_passes(scene, settings, film, false, |path, pass, _, splat| {
+        trace(scene, settings, path, pass, splat);
+        Vec3A::ZERO
+    });
 }
 
 /// Fills the film with `spp` passes of one light path per image pixel, `trace(path, pass,
-/// splat)` splatting each path's contributions (module docs: batches, variance, order).
+/// pixel, splat)` splatting each path's contributions (module docs: batches, variance, order).
+///
+/// With `camera_samples` (bidirectional path tracing), light path p of a pass also takes that
+/// pass's camera sample of image pixel p = y·W + x, where (x, y) is in the film: `trace` gets
+/// `Some([x, y])` and returns the sample's value, and the film is the sum of the splats' mean
+/// and the camera samples' per-pixel mean (`film::pixel_stats`, the samples taken in pass
+/// order), its variance the sum of theirs. Each light path is then traced once for both.
 pub fn splat_passes(
     scene: &Scene,
     settings: &Settings,
     film: &mut Film,
-    trace: impl Fn(u64, u64, &mut dyn FnMut(DVec2, Vec3A)) + Sync,
+    camera_samples: bool,
+    trace: impl Fn(u64, u64, Option<[u32; 2]>, &mut dyn FnMut(DVec2, Vec3A)) -> Vec3A + Sync,
 ) {
-    let paths = scene.camera.width as u64 * scene.camera.height as u64;
+    let width = scene.camera.width as u64;
+    let paths = width * scene.camera.height as u64;
+    let (origin, size) = film_window(film);
     let pixels = film.mean.width as usize * film.mean.height as usize;
     let spp = settings.spp as u64;
     let per_batch = spp.div_ceil(BATCHES);
@@ -78,6 +90,14 @@ pub fn splat_passes(
     let mut sum = vec![0.0f64; 3 * pixels];
     let mut sum_sq = vec![0.0f64; 3 * pixels];
     let mut batch = vec![0.0f64; 3 * pixels];
+    // The camera samples' sums, sums of squares and finite-sample counts per pixel.
+    let mut camera = camera_samples.then(|| CameraSums::new(pixels));
+    // The film pixel (x, y, index) of light path `path`, where it takes a camera sample.
+    let film_pixel = |path: u64| {
+        let (x, y) = ((path % width) as u32, (path / width) as u32);
+        let (fx, fy) = (x.checked_sub(origin[0])?, y.checked_sub(origin[1])?);
+        (camera_samples && fx < size[0] && fy < size[1]).then_some(([x, y], fy * size[0] + fx))
+    };
     let bar = super::super::progress_bar(spp, "light", settings.progress);
     let mut dropped = 0;
     let mut batches = 0u64;
@@ -88,28 +108,36 @@ pub fn splat_passes(
         let total = passes * paths;
         for start in (0..total).step_by(GROUP as usize) {
             let end = (start + GROUP).min(total);
-            let chunks: Vec<(Vec<Splat>, u64)> = (start..end)
+            let chunks: Vec<(Vec<Splat>, Vec<(u32, Vec3A)>, u64)> = (start..end)
                 .step_by(CHUNK as usize)
                 .collect::<Vec<_>>()
                 .into_par_iter()
                 .map(|c| {
                     let mut out = Vec::with_capacity(4 * CHUNK as usize);
+                    let mut samples = Vec::new();
                     let mut lost = 0;
                     for g in c..(c + CHUNK).min(end) {
                         let (pass, path) = (settings.first_sample as u64 + first + g / paths, g % paths);
-                        trace(path, pass, &mut |px, v| {
-                            splat(scene, film_window(film), px, v, &mut out, &mut lost)
+                        let pixel = film_pixel(path);
+                        let l = trace(path, pass, pixel.map(|p| p.0), &mut |px, v| {
+                            splat(scene, (origin, size), px, v, &mut out, &mut lost)
                         });
+                        if let Some((_, i)) = pixel {
+                            samples.push((i, l));
+                        }
                     }
-                    (out, lost)
+                    (out, samples, lost)
                 })
                 .collect();
-            for (splats, lost) in chunks {
+            for (splats, samples, lost) in chunks {
                 dropped += lost;
                 for (i, v) in splats {
                     for c in 0..3 {
                         batch[3 * i as usize + c] += v[c] as f64;
                     }
+                }
+                if let Some(camera) = camera.as_mut() {
+                    dropped += camera.add(&samples);
                 }
             }
             bar.set_position(first + end / paths);
@@ -135,7 +163,53 @@ pub fn splat_passes(
             0.0
         };
     }
+    if let Some(camera) = camera {
+        for i in 0..pixels {
+            let (mean, var) = camera.stats(i);
+            for c in 0..3 {
+                film.mean.data[3 * i + c] += mean[c];
+                film.variance.data[3 * i + c] += var[c];
+            }
+        }
+    }
     film.dropped_samples += dropped;
+}
+
+/// Per-pixel sums of camera samples, added in the order they are taken.
+struct CameraSums {
+    sum: Vec<[f64; 3]>,
+    sum_sq: Vec<[f64; 3]>,
+    count: Vec<u64>,
+}
+
+impl CameraSums {
+    fn new(pixels: usize) -> Self {
+        CameraSums { sum: vec![[0.0; 3]; pixels], sum_sq: vec![[0.0; 3]; pixels], count: vec![0; pixels] }
+    }
+
+    /// Adds (pixel, value) samples; returns how many were dropped for not being finite.
+    fn add(&mut self, samples: &[(u32, Vec3A)]) -> u64 {
+        let mut dropped = 0;
+        for &(i, l) in samples {
+            let i = i as usize;
+            if !l.is_finite() {
+                dropped += 1;
+                continue;
+            }
+            for c in 0..3 {
+                let v = l[c] as f64;
+                self.sum[i][c] += v;
+                self.sum_sq[i][c] += v * v;
+            }
+            self.count[i] += 1;
+        }
+        dropped
+    }
+
+    /// A pixel's mean and the variance of that mean.
+    fn stats(&self, i: usize) -> ([f32; 3], [f32; 3]) {
+        mean_and_variance(self.sum[i], self.sum_sq[i], self.count[i])
+    }
 }
 
 /// The film's window in the image: origin and size.
