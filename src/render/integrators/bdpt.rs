@@ -11,12 +11,16 @@
 //!   camera's to find (s = 0, t = 2, weight 1, as in pbrt);
 //! - otherwise y_{s−1} and z_{t−1} joined by a shadow ray.
 //!
-//! Each contribution is weighted by the balance heuristic over every strategy that could have
-//! made the same path (Veach's multiple importance sampling): the vertices keep the area
+//! Each contribution is weighted by the power heuristic (β = 2) over every strategy that could
+//! have made the same path (Veach's multiple importance sampling): the vertices keep the area
 //! densities with which each subpath drew them forwards and would have drawn them backwards,
-//! and the weight is 1/(1 + Σ ratios of the other strategies' densities to this one's),
-//! computed from them (pbrt-v3's `MISWeight`; a delta density counts as 1 in the ratios, and
-//! strategies that would join at a delta vertex, or need to hit a point light, count none).
+//! and the weight is 1/(1 + Σ rᵢ²), rᵢ the ratio of another strategy's density to this one's,
+//! computed from them (pbrt-v3's `MISWeight` sums rᵢ, the balance heuristic; a delta density
+//! counts as 1 in the ratios, and strategies that would join at a delta vertex, or need to hit
+//! a point light, count none). The power heuristic, as Veach recommends and Mitsuba's bdpt
+//! uses, takes less weight from a strategy that draws the path rarely: a camera path that
+//! reaches a small light through glass keeps a share of a caustic under the balance heuristic
+//! and brings it as rare, bright samples (the benchmark in the docs' measurements).
 //! The camera's density of a direction is its importance W (`camera_ray`) over the image's
 //! pixel count, since one light path per camera sample spreads over the whole image; so the
 //! strategies t = 1 (one light path per pixel per pass, `light::splat_passes`) and t ≥ 2 (the
@@ -426,7 +430,7 @@ fn pdf_light_origin(scene: &Scene, v: &Vertex) -> f32 {
     scene.pick_probability(i) * pdf_pos
 }
 
-/// The balance-heuristic weight of the strategy (s = y.len(), t) for the path z[..t] + y
+/// The power-heuristic weight of the strategy (s = y.len(), t) for the path z[..t] + y
 /// (module docs); `camera` replaces z₀ for t = 1, `light` replaces y₀ for s = 1.
 fn mis(
     scene: &Scene,
@@ -474,7 +478,7 @@ fn mis(
     for i in (1..t).rev() {
         ri *= remap(z_rev(i)) / remap(zv(i).pdf_fwd);
         if !z_delta(i) && !z_delta(i - 1) {
-            sum += ri;
+            sum += ri * ri;
         }
     }
     let y_rev = |i: usize| {
@@ -493,7 +497,7 @@ fn mis(
         // Before y₀: a light with a delta position, which no camera subpath can hit.
         let before = if i > 0 { y_delta(i - 1) } else { yv(0).delta };
         if !y_delta(i) && !before {
-            sum += ri;
+            sum += ri * ri;
         }
     }
     let w = 1.0 / (1.0 + sum);
