@@ -17,6 +17,7 @@ import mitsuba as mi
 
 mi.set_variant('llvm_ad_rgb')
 import drjit as dr
+from render_peers import grow, pixels_seeing
 
 a = argparse.ArgumentParser()
 a.add_argument('--passes', type=int, default=32)
@@ -25,22 +26,9 @@ a.add_argument('--out', default='tests/data/mitsuba')
 o = a.parse_args()
 d = 'tests/data/mitsuba'
 scene = mi.load_file(os.path.join(d, 'caustic.xml'), integrator='path')
-sensor = scene.sensors()[0]
-w, h = sensor.film().crop_size()
-# Which pixels see the glass: 8 × 8 rays through each pixel's square.
-sub = 8
-ys, xs, sy, sx = np.meshgrid(np.arange(h), np.arange(w), np.arange(sub), np.arange(sub), indexing='ij')
-fx = ((xs + (sx + 0.5) / sub) / w).ravel().astype(np.float32)
-fy = ((ys + (sy + 0.5) / sub) / h).ravel().astype(np.float32)
-rays, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(fx, fy), mi.Point2f(0.5, 0.5))
-si = scene.ray_intersect(rays)
-glass = [s for s in scene.shapes() if s.id() == 'glass'][0]
-hits = np.array(si.is_valid() & (si.shape == mi.ShapePtr(glass))).reshape(h, w, sub * sub).any(axis=2)
-mask = hits.copy()
-mask[1:, :] |= hits[:-1, :]
-mask[:-1, :] |= hits[1:, :]
-mask[:, 1:] |= hits[:, :-1]
-mask[:, :-1] |= hits[:, 1:]
+w, h = scene.sensors()[0].film().crop_size()
+# Which pixels see the glass: 8 × 8 rays through each pixel's square, and their neighbours.
+mask = grow(pixels_seeing(scene, 'glass'))
 imgs = np.stack([np.array(mi.render(scene, spp=o.spp, seed=100 + k))[..., :3] for k in range(o.passes)])
 path_mean, path_var = imgs.mean(axis=0), imgs.var(axis=0, ddof=1) / o.passes
 pt_mean = np.array(mi.Bitmap(os.path.join(d, 'caustic.exr')))[..., :3]

@@ -14,12 +14,13 @@ the wall time of the render, the samples per pixel reached and relMSE = mean((x 
 from the seeds 1..32 tools/mitsuba_reference.py renders references with. Mitsuba comes from the
 peers virtual environment (../shared/tools/peers-venv.sh), never from lumen's dependencies.
 """
-import argparse, os, subprocess, tempfile, time
+import argparse, os, time
 import numpy as np
 import mitsuba as mi
 
 mi.set_variant('llvm_ad_rgb')
 import drjit as dr
+from render_peers import lumen_render
 
 
 def relmse(x, ref, window=None):
@@ -50,17 +51,6 @@ def mitsuba(scene_file, integrator, seconds, seed):
     return np.array(img)[..., :3], wall, spp
 
 
-def lumen(binary, scene_file, integrator, seconds):
-    with tempfile.TemporaryDirectory() as d:
-        out = os.path.join(d, 'x.exr')
-        t = time.perf_counter()
-        r = subprocess.run([binary, 'render', scene_file, '--integrator', integrator, '--time-budget', str(seconds),
-                            '--out', out], capture_output=True, text=True, check=True)
-        wall = time.perf_counter() - t
-        spp = int(r.stderr.split(' spp')[0].rsplit(', ', 1)[-1])
-        return np.array(mi.Bitmap(out))[..., :3], wall, spp
-
-
 a = argparse.ArgumentParser()
 a.add_argument('scene')
 a.add_argument('--reference', required=True)
@@ -76,7 +66,7 @@ window = [int(v) for v in o.region.split(',')] if o.region else None
 runs = []
 for k in range(o.repeat):
     for li, mi_int in zip(o.lumen_integrators.split(','), o.mitsuba_integrators.split(',')):
-        for who, f in (('lumen ' + li, lambda: lumen(o.lumen, o.scene, li, o.seconds)),
+        for who, f in (('lumen ' + li, lambda: lumen_render(o.lumen, o.scene, li, o.seconds)),
                        ('mitsuba ' + mi_int, lambda: mitsuba(o.scene, mi_int, o.seconds, 1000 + 10 * k))):
             img, wall, spp = f()
             row = (who, wall, spp, relmse(img, ref), relmse(img, ref, window) if window else float('nan'))

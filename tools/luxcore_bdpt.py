@@ -141,23 +141,8 @@ def reference(xml, out, spp):
     if not os.path.exists(path):
         imgs = [np.array(mi.render(scene, spp=spp // 16, seed=100 + k))[..., :3] for k in range(16)]
         mi.util.write_bitmap(path, mi.TensorXf(np.mean(imgs, axis=0).astype(np.float32)), write_async=False)
-    sensor = scene.sensors()[0]
-    w, h = sensor.film().crop_size()
-    sub = 8
-    ys, xs, sy, sx = np.meshgrid(np.arange(h), np.arange(w), np.arange(sub), np.arange(sub), indexing='ij')
-    fx = ((xs + (sx + 0.5) / sub) / w).ravel().astype(np.float32)
-    fy = ((ys + (sy + 0.5) / sub) / h).ravel().astype(np.float32)
-    rays, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(fx, fy), mi.Point2f(0.5, 0.5))
-    si = scene.ray_intersect(rays)
-    glass = [s for s in scene.shapes() if s.id() == 'glass'][0]
-    sees = np.array(si.is_valid() & (si.shape == mi.ShapePtr(glass))).reshape(h, w, sub * sub).any(axis=2)
-    for _ in range(2):
-        grown = sees.copy()
-        grown[1:, :] |= sees[:-1, :]
-        grown[:-1, :] |= sees[1:, :]
-        grown[:, 1:] |= sees[:, :-1]
-        grown[:, :-1] |= sees[:, 1:]
-        sees = grown
+    # Widened by two pixels for LuxCore's offset (module docs).
+    sees = grow(pixels_seeing(scene, 'glass'), 2)
     return np.array(mi.Bitmap(path))[..., :3], ~sees
 
 
@@ -243,17 +228,6 @@ film.outputs.0.filename = "unused.exr"
     os._exit(0)
 
 
-def lumen(binary, xml, integrator, seconds):
-    with tempfile.TemporaryDirectory() as d:
-        out = os.path.join(d, 'x.exr')
-        t = time.perf_counter()
-        r = subprocess.run([binary, 'render', xml, '--integrator', integrator, '--time-budget', str(seconds),
-                            '--out', out], capture_output=True, text=True, check=True)
-        wall = time.perf_counter() - t
-        spp = int(r.stderr.split(' spp')[0].rsplit(', ', 1)[-1])
-        return np.array(mi.Bitmap(out))[..., :3], wall, spp
-
-
 def relmse(x, ref, mask):
     return float(np.mean(((x - ref) ** 2 / (ref ** 2 + 0.01))[mask]))
 
@@ -263,6 +237,8 @@ if len(sys.argv) == 5 and sys.argv[1] == '--worker':
 import mitsuba as mi
 
 mi.set_variant('llvm_ad_rgb')
+from render_peers import grow, lumen_render, pixels_seeing
+
 a = argparse.ArgumentParser()
 a.add_argument('--out', required=True)
 a.add_argument('--seconds', type=float, default=16)
@@ -285,7 +261,7 @@ print(f'image mean outside the glass: Mitsuba reference {ref[outside_glass].mean
 for k in range(o.repeat):
     for pair in o.pairs.split(','):
         ours, theirs = pair.split(':')
-        for who, f in (('lumen ' + ours, lambda: lumen(o.lumen, xml, ours, o.seconds)),
+        for who, f in (('lumen ' + ours, lambda: lumen_render(o.lumen, xml, ours, o.seconds)),
                        ('luxcore ' + theirs, lambda: luxcore(theirs, o.seconds))):
             img, wall, spp = f()
             r = lux_ref if who.startswith('luxcore') else ref
