@@ -17,10 +17,11 @@
 //! and the weight is 1/(1 + Σ rᵢ²), rᵢ the ratio of another strategy's density to this one's,
 //! computed from them (pbrt-v3's `MISWeight` sums rᵢ, the balance heuristic; a delta density
 //! counts as 1 in the ratios, and strategies that would join at a delta vertex, or need to hit
-//! a point light, count none). The power heuristic, as Veach recommends and Mitsuba's bdpt
-//! uses, takes less weight from a strategy that draws the path rarely: a camera path that
+//! a point light, count none). The power heuristic, which Veach recommends (1997, §9.2.4),
+//! takes less weight from a strategy that draws the path rarely: a camera path that
 //! reaches a small light through glass keeps a share of a caustic under the balance heuristic
-//! and brings it as rare, bright samples (the benchmark in the docs' measurements).
+//! and brings it as rare, bright samples (docs/measurements.md, "Bidirectional path tracing as
+//! it is now").
 //! The camera's density of a direction is its importance W (`camera_ray`) over the image's
 //! pixel count, since one light path per camera sample spreads over the whole image; so the
 //! strategies t = 1 (one light path per pixel per pass, `light::splat_passes`) and t ≥ 2 (the

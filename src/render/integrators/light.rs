@@ -98,7 +98,8 @@ pub fn splat_passes(
         let (fx, fy) = (x.checked_sub(origin[0])?, y.checked_sub(origin[1])?);
         (camera_samples && fx < size[0] && fy < size[1]).then_some(([x, y], fy * size[0] + fx))
     };
-    let bar = super::super::progress_bar(spp, "light", settings.progress);
+    let label = if camera_samples { "bdpt" } else { "light" };
+    let bar = super::super::progress_bar(spp, label, settings.progress);
     let mut dropped = 0;
     let mut batches = 0u64;
     for first in (0..spp).step_by(per_batch as usize) {
