@@ -22,36 +22,47 @@ pub const RR_START: u32 = 5;
 
 /// Mean and variance of the mean of a pixel's samples, in sample order, and the number of
 /// non-finite samples dropped.
-pub fn pixel_stats(samples: impl ExactSizeIterator<Item = Vec3A>) -> ([f32; 3], [f32; 3], u64) {
-    let spp = samples.len() as u64;
-    let mut sum = [0.0f64; 3];
-    let mut sum2 = [0.0f64; 3];
-    let mut dropped = 0;
-    for l in samples {
-        if !l.is_finite() {
-            dropped += 1;
-            continue;
-        }
-        for c in 0..3 {
-            let v = l[c] as f64;
-            sum[c] += v;
-            sum2[c] += v * v;
-        }
-    }
-    let (mean, var) = mean_and_variance(sum, sum2, spp - dropped);
+pub fn pixel_stats(samples: impl Iterator<Item = Vec3A>) -> ([f32; 3], [f32; 3], u64) {
+    let mut sums = PixelSums::default();
+    let dropped = samples.filter(|&l| !sums.add(l)).count() as u64;
+    let (mean, var) = sums.stats();
     (mean, var, dropped)
 }
 
-/// The mean of n samples of a pixel from their sum and sum of squares, and the variance of
-/// that mean (the samples' unbiased variance over n; 0 for one sample, and all 0 for none).
-pub fn mean_and_variance(sum: [f64; 3], sum2: [f64; 3], n: u64) -> ([f32; 3], [f32; 3]) {
-    let n = n.max(1) as f64;
-    let mut mean = [0.0f32; 3];
-    let mut var = [0.0f32; 3];
-    for c in 0..3 {
-        let m = sum[c] / n;
-        mean[c] = m as f32;
-        var[c] = if n > 1.0 { ((sum2[c] - n * m * m).max(0.0) / (n - 1.0) / n) as f32 } else { 0.0 };
+/// A pixel's sums over its finite samples, in the order they are added.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PixelSums {
+    sum: [f64; 3],
+    sum2: [f64; 3],
+    n: u64,
+}
+
+impl PixelSums {
+    /// Adds a sample; returns false, adding nothing, where it is not finite.
+    pub fn add(&mut self, l: Vec3A) -> bool {
+        if !l.is_finite() {
+            return false;
+        }
+        for c in 0..3 {
+            let v = l[c] as f64;
+            self.sum[c] += v;
+            self.sum2[c] += v * v;
+        }
+        self.n += 1;
+        true
     }
-    (mean, var)
+
+    /// The mean, and the variance of that mean (the samples' unbiased variance over n; 0 for
+    /// one sample, and all 0 for none).
+    pub fn stats(&self) -> ([f32; 3], [f32; 3]) {
+        let n = self.n.max(1) as f64;
+        let mut mean = [0.0f32; 3];
+        let mut var = [0.0f32; 3];
+        for c in 0..3 {
+            let m = self.sum[c] / n;
+            mean[c] = m as f32;
+            var[c] = if n > 1.0 { ((self.sum2[c] - n * m * m).max(0.0) / (n - 1.0) / n) as f32 } else { 0.0 };
+        }
+        (mean, var)
+    }
 }

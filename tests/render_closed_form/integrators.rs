@@ -175,12 +175,7 @@ fn bdpt_agrees_with_the_path_tracer() {
 fn light_tracing_is_deterministic_and_crops_exactly() {
     let scene = render::load(&common::root().join("pipelines/scenes/cornell-box.toml")).unwrap();
     for name in ["light", "bdpt"] {
-        let mut s = common::settings(&scene, 4, 8);
-        s.integrator = integrators::find(name).unwrap();
-        s.threads = Some(1);
-        let one = render::render(&scene, &s);
-        s.threads = Some(2);
-        let two = render::render(&scene, &s);
+        let (mut s, one, two) = on_one_and_two_threads(&scene, name);
         assert!(one.mean.data == two.mean.data && one.variance.data == two.variance.data, "{name}");
         s.crop = Some([100, 30, 160, 90]);
         let crop = render::render(&scene, &s);
@@ -284,14 +279,21 @@ fn sppm_error_falls_as_passes_grow() {
 fn photon_mapping_and_bdpt_are_deterministic() {
     let scene = render::load(&common::root().join("tests/data/mitsuba/caustic.xml")).unwrap();
     for name in ["pm", "sppm", "bdpt"] {
-        let mut s = common::settings(&scene, 4, 8);
-        s.integrator = integrators::find(name).unwrap();
-        s.threads = Some(1);
-        let one = render::render(&scene, &s);
-        s.threads = Some(2);
-        let two = render::render(&scene, &s);
+        let (_, one, two) = on_one_and_two_threads(&scene, name);
         assert!(one.mean.data == two.mean.data, "{name}");
     }
+}
+
+/// The integrator `name`'s render of `scene` (4 samples, depth 8) on one thread and on two,
+/// with the settings of the second.
+fn on_one_and_two_threads(scene: &Scene, name: &str) -> (render::Settings, render::Film, render::Film) {
+    let mut s = common::settings(scene, 4, 8);
+    s.integrator = integrators::find(name).unwrap();
+    s.threads = Some(1);
+    let one = render::render(scene, &s);
+    s.threads = Some(2);
+    let two = render::render(scene, &s);
+    (s, one, two)
 }
 
 /// A time budget renders in rounds (1, 2, 4, … samples, `first_sample` moving on) whose

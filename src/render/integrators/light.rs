@@ -35,7 +35,7 @@
 //! pixels. Media are not supported (`Kind::media`).
 
 use super::super::camera_ray::{camera_ray, link_point, needs_lens_sample};
-use super::super::film::{mean_and_variance, Film};
+use super::super::film::{Film, PixelSums};
 use super::super::filter;
 use super::super::sampler::Sampler;
 use super::super::scene::{Light, Scene};
@@ -70,7 +70,7 @@ pub fn render(scene: &Scene, settings: &Settings, film: &mut Film) {
 /// With `camera_samples` (bidirectional path tracing), light path p of a pass also takes that
 /// pass's camera sample of image pixel p = y·W + x, where (x, y) is in the film: `trace` gets
 /// `Some([x, y])` and returns the sample's value, and the film is the sum of the splats' mean
-/// and the camera samples' per-pixel mean (`film::pixel_stats`, the samples taken in pass
+/// and the camera samples' per-pixel mean (`film::PixelSums`, the samples taken in pass
 /// order), its variance the sum of theirs. Each light path is then traced once for both.
 pub fn splat_passes(
     scene: &Scene,
@@ -90,8 +90,8 @@ pub fn splat_passes(
     let mut sum = vec![0.0f64; 3 * pixels];
     let mut sum_sq = vec![0.0f64; 3 * pixels];
     let mut batch = vec![0.0f64; 3 * pixels];
-    // The camera samples' sums, sums of squares and finite-sample counts per pixel.
-    let mut camera = camera_samples.then(|| CameraSums::new(pixels));
+    // The camera samples' sums per pixel.
+    let mut camera = camera_samples.then(|| vec![PixelSums::default(); pixels]);
     // The film pixel (x, y, index) of light path `path`, where it takes a camera sample.
     let film_pixel = |path: u64| {
         let (x, y) = ((path % width) as u32, (path / width) as u32);
@@ -138,7 +138,7 @@ pub fn splat_passes(
                     }
                 }
                 if let Some(camera) = camera.as_mut() {
-                    dropped += camera.add(&samples);
+                    dropped += samples.iter().filter(|&&(i, l)| !camera[i as usize].add(l)).count() as u64;
                 }
             }
             bar.set_position(first + end / paths);
@@ -165,8 +165,8 @@ pub fn splat_passes(
         };
     }
     if let Some(camera) = camera {
-        for i in 0..pixels {
-            let (mean, var) = camera.stats(i);
+        for (i, sums) in camera.iter().enumerate() {
+            let (mean, var) = sums.stats();
             for c in 0..3 {
                 film.mean.data[3 * i + c] += mean[c];
                 film.variance.data[3 * i + c] += var[c];
@@ -174,43 +174,6 @@ pub fn splat_passes(
         }
     }
     film.dropped_samples += dropped;
-}
-
-/// Per-pixel sums of camera samples, added in the order they are taken.
-struct CameraSums {
-    sum: Vec<[f64; 3]>,
-    sum_sq: Vec<[f64; 3]>,
-    count: Vec<u64>,
-}
-
-impl CameraSums {
-    fn new(pixels: usize) -> Self {
-        CameraSums { sum: vec![[0.0; 3]; pixels], sum_sq: vec![[0.0; 3]; pixels], count: vec![0; pixels] }
-    }
-
-    /// Adds (pixel, value) samples; returns how many were dropped for not being finite.
-    fn add(&mut self, samples: &[(u32, Vec3A)]) -> u64 {
-        let mut dropped = 0;
-        for &(i, l) in samples {
-            let i = i as usize;
-            if !l.is_finite() {
-                dropped += 1;
-                continue;
-            }
-            for c in 0..3 {
-                let v = l[c] as f64;
-                self.sum[i][c] += v;
-                self.sum_sq[i][c] += v * v;
-            }
-            self.count[i] += 1;
-        }
-        dropped
-    }
-
-    /// A pixel's mean and the variance of that mean.
-    fn stats(&self, i: usize) -> ([f32; 3], [f32; 3]) {
-        mean_and_variance(self.sum[i], self.sum_sq[i], self.count[i])
-    }
 }
 
 /// The film's window in the image: origin and size.
