@@ -37,8 +37,15 @@
 //! traced beside it. The film is the sum of the camera samples' mean and the splats' mean,
 //! its variance the sum of their variances (the covariance of the two, through the shared
 //! light subpaths, is left out).
-//! Participating media and lights at infinity (environment, directional) are refused
-//! (`Kind::media`, `Kind::infinite_lights`).
+//!
+//! Lights at infinity (environment, directional) are vertices at infinity, as in pbrt-v3: such
+//! a vertex keeps a direction, not a point (`Vertex::far`, its `n` the direction light travels
+//! in). A light subpath leaves one from a point on the disk facing it (`sample_emission`), so
+//! its first surface is drawn with the disk's area density times the cosine there; a camera
+//! subpath that leaves the scene ends on the environment's vertex; the densities of and
+//! towards such a vertex stay in solid angle. A directional light is a delta in direction: no
+//! camera subpath reaches it, as none reaches a point light.
+//! Participating media are refused (`Kind::media`).
 
 use super::super::bsdf::Bsdf;
 use super::super::camera_ray::{importance, link_point};
@@ -78,9 +85,12 @@ struct Vertex {
     n: Vec3A,
     /// The subpath's throughput arriving here.
     beta: Vec3A,
-    /// A surface's: a delta BSDF lobe was drawn here; a light's: its position is a delta
-    /// (a point or spot light).
+    /// A surface's: a delta BSDF lobe was drawn here; a light's: no camera subpath can reach
+    /// it (a point or spot light, a delta in position; a directional light, in direction).
     delta: bool,
+    /// A light at infinity (environment, directional): `n` is the direction its light travels
+    /// in, and `p` means nothing.
+    far: bool,
     /// Area densities of this vertex: drawn from the subpath's previous vertex, and as the
     /// other subpath would draw it.
     pdf_fwd: f32,
@@ -98,12 +108,33 @@ impl Vertex {
             n,
             beta: Vec3A::ONE,
             delta: false,
+            far: false,
             pdf_fwd: 0.0,
             pdf_rev: 0.0,
             hit: Hit { t: 0.0, prim: 0, b1: 0.0, b2: 0.0 },
             material: 0,
             albedo: Vec3A::ZERO,
         }
+    }
+
+    /// The vertex at infinity of light `light`, whose light travels along `travel`.
+    fn far(scene: &Scene, light: usize, travel: Vec3A) -> Vertex {
+        let p = scene.bounds_center - travel * (2.0 * scene.bounds_radius);
+        let mut v = Vertex::point(Role::Light(light), p, travel);
+        v.far = true;
+        v.delta = matches!(scene.lights[light], Light::Directional { .. });
+        v
+    }
+}
+
+/// The unit direction from `from` towards `to`, either of them possibly at infinity.
+fn toward(from: &Vertex, to: &Vertex) -> Vec3A {
+    if to.far {
+        -to.n
+    } else if from.far {
+        from.n
+    } else {
+        (to.p - from.p).normalize()
     }
 }
 
@@ -124,7 +155,7 @@ pub fn render(scene: &Scene, settings: &Settings, film: &mut Film) {
                 }
                 let Some(link) = link_point(scene, qs.p, ls.next2()) else { continue };
                 let to_cam = link.dir;
-                let value = qs.beta * f(scene, qs, to_cam, (light[s - 2].p - qs.p).normalize());
+                let value = qs.beta * f(scene, qs, to_cam, toward(qs, &light[s - 2]));
                 if value.max_element() <= 0.0 {
                     continue;
                 }
@@ -164,7 +195,11 @@ fn camera_strategies(
                 break;
             }
             let pt = &z[t - 1];
-            let wo = (z[t - 2].p - pt.p).normalize();
+            // A camera subpath that left the scene is joined to nothing.
+            if pt.far && s > 0 {
+                break;
+            }
+            let wo = toward(pt, &z[t - 2]);
             match s {
                 0 => {
                     let le = emitted(scene, pt, wo);
@@ -179,17 +214,21 @@ fn camera_strategies(
                     let Some((light, pdf)) = sample_light_vertex(scene, s_.next(), s_.next2()) else {
                         continue;
                     };
-                    let d = light.p - pt.p;
-                    let dist = d.length();
-                    let wi = d / dist;
+                    let (wi, dist, g_light) = if light.far {
+                        (-light.n, f32::INFINITY, 1.0)
+                    } else {
+                        let d = light.p - pt.p;
+                        let dist = d.length();
+                        let wi = d / dist;
+                        let cos = if light.n == Vec3A::ZERO { 1.0 } else { light.n.dot(wi).abs() };
+                        (wi, dist, cos / (dist * dist))
+                    };
                     let le = emitted(scene, &light, -wi);
                     let fz = f(scene, pt, wo, wi);
                     if le.max_element() <= 0.0 || fz.max_element() <= 0.0 {
                         continue;
                     }
-                    let g = pt.n.dot(wi).abs()
-                        * if light.n == Vec3A::ZERO { 1.0 } else { light.n.dot(wi).abs() }
-                        / (dist * dist);
+                    let g = pt.n.dot(wi).abs() * g_light;
                     let side = if pt.n.dot(wi) >= 0.0 { pt.n } else { -pt.n };
                     if !scene.unoccluded(pt.p + side * epsilon(pt.p), pt.p, wi, dist) {
                         continue;
@@ -205,7 +244,7 @@ fn camera_strategies(
                     let d = pt.p - qs.p;
                     let dist = d.length();
                     let w_to_pt = d / dist;
-                    let fq = f(scene, qs, w_to_pt, (y[s - 2].p - qs.p).normalize());
+                    let fq = f(scene, qs, w_to_pt, toward(qs, &y[s - 2]));
                     let fz = f(scene, pt, wo, -w_to_pt);
                     if fq.max_element() <= 0.0 || fz.max_element() <= 0.0 {
                         continue;
@@ -232,22 +271,32 @@ fn camera_subpath(scene: &Scene, settings: &Settings, ray: Ray, s: &mut Sampler,
     extend(scene, ray, Vec3A::ONE, pdf_dir, false, s, path, settings.max_depth as usize + 1);
 }
 
-/// The light subpath: a light's point, then up to `max_depth − 1` surfaces.
+/// The light subpath: a light's point, then up to `max_depth − 1` surfaces,
 /// into `path` (empty where no light emits).
 fn light_subpath(scene: &Scene, settings: &Settings, s: &mut Sampler, path: &mut Vec<Vertex>) {
     path.clear();
     let (u_pick, u_pos, u_dir) = (s.next(), s.next2(), s.next2());
     let Some(e) = scene.sample_emission(u_pick, u_pos, u_dir) else { return };
     let (pdf_pos, pdf_dir) = scene.emission_pdf(e.light, e.n, e.ray.dir);
-    let mut v = Vertex::point(Role::Light(e.light), e.p, e.n);
-    v.delta = matches!(scene.lights[e.light], Light::Point { .. } | Light::Spot { .. });
-    v.pdf_fwd = scene.pick_probability(e.light) * pdf_pos;
+    let far = matches!(scene.lights[e.light], Light::Directional { .. } | Light::Environment { .. });
+    let (v, pdf_next) = if far {
+        // Its direction is the vertex's density; the disk's point is the next vertex's.
+        let v = Vertex::far(scene, e.light, e.ray.dir);
+        (Vertex { pdf_fwd: pdf_light_origin(scene, &v), ..v }, pdf_pos)
+    } else {
+        let mut v = Vertex::point(Role::Light(e.light), e.p, e.n);
+        v.delta = matches!(scene.lights[e.light], Light::Point { .. } | Light::Spot { .. });
+        v.pdf_fwd = scene.pick_probability(e.light) * pdf_pos;
+        (v, pdf_dir)
+    };
     path.push(v);
-    extend(scene, e.ray, e.beta, pdf_dir, true, s, path, settings.max_depth as usize);
+    extend(scene, e.ray, e.beta, pdf_next, true, s, path, settings.max_depth as usize);
 }
 
 /// A random walk from `path`'s last vertex along `ray` (drawn with solid-angle density
-/// `pdf_dir`), pushing the surfaces it meets, each with its densities (module docs).
+/// `pdf_dir`; from a light at infinity, the area density of the ray's origin across it),
+/// pushing the surfaces it meets, each with its densities (module docs). A camera walk that
+/// leaves a scene with an environment ends on its vertex at infinity.
 #[allow(clippy::too_many_arguments)]
 fn extend(
     scene: &Scene,
@@ -260,7 +309,15 @@ fn extend(
     max_vertices: usize,
 ) {
     while path.len() < max_vertices {
-        let Some(hit) = scene.bvh.intersect(&ray, 0.0, f32::INFINITY) else { break };
+        let Some(hit) = scene.bvh.intersect(&ray, 0.0, f32::INFINITY) else {
+            if let (false, Some(i)) = (light, scene.environment_light) {
+                let mut v = Vertex::far(scene, i, -ray.dir);
+                v.beta = beta;
+                v.pdf_fwd = pdf_dir;
+                path.push(v);
+            }
+            break;
+        };
         let surf = scene.surface(&ray, &hit);
         let mat = &scene.materials[surf.material as usize];
         let prev = path.len() - 1;
@@ -309,7 +366,8 @@ fn extend(
 }
 
 /// A point drawn on a light picked by power, as the vertex y₀ of the strategy s = 1, and the
-/// area density it was drawn with (the pick's included).
+/// area density it was drawn with (the pick's included; for a light at infinity, its
+/// direction's solid-angle density, 1 for a directional light's single direction).
 fn sample_light_vertex(scene: &Scene, u_pick: f32, u: (f32, f32)) -> Option<(Vertex, f32)> {
     let (i, p_pick, _) = scene.pick_light(u_pick)?;
     let (p, n, pdf_pos, delta) = match scene.lights[i] {
@@ -318,7 +376,15 @@ fn sample_light_vertex(scene: &Scene, u_pick: f32, u: (f32, f32)) -> Option<(Ver
             (p, n, 1.0 / area, false)
         }
         Light::Point { position, .. } | Light::Spot { position, .. } => (position, Vec3A::ZERO, 1.0, true),
-        Light::Directional { .. } | Light::Environment { .. } => return None,
+        Light::Directional { to_light, .. } => {
+            let v = Vertex::far(scene, i, -to_light);
+            return Some((Vertex { pdf_fwd: p_pick, ..v }, p_pick));
+        }
+        Light::Environment { .. } => {
+            let (w, _, pdf) = scene.sample_environment(u)?;
+            let v = Vertex::far(scene, i, -w);
+            return Some((Vertex { pdf_fwd: p_pick * pdf, ..v }, p_pick * pdf));
+        }
     };
     let mut v = Vertex::point(Role::Light(i), p, n);
     v.delta = delta;
@@ -326,11 +392,13 @@ fn sample_light_vertex(scene: &Scene, u_pick: f32, u: (f32, f32)) -> Option<(Ver
     Some((v, p_pick * pdf_pos))
 }
 
-/// Radiance (intensity, for a point or spot light) leaving the light or emitter at `v`
-/// along `dir`.
+/// Radiance (intensity, for a point or spot light; irradiance, for a directional light)
+/// leaving the light or emitter at `v` along `dir`.
 fn emitted(scene: &Scene, v: &Vertex, dir: Vec3A) -> Vec3A {
     match v.role {
         Role::Light(i) => match scene.lights[i] {
+            Light::Environment { .. } => scene.environment(-v.n).map_or(Vec3A::ZERO, |(le, _)| le),
+            Light::Directional { irradiance, .. } => irradiance,
             Light::Area { radiance, .. } if v.n.dot(dir) > 0.0 => radiance,
             Light::Point { intensity, .. } => intensity,
             Light::Spot { axis, intensity, cutoff, beam, .. } => {
@@ -386,8 +454,16 @@ fn pdf_dir_at(scene: &Scene, v: &Vertex, w_from: Vec3A, w_to: Vec3A) -> f32 {
     bsdf.pdf(v.albedo, if front { v.n } else { -v.n }, w_from, w_to)
 }
 
-/// A solid-angle density at `from` as an area density at `to`.
+/// A solid-angle density at `from` as an area density at `to`; towards a vertex at infinity it
+/// stays a solid-angle density, and from one (then an area density across the light's
+/// direction) it takes the cosine at `to` only.
 fn to_area(pdf_dir: f32, from: &Vertex, to: &Vertex) -> f32 {
+    if to.far {
+        return pdf_dir;
+    }
+    if from.far {
+        return pdf_dir * if to.n == Vec3A::ZERO { 1.0 } else { to.n.dot(from.n).abs() };
+    }
     let d = to.p - from.p;
     let d2 = d.length_squared();
     if !(d2 > 0.0) {
@@ -408,27 +484,33 @@ fn camera_pdf(scene: &Scene, aperture: Vec3A, p: Vec3A) -> f32 {
 /// subpath (none at an endpoint).
 fn pdf(scene: &Scene, v: &Vertex, prev: Option<&Vertex>, next: &Vertex) -> f32 {
     match (v.role, prev) {
-        (Role::Camera, _) => to_area(camera_pdf(scene, v.p, next.p), v, next),
+        (Role::Camera, _) => to_area(camera_pdf(scene, v.p, v.p + toward(v, next)), v, next),
         (Role::Light(_), _) | (Role::Surface, None) => pdf_light(scene, v, next),
         (Role::Surface, Some(prev)) => {
-            let (a, b) = ((prev.p - v.p).normalize(), (next.p - v.p).normalize());
+            let (a, b) = (toward(v, prev), toward(v, next));
             to_area(pdf_dir_at(scene, v, a, b), v, next)
         }
     }
 }
 
-/// The area density with which the light at `v` emits towards `next`.
+/// The area density with which the light at `v` emits towards `next` (from a light at
+/// infinity: the density of the disk point its ray leaves, across its direction).
 fn pdf_light(scene: &Scene, v: &Vertex, next: &Vertex) -> f32 {
     let Some(i) = light_of(scene, v) else { return 0.0 };
-    let (_, pdf_dir) = scene.emission_pdf(i, v.n, (next.p - v.p).normalize());
-    to_area(pdf_dir, v, next)
+    let (pdf_pos, pdf_dir) = scene.emission_pdf(i, v.n, toward(v, next));
+    to_area(if v.far { pdf_pos } else { pdf_dir }, v, next)
 }
 
-/// The area density with which light subpaths start at `v` (the pick's included).
+/// The area density with which light subpaths start at `v` (the pick's included; for a light
+/// at infinity, the solid-angle density of its direction).
 fn pdf_light_origin(scene: &Scene, v: &Vertex) -> f32 {
     let Some(i) = light_of(scene, v) else { return 0.0 };
-    let (pdf_pos, _) = scene.emission_pdf(i, v.n, v.n);
-    scene.pick_probability(i) * pdf_pos
+    let p_pick = scene.pick_probability(i);
+    match scene.lights[i] {
+        Light::Environment { .. } => scene.environment(-v.n).map_or(0.0, |(_, pdf)| pdf),
+        Light::Directional { .. } => p_pick,
+        _ => p_pick * scene.emission_pdf(i, v.n, v.n).0,
+    }
 }
 
 /// The power-heuristic weight of the strategy (s = y.len(), t) for the path z[..t] + y

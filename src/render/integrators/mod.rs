@@ -40,9 +40,6 @@ pub struct Kind {
     /// Whether it renders participating media; scenes with media are refused otherwise
     /// (`refusal`).
     pub media: bool,
-    /// Whether it renders lights at infinity (environment, directional); scenes with them are
-    /// refused otherwise (`refusal`).
-    pub infinite_lights: bool,
     /// Whether it keeps a time budget itself (its passes build on each other), rather than
     /// being called in rounds (`render_budgeted`).
     pub progressive: bool,
@@ -55,7 +52,6 @@ pub const REGISTRY: &[Kind] = &[
         about: "unidirectional path tracing with next-event estimation and MIS",
         render: path::render,
         media: false,
-        infinite_lights: true,
         progressive: false,
     },
     Kind {
@@ -63,7 +59,6 @@ pub const REGISTRY: &[Kind] = &[
         about: "path tracing through participating media (delta tracking, light sampling through media)",
         render: volpath::render,
         media: true,
-        infinite_lights: true,
         progressive: false,
     },
     Kind {
@@ -71,7 +66,6 @@ pub const REGISTRY: &[Kind] = &[
         about: "light tracing: paths from the lights, every vertex joined to the camera (Mitsuba's ptracer)",
         render: light::render,
         media: false,
-        infinite_lights: true,
         progressive: false,
     },
     Kind {
@@ -79,7 +73,6 @@ pub const REGISTRY: &[Kind] = &[
         about: "photon mapping: photons from the lights in a kd-tree, density estimation where camera paths meet a diffuse surface",
         render: photon::render,
         media: false,
-        infinite_lights: true,
         progressive: false,
     },
     Kind {
@@ -87,7 +80,6 @@ pub const REGISTRY: &[Kind] = &[
         about: "stochastic progressive photon mapping: per-pixel radii shrinking pass by pass, consistent",
         render: sppm::render,
         media: false,
-        infinite_lights: true,
         progressive: true,
     },
     Kind {
@@ -95,7 +87,6 @@ pub const REGISTRY: &[Kind] = &[
         about: "bidirectional path tracing: camera and light subpaths joined by every strategy, weighted by multiple importance sampling",
         render: bdpt::render,
         media: false,
-        infinite_lights: false,
         progressive: false,
     },
 ];
@@ -273,19 +264,12 @@ impl serde::Serialize for Kind {
     }
 }
 
-/// Why `kind` cannot render a scene (with participating media when `media`, with an
-/// environment or directional light when `infinite_lights`), if it cannot: the message
-/// follows the integrator's name in an error.
-pub fn refusal(kind: &Kind, media: bool, infinite_lights: bool) -> Option<String> {
-    if media && !kind.media {
-        return Some(format!(
-            "is \"{}\", which does not render participating media: a scene with media takes the volpath integrator ([render] integrator = \"volpath\"; in Mitsuba XML, <integrator type=\"volpath\">)",
-            kind.name
-        ));
-    }
-    (infinite_lights && !kind.infinite_lights).then(|| {
+/// Why `kind` cannot render a scene (with participating media when `media`), if it cannot:
+/// the message follows the integrator's name in an error.
+pub fn refusal(kind: &Kind, media: bool) -> Option<String> {
+    (media && !kind.media).then(|| {
         format!(
-            "is \"{}\", which does not render environment or directional lights yet: use path, light, pm or sppm for this scene",
+            "is \"{}\", which does not render participating media: a scene with media takes the volpath integrator ([render] integrator = \"volpath\"; in Mitsuba XML, <integrator type=\"volpath\">)",
             kind.name
         )
     })
@@ -296,7 +280,7 @@ pub fn refusal(kind: &Kind, media: bool, infinite_lights: bool) -> Option<String
 /// would find only by chance: a delta surface (mirror, glass) with a small light (a point or
 /// spot light, or emitters whose area is below 1 % of the cross-section of the scene's
 /// bounding sphere) and a diffuse surface to receive it. Such scenes take `sppm`, which
-/// renders the caustic and what the glass shows of it, and lights at infinity too.
+/// renders the caustic and what the glass shows of it.
 pub fn choose(scene: &Scene) -> (&'static Kind, String) {
     use super::scene::Light;
     let own = scene.render.integrator;
@@ -341,13 +325,6 @@ pub fn choose(scene: &Scene) -> (&'static Kind, String) {
     }
 }
 
-/// Whether the scene has a light at infinity (environment, directional).
-pub fn has_infinite_lights(scene: &Scene) -> bool {
-    scene.lights.iter().any(|l| {
-        matches!(l, super::scene::Light::Environment { .. } | super::scene::Light::Directional { .. })
-    })
-}
-
 /// Renders the scene into a film with the settings' integrator (which `refusal` must
 /// accept for the scene; `try_render` checks).
 pub fn render(scene: &Scene, settings: &Settings) -> Film {
@@ -359,7 +336,7 @@ pub fn render(scene: &Scene, settings: &Settings) -> Film {
 /// `Error::OutOfMemory` (nothing allocated) a film whose memory cannot be had, where
 /// `render` would abort: for films of a size a user chose.
 pub fn try_render(scene: &Scene, settings: &Settings) -> Result<Film, super::Error> {
-    if let Some(message) = refusal(settings.integrator, !scene.media.is_empty(), has_infinite_lights(scene)) {
+    if let Some(message) = refusal(settings.integrator, !scene.media.is_empty()) {
         return Err(super::Error::Unsupported { what: "the integrator".into(), message });
     }
     let (fw, fh) = film_size(scene, settings);

@@ -521,12 +521,7 @@ pub fn build(file: &SceneFile, path: &Path) -> Result<Scene, Error> {
             ));
         }
     }
-    let infinite = file
-        .lights
-        .iter()
-        .any(|l| matches!(l, LightSpec::Directional { .. } | LightSpec::Environment { .. }));
-    if let Some(why) = super::super::integrators::refusal(file.render.integrator, !media.is_empty(), infinite)
-    {
+    if let Some(why) = super::super::integrators::refusal(file.render.integrator, !media.is_empty()) {
         return Err(field_err(path, "render.integrator", &why));
     }
     let info: Vec<PrimInfo> = bvh
