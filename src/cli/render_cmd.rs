@@ -35,7 +35,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub photons: Option<u64>,
     /// pm: the gather radius in scene units (default: the --k nearest photons); sppm: the
-    /// initial radius (default: two pixel footprints).
+    /// initial radius (default: one pixel footprint).
     #[arg(long)]
     pub radius: Option<f32>,
     /// pm: photons per density estimate without a radius (default 50).

@@ -5,6 +5,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod aim;
 mod camera;
 mod environment;
 mod integrators;

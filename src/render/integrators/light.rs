@@ -213,7 +213,7 @@ fn splat(
 fn trace(scene: &Scene, settings: &Settings, path: u64, pass: u64, splat: &mut dyn FnMut(DVec2, Vec3A)) {
     let mut s = Sampler::with_kind(settings.sampler, settings.seed ^ STREAM, path, pass);
     seen_directly(scene, &mut s, splat);
-    walk(scene, &mut s, settings.max_depth, |v, s| {
+    walk(scene, None, &mut s, settings.max_depth, |v, s| {
         let Some(link) = link_point(scene, v.p, s.next2()) else { return };
         let towards = v.n.dot(link.dir) >= 0.0;
         if !towards && v.mat.one_sided {

@@ -143,7 +143,7 @@ pub struct PhotonSettings {
     /// bounce, so 10⁸ photon paths in a closed room take some 20 GB.
     pub count: Option<u64>,
     /// `pm`: the gather radius in scene units (default: none, the `k` nearest photons);
-    /// `sppm`: the initial radius (default: two pixel footprints at each visible point).
+    /// `sppm`: the initial radius (default: one pixel footprint at each visible point).
     /// Finite, over 0, at most 10³⁰.
     pub radius: Option<f32>,
     /// `pm`: photons per density estimate when no radius is given (default 50, 1 to 10⁴).

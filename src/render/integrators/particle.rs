@@ -16,7 +16,7 @@ use super::super::bsdf::Bsdf;
 use super::super::film::RR_START;
 use super::super::geometry::{Hit, Ray};
 use super::super::sampler::Sampler;
-use super::super::scene::{Material, Scene};
+use super::super::scene::{Aim, Material, Scene};
 use super::super::transport::{self, epsilon};
 use glam::Vec3A;
 
@@ -39,13 +39,25 @@ pub struct Vertex<'a> {
     pub specular_chain: bool,
 }
 
-/// Draws a light path with `s` and shows `visit` each vertex it reaches (module docs).
-pub fn walk(scene: &Scene, s: &mut Sampler, max_depth: u32, mut visit: impl FnMut(&Vertex, &mut Sampler)) {
+/// Draws a light path with `s` and shows `visit` each vertex it reaches (module docs); with
+/// `aim`, its first direction is aimed at the scene's delta objects half of the time
+/// (`scene::Aim`).
+pub fn walk(
+    scene: &Scene,
+    aim: Option<&Aim>,
+    s: &mut Sampler,
+    max_depth: u32,
+    mut visit: impl FnMut(&Vertex, &mut Sampler),
+) {
     if max_depth < 2 {
         return;
     }
     let (u_pick, u_pos, u_dir) = (s.next(), s.next2(), s.next2());
-    let Some(e) = scene.sample_emission(u_pick, u_pos, u_dir) else { return };
+    let e = match aim {
+        Some(aim) => aim.sample_emission(scene, u_pick, u_pos, u_dir, s.next()),
+        None => scene.sample_emission(u_pick, u_pos, u_dir),
+    };
+    let Some(e) = e else { return };
     let (mut ray, mut beta) = (e.ray, e.beta);
     let mut specular_chain = true;
     for depth in 1..max_depth {

@@ -1,7 +1,8 @@
 //! Photon mapping (Jensen 1996; Jensen 2001, "Realistic Image Synthesis Using Photon
 //! Mapping"): two passes.
 //!
-//! 1. Photons. `count` light paths (`particle::walk`) leave the lights; wherever one meets a
+//! 1. Photons. `count` light paths (`particle::walk`) leave the lights, half of them aimed at
+//!    the scene's mirrors and glass (`scene::Aim`, Jensen's projection maps); wherever one meets a
 //!    surface that is not a delta one it leaves a photon: the point, the direction the light
 //!    came from, its flux β/count and the normal on that side. Russian roulette ends the
 //!    paths as it ends camera paths. Every photon goes into the global map; those whose light
@@ -38,7 +39,7 @@ use super::super::film::{pixel_stats, Film};
 use super::super::geometry::Ray;
 use super::super::photons::{Index, IndexKind};
 use super::super::sampler::Sampler;
-use super::super::scene::Scene;
+use super::super::scene::{Aim, Scene};
 use super::super::transport::{self, epsilon};
 use super::particle::{shading, walk};
 use super::{camera_path, render_rows, Settings};
@@ -147,6 +148,7 @@ pub fn trace_photons(
     count: u64,
     pass: u64,
 ) -> (Vec<Photon>, Vec<Photon>) {
+    let aim = Aim::of(scene);
     let chunks: Vec<(Vec<Photon>, Vec<Photon>)> = (0..count)
         .step_by(CHUNK as usize)
         .collect::<Vec<_>>()
@@ -155,7 +157,7 @@ pub fn trace_photons(
             let (mut global, mut caustic) = (Vec::new(), Vec::new());
             for path in c..(c + CHUNK).min(count) {
                 let mut s = Sampler::with_kind(settings.sampler, settings.seed ^ STREAM, path, pass);
-                walk(scene, &mut s, settings.max_depth, |v, _| {
+                walk(scene, aim.as_ref(), &mut s, settings.max_depth, |v, _| {
                     if v.mat.bsdf.is_delta() {
                         return;
                     }

@@ -49,12 +49,12 @@ impl Scene {
         let (origin, dir, beta) = match self.lights[i] {
             Light::Area { prim, radiance, area } => {
                 let (y, n) = self.area_light_point(prim, u_pos);
-                let dir = transport::cosine_hemisphere(n, u_dir.0, u_dir.1);
+                let dir = self.emission_direction(i, n, u_dir);
                 at = Some((y, n));
                 (transport::offset(y, n, dir, transport::epsilon(y)), dir, radiance * (PI * area / p_pick))
             }
             Light::Point { position, intensity } => {
-                (position, uniform_sphere(u_dir), intensity * (4.0 * PI / p_pick))
+                (position, self.emission_direction(i, Vec3A::ZERO, u_dir), intensity * (4.0 * PI / p_pick))
             }
             Light::Spot { position, axis, intensity, cutoff, beam } => {
                 let cos_max = cutoff.cos();
@@ -84,6 +84,17 @@ impl Scene {
             beta,
             light: i,
         })
+    }
+
+    /// The direction `sample_emission` draws with `u` for the area, point or spot light `i`
+    /// (`n` the area light's normal at the point drawn): cosine-weighted about `n`, uniform
+    /// over the sphere, uniform in the spot's cone.
+    pub(super) fn emission_direction(&self, i: usize, n: Vec3A, u: (f32, f32)) -> Vec3A {
+        match self.lights[i] {
+            Light::Spot { axis, cutoff, .. } => around(axis, 1.0 - u.0 * (1.0 - cutoff.cos()), u.1),
+            Light::Point { .. } => uniform_sphere(u),
+            _ => transport::cosine_hemisphere(n, u.0, u.1),
+        }
     }
 
     /// The densities with which `sample_emission`, having picked light `i`, draws the ray
@@ -162,7 +173,7 @@ pub(super) fn uniform_sphere(u: (f32, f32)) -> Vec3A {
 }
 
 /// The unit direction at cosine `cos_t` from `axis`, turned by 2π·`u` about it.
-fn around(axis: Vec3A, cos_t: f32, u: f32) -> Vec3A {
+pub(super) fn around(axis: Vec3A, cos_t: f32, u: f32) -> Vec3A {
     let (t, b) = transport::basis(axis);
     let s = (1.0 - cos_t * cos_t).max(0.0).sqrt();
     let (cos, sin) = transport::unit_circle(u);

@@ -9,6 +9,7 @@
 //! `file` is the schema, `build` checks it and builds the scene; this module holds the built
 //! scene, its lights and the queries the integrator makes of it.
 
+mod aim;
 mod build;
 mod emission;
 pub mod file;
@@ -17,6 +18,7 @@ mod query;
 
 pub use query::{epsilon, Surface};
 
+pub use aim::Aim;
 pub use build::build;
 pub use emission::Emission;
 pub use file::*;
