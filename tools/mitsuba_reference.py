@@ -48,7 +48,8 @@ def write_smoke(path):
 
 SCENES = ['glossy-spheres', 'sphere-light', 'glass-environment', 'envmap-spheres', 'depth-of-field',
           'media-fog-box', 'media-haze', 'media-glass', 'media-lamp-in-fog', 'media-smoke-sky',
-          'media-smoke-grid', 'plastic-pane', 'rough-glass', 'envmap-turned', 'rough-plastic', 'showcase', 'caustic']
+          'media-smoke-grid', 'plastic-pane', 'rough-glass', 'envmap-turned', 'rough-plastic', 'showcase', 'caustic',
+          'cornell-glass']
 
 a = argparse.ArgumentParser()
 a.add_argument('scene', choices=SCENES)
