@@ -281,8 +281,7 @@ fn light_subpath(scene: &Scene, settings: &Settings, s: &mut Sampler, path: &mut
     let far = matches!(scene.lights[e.light], Light::Directional { .. } | Light::Environment { .. });
     let (v, pdf_next) = if far {
         // Its direction is the vertex's density; the disk's point is the next vertex's.
-        let v = Vertex::far(scene, e.light, e.ray.dir);
-        (Vertex { pdf_fwd: pdf_light_origin(scene, &v), ..v }, pdf_pos)
+        (far_light(scene, e.light, e.ray.dir).0, pdf_pos)
     } else {
         let mut v = Vertex::point(Role::Light(e.light), e.p, e.n);
         v.delta = matches!(scene.lights[e.light], Light::Point { .. } | Light::Spot { .. });
@@ -376,20 +375,21 @@ fn sample_light_vertex(scene: &Scene, u_pick: f32, u: (f32, f32)) -> Option<(Ver
             (p, n, 1.0 / area, false)
         }
         Light::Point { position, .. } | Light::Spot { position, .. } => (position, Vec3A::ZERO, 1.0, true),
-        Light::Directional { to_light, .. } => {
-            let v = Vertex::far(scene, i, -to_light);
-            return Some((Vertex { pdf_fwd: p_pick, ..v }, p_pick));
-        }
-        Light::Environment { .. } => {
-            let (w, _, pdf) = scene.sample_environment(u)?;
-            let v = Vertex::far(scene, i, -w);
-            return Some((Vertex { pdf_fwd: p_pick * pdf, ..v }, p_pick * pdf));
-        }
+        Light::Directional { to_light, .. } => return Some(far_light(scene, i, -to_light)),
+        Light::Environment { .. } => return Some(far_light(scene, i, -scene.sample_environment(u)?.0)),
     };
     let mut v = Vertex::point(Role::Light(i), p, n);
     v.delta = delta;
     v.pdf_fwd = p_pick * pdf_pos;
     Some((v, p_pick * pdf_pos))
+}
+
+/// The light vertex at infinity of light `i` whose light travels along `travel`, as a light
+/// subpath starts there: with its direction's density (`pdf_light_origin`), also returned.
+fn far_light(scene: &Scene, i: usize, travel: Vec3A) -> (Vertex, f32) {
+    let v = Vertex::far(scene, i, travel);
+    let pdf = pdf_light_origin(scene, &v);
+    (Vertex { pdf_fwd: pdf, ..v }, pdf)
 }
 
 /// Radiance (intensity, for a point or spot light; irradiance, for a directional light)

@@ -24,6 +24,7 @@ use super::super::bsdf::Bsdf;
 use super::super::geometry::Prim;
 use super::super::transport;
 use super::emission::{around, uniform_sphere, Emission};
+use super::query::sphere_cone;
 use super::{spot_falloff, Light, Scene};
 use glam::Vec3A;
 use std::collections::BTreeMap;
@@ -136,16 +137,9 @@ impl Aim {
 }
 
 /// The cone the sphere `(c, r)` subtends from `y`: its axis and 1 − cos θ of its half-angle
-/// (2, the whole sphere of directions, from inside).
+/// (2, the whole sphere of directions, from inside or on it).
 fn cone((c, r): (Vec3A, f32), y: Vec3A) -> (Vec3A, f32) {
-    let d = c - y;
-    let d2 = d.length_squared();
-    if d2 <= r * r {
-        return (Vec3A::Z, 2.0);
-    }
-    let sin2 = r * r / d2;
-    // 1 − cos θ = sin²θ / (1 + cos θ), exact for small cones.
-    (d / d2.sqrt(), sin2 / (1.0 + (1.0 - sin2).sqrt()))
+    sphere_cone(c, r, y).map_or((Vec3A::Z, 2.0), |(axis, _, one_minus)| (axis, one_minus))
 }
 
 /// A direction uniform in the cone the sphere subtends from `y`.

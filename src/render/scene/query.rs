@@ -120,15 +120,7 @@ impl Scene {
         if self.info[prim as usize].reverse {
             return None;
         }
-        let dc = center - p;
-        let d2 = dc.length_squared();
-        let sin2 = radius * radius / d2;
-        if !(sin2 < 1.0 - 1e-4) {
-            return None;
-        }
-        let cos_max = (1.0 - sin2).sqrt();
-        let d = d2.sqrt();
-        Some((dc / d, d, sin2 / (1.0 + cos_max)))
+        sphere_cone(center, radius, p)
     }
 
     /// Solid-angle density with which light sampling from `from` picks the point `y` (normal
@@ -194,4 +186,20 @@ impl Scene {
             }
         }
     }
+}
+
+/// The cone the sphere (`center`, `radius`) subtends from `p`: (axis, distance to the centre,
+/// 1 − cos θ_max computed without cancellation as sin²θ_max / (1 + cos θ_max)); `None` from
+/// inside the sphere or on it.
+#[inline]
+pub(super) fn sphere_cone(center: Vec3A, radius: f32, p: Vec3A) -> Option<(Vec3A, f32, f32)> {
+    let dc = center - p;
+    let d2 = dc.length_squared();
+    let sin2 = radius * radius / d2;
+    if !(sin2 < 1.0 - 1e-4) {
+        return None;
+    }
+    let cos_max = (1.0 - sin2).sqrt();
+    let d = d2.sqrt();
+    Some((dc / d, d, sin2 / (1.0 + cos_max)))
 }
