@@ -53,6 +53,14 @@ fn chained_colour_cases_take_the_merged_radiance_and_the_response() {
         assert_eq!(a[1], b[1], "the alone run does not depend on the upstream");
         assert_ne!(a[0], b[0], "the chained run takes the upstream's estimate");
     }
+    // The error each link inherits, from the merge's and the response's own errors at the
+    // patches, is predicted within a factor of 2 (the goal), in sign as in size.
+    for (case, m) in ["radiance", "response"].iter().cycle().zip(m1.iter().chain(&m2)) {
+        let (inherited, predicted) = (m[2], m[3]);
+        assert!(inherited.abs() > 0.005, "{case}: inherited {inherited}, too little to predict");
+        let ratio = predicted / inherited;
+        assert!((0.5..2.0).contains(&ratio), "{case}: inherited {inherited}, predicted {predicted}");
+    }
     // A power of 1.02 bends the patches' chromaticities by up to 2 % of their log ratios,
     // against the merge's and the response's own errors of about 0.2 % per patch. What it
     // adds to the inherited error is what the slopes predict.

@@ -45,7 +45,8 @@ pub struct InheritedResponse {
 /// merged radiance's), per channel, as its least-squares line e ≈ a + slope·(u − c) about the
 /// middle c of the range it was measured on; the offset a is free (a scale), the slope is the
 /// log–log slope less 1. (Bend and twist terms were tried too: they explain no more of the
-/// error a colour fit inherits, which sits in the curve's wiggles at the patches' own values.)
+/// error a colour fit inherits, which sits in the curve's wiggles at the patches' own values;
+/// `color_chain` moves each patch for those.)
 #[derive(Clone, Debug, Default)]
 pub struct LnError {
     pub centre: [f64; 3],
@@ -78,7 +79,7 @@ impl LnError {
         ["slope_r", "slope_g", "slope_b"]
             .iter()
             .zip(self.slope)
-            .map(|(name, error)| Parameter { name, error, step: SLOPE_STEP })
+            .map(|(name, error)| Parameter { name: name.to_string(), error, step: SLOPE_STEP, group: None })
             .collect()
     }
 
@@ -267,11 +268,14 @@ pub struct Chain<'a> {
 }
 
 /// One inherited quantity the sensitivity moves: its name, how far the inherited value is off
-/// the truth in it, and the step when that is smaller.
+/// the truth in it, and the step when that is smaller. Parameters of one `group` (many alike,
+/// such as each patch's value) are reported together: the RMS of their slopes, and the
+/// largest of their contributions in the note.
 pub struct Parameter {
-    pub name: &'static str,
+    pub name: String,
     pub error: f64,
     pub step: f64,
+    pub group: Option<&'static str>,
 }
 
 /// A case with a `camera` field and `perturb`: run on the scene's true camera when the field
@@ -290,7 +294,12 @@ pub fn run_on_camera(
     };
     let parameters: Vec<Parameter> = PARAMETERS
         .iter()
-        .map(|(name, step, off)| Parameter { name, error: off(&estimate, &truth), step: *step })
+        .map(|(name, step, off)| Parameter {
+            name: name.to_string(),
+            error: off(&estimate, &truth),
+            step: *step,
+            group: None,
+        })
         .collect();
     run_chained(
         &camera_error(&source, &estimate, &truth),
@@ -332,7 +341,7 @@ pub fn run_chained(
             (Some(e), Some(a)) => Some((e - a) / delta),
             _ => None,
         };
-        sensitivity.push((p.name, p.error, slope));
+        sensitivity.push((p, slope));
         linear.push(run.linear.map(|l| (l, p.error / delta)));
     }
     // Item by item where every run gave its items, else from the slopes.
@@ -343,15 +352,56 @@ pub fn run_chained(
     };
     let mut result = chained_result(chained, alone, chain.errors, upstream);
     let unit = chain.unit;
-    let mut from_slopes = Some(0.0);
-    for (name, error, slope) in &sensitivity {
-        let metric = format!("sensitivity_{headline}_per_{name}");
-        let per = format!("{unit} per unit");
+    let per = format!("{unit} per unit");
+    let from_slopes = sensitivity.iter().try_fold(0.0, |sum, (p, slope)| slope.map(|s| sum + s * p.error));
+    let mut said = Vec::new();
+    for (p, slope) in sensitivity.iter().filter(|(p, _)| p.group.is_none()) {
+        let metric = format!("sensitivity_{headline}_per_{}", p.name);
         result.metrics.push(match slope {
             Some(s) => Metric::new(&metric, *s, &per, Better::Lower),
             None => Metric::missing(&metric, &per, Better::Lower, format!("no {headline} to compare")),
         });
-        from_slopes = from_slopes.zip(*slope).map(|(p, s)| p + s * error);
+        said.push(format!(
+            "{} {unit} per unit of {n} (inherited {n} {e:+.5})",
+            slope.map_or("—".into(), |s| format!("{s:.4}")),
+            n = p.name,
+            e = p.error
+        ));
+    }
+    let mut groups: Vec<&str> = Vec::new();
+    for g in sensitivity.iter().filter_map(|(p, _)| p.group) {
+        if !groups.contains(&g) {
+            groups.push(g);
+        }
+    }
+    for group in groups {
+        let members: Vec<(&Parameter, f64)> = sensitivity
+            .iter()
+            .filter(|(p, _)| p.group == Some(group))
+            .filter_map(|(p, s)| s.map(|s| (*p, s)))
+            .collect();
+        let n = members.len().max(1) as f64;
+        let rms = |f: &dyn Fn(&(&Parameter, f64)) -> f64| {
+            (members.iter().map(|m| f(m).powi(2)).sum::<f64>() / n).sqrt()
+        };
+        let metric = format!("sensitivity_{headline}_per_{group}_rms");
+        result.metrics.push(Metric::maybe(
+            &metric,
+            (!members.is_empty()).then(|| rms(&|m| m.1)),
+            &per,
+            Better::Lower,
+            &format!("no {headline} to compare"),
+        ));
+        let mut largest = members.clone();
+        largest.sort_by(|a, b| (b.1 * b.0.error).abs().total_cmp(&(a.1 * a.0.error).abs()));
+        said.push(format!(
+            "{} {unit} per unit of {group} as RMS over its {} parameters (their inherited values RMS {:.5}; together {:+.5} {unit}, most from {})",
+            if members.is_empty() { "—".into() } else { format!("{:.4}", rms(&|m| m.1)) },
+            members.len(),
+            rms(&|m| m.0.error),
+            members.iter().map(|(p, s)| s * p.error).sum::<f64>(),
+            largest.iter().take(3).map(|(p, s)| format!("{} {:+.5}", p.name, s * p.error)).collect::<Vec<_>>().join(", ")
+        ));
     }
     let predicted = by_items.or(from_slopes);
     result.metrics.push(Metric::maybe(
@@ -363,14 +413,7 @@ pub fn run_chained(
     ));
     result.notes.push(format!(
         "Sensitivity of {headline}: {}; predicted inherited {} ({}).",
-        sensitivity
-            .iter()
-            .map(|(n, e, s)| format!(
-                "{} {unit} per unit of {n} (inherited {n} {e:+.5})",
-                s.map_or("—".into(), |s| format!("{s:.4}"))
-            ))
-            .collect::<Vec<_>>()
-            .join(", "),
+        said.join(", "),
         predicted.map_or("—".into(), |p| format!("{p:+.6} {unit}")),
         if by_items.is_some() {
             "its errors carried item by item to first order"

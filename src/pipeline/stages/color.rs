@@ -115,6 +115,7 @@ fn default_reference() -> String {
     "spectral".into()
 }
 
+#[derive(Clone)]
 pub struct Truth {
     /// Noise-free camera value of each patch at the sensor (full scale = 1).
     pub(super) rgb: Vec<[f64; 3]>,

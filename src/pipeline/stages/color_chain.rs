@@ -1,14 +1,22 @@
-//! The colour stage's chained cases (docs/pipeline.md), each with the sensitivity to each
-//! channel's log–log slope of what it inherits (`chain::LnError`):
+//! The colour stage's chained cases (docs/pipeline.md):
 //! - the correction fitted on a chart inside the radiance an earlier hdr case merged
 //!   (`image = "from:CASE/radiance"`), alone on the true radiance;
 //! - the chart photographed once through the camera of an earlier hdr case's stack and made
 //!   linear through the response that case recovered (`response = "from:CASE"`), alone
 //!   through the true response. The codes are drawn once; each run only linearises them.
+//!
+//! What a colour fit inherits is each patch's value off by a little, about 0.1–0.2 % in ln.
+//! Little of it is the inherited curve's log–log slope (`chain::LnError`): most lies in the
+//! response's wiggles at the patches' own codes and in the merge's noise there. So the
+//! sensitivity moves both, one at a time: each channel's slope (on the whole image), and each
+//! patch's value in each channel (`patch_ln`), by the patch's own inherited error in ln (its
+//! value chained over its value alone) less the slope's line and less the channel's mean, a
+//! scale per channel to which the fit (root-polynomial, homogeneous of degree 1) is blind.
+//! The prediction carries the patches' leave-one-out colours to first order over all of them.
 
-use super::chain::{run_chained, Chain};
-use super::color::{chart_input, chart_signal, load_chart, solve, validate, Config, Truth};
-use super::{run_case, CaseResult, Context, Findings, StageError, Synthesis};
+use super::chain::{run_chained, Chain, LnError, Parameter};
+use super::color::{chart_input, chart_signal, load_chart, solve, validate, Chart, Config, Truth};
+use super::{run_case, CaseResult, Context, Findings, StageError};
 use crate::color;
 use crate::image::Image;
 use crate::render;
@@ -37,14 +45,98 @@ pub(super) fn image_source(image: &Option<String>) -> Option<(String, String)> {
     })
 }
 
-/// A chained case's input: the chart sampled in `image`, a merged radiance of it (module docs).
-fn synthesize_radiance(
+/// A colour run's input: the chart sampled in an image, its truth and notes.
+struct Sampled {
+    input: color::Input,
+    truth: Truth,
+    notes: Vec<String>,
+}
+
+/// The sensitivity's step for a patch's value in ln: 0.1 %, about what a merge or a
+/// recovered response leaves on a patch.
+const PATCH_STEP: f64 = 1e-3;
+
+/// Runs the colour case on a sampled chart, with patch `k`'s channel `ch` first scaled by
+/// e^δ where `moved` = (k, ch, δ) is given.
+fn run_sampled(
     c: &Config,
-    ctx: &Context,
-    image: &Image,
-    source: &str,
-) -> Result<Synthesis<color::Input, Truth>, StageError> {
-    let chart = load_chart(&c.scene, &c.camera, &c.illuminant, ctx)?;
+    s: &Sampled,
+    moved: Option<(usize, usize, f64)>,
+) -> Result<CaseResult, StageError> {
+    let mut input = s.input.clone();
+    if let Some((k, ch, delta)) = moved {
+        input.patches[k].rgb[ch] *= delta.exp();
+    }
+    run_case(
+        || Ok(Some((input, s.truth.clone(), Findings { notes: s.notes.clone(), ..Default::default() }))),
+        |i| solve(c, i),
+        |o, t| validate(c, o, t),
+    )
+}
+
+/// The `patch_ln` parameters (module docs), with each one's patch and channel: the patches
+/// sampled usable (unflagged, positive) both chained and alone.
+fn patch_parameters(
+    chained: &color::Input,
+    alone: &color::Input,
+    slope: [f64; 3],
+) -> Vec<(Parameter, usize, usize)> {
+    let mut out = Vec::new();
+    for ch in 0..3 {
+        // Per usable patch: its ln value alone u and its ln error e.
+        let ue: Vec<(usize, f64, f64)> = chained
+            .patches
+            .iter()
+            .zip(&alone.patches)
+            .enumerate()
+            .filter(|(_, (p, a))| p.flag.is_none() && a.flag.is_none() && p.rgb[ch] > 0.0 && a.rgb[ch] > 0.0)
+            .map(|(k, (p, a))| (k, a.rgb[ch].ln(), (p.rgb[ch] / a.rgb[ch]).ln()))
+            .collect();
+        let n = ue.len().max(1) as f64;
+        let (mu, me) = ue.iter().fold((0.0, 0.0), |(a, b), (_, u, e)| (a + u / n, b + e / n));
+        for &(k, u, e) in &ue {
+            let name = format!("{} ({})", alone.patches[k].name, ["R", "G", "B"][ch]);
+            let error = e - me - slope[ch] * (u - mu);
+            out.push((Parameter { name, error, step: PATCH_STEP, group: Some("patch_ln") }, k, ch));
+        }
+    }
+    out
+}
+
+/// A chained colour case (module docs): chained on `chained`, alone on `alone`, the slope
+/// parameters of `error` moved by `run_slope(ch, δ)`, the patches' on `alone`'s input.
+fn run_colour_chain(
+    c: &Config,
+    upstream: &str,
+    error: &LnError,
+    chained: &Sampled,
+    alone: &Sampled,
+    run_slope: impl Fn(usize, f64) -> Result<CaseResult, StageError>,
+) -> Result<CaseResult, StageError> {
+    let mut parameters = error.parameters();
+    let n = parameters.len();
+    let patches: Vec<(usize, usize)> = patch_parameters(&chained.input, &alone.input, error.slope)
+        .into_iter()
+        .map(|(p, k, ch)| {
+            parameters.push(p);
+            (k, ch)
+        })
+        .collect();
+    run_chained(
+        upstream,
+        &CHAIN,
+        &parameters,
+        || run_sampled(c, chained, None),
+        || run_sampled(c, alone, None),
+        |k, delta| match k.checked_sub(n) {
+            None => run_slope(k, delta),
+            Some(i) => run_sampled(c, alone, Some((patches[i].0, patches[i].1, delta))),
+        },
+    )
+}
+
+/// The chart sampled in `image`, a merged radiance of it (module docs).
+fn sample_radiance(c: &Config, chart: &Chart, image: &Image, source: &str) -> Result<Sampled, StageError> {
     let (w, h) = (chart.scene.camera.width, chart.scene.camera.height);
     if (image.width, image.height) != (w, h) {
         return Err(StageError::Config(format!(
@@ -54,13 +146,12 @@ fn synthesize_radiance(
     }
     let corners = chart.corners(&c.scene)?;
     // A merged radiance has no full scale: nothing in it is clipped.
-    let (input, pixels) = chart_input(c, &chart, image, corners, f64::INFINITY)?;
+    let (input, pixels) = chart_input(c, chart, image, corners, f64::INFINITY)?;
     let notes = vec![format!(
         "{} under {}, camera {}: the chart sampled in the radiance case `{source}` merged; reference {}.",
         c.scene, c.illuminant, c.camera, c.reference
     )];
-    let truth = Truth { rgb: chart.patch_rgb(), pixel_variance: None, pixels };
-    Ok(Some((input, truth, Findings { notes, ..Default::default() })))
+    Ok(Sampled { input, truth: Truth { rgb: chart.patch_rgb(), pixel_variance: None, pixels }, notes })
 }
 
 /// A chained case on a merged radiance (`image = "from:CASE/radiance"`, module docs).
@@ -109,25 +200,25 @@ pub(super) fn run_radiance(
             c.illuminant
         )));
     }
-    let run_on = |image: &Image| {
-        run_case(|| synthesize_radiance(c, ctx, image, source), |i| solve(c, i), |o, t| validate(c, o, t))
-    };
-    run_chained(
+    let chart = load_chart(&c.scene, &c.camera, &c.illuminant, ctx)?;
+    let chained = sample_radiance(c, &chart, &r.estimate, source)?;
+    let alone = sample_radiance(c, &chart, &r.truth, source)?;
+    run_colour_chain(
+        c,
         &format!(
             "Chained: the radiance merged by case `{source}` is off the truth in ln by {}; inherited:",
             r.error.describe()
         ),
-        &CHAIN,
-        &r.error.parameters(),
-        || run_on(&r.estimate),
-        || run_on(&r.truth),
+        &r.error,
+        &chained,
+        &alone,
         |ch, delta| {
             // The true radiance with one channel's slope moved: raised to the power 1 + δ.
             let mut moved = r.truth.clone();
             for v in moved.data.iter_mut().skip(ch).step_by(3) {
                 *v = v.max(0.0).powf(1.0 + delta as f32);
             }
-            run_on(&moved)
+            run_sampled(c, &sample_radiance(c, &chart, &moved, source)?, None)
         },
     )
 }
@@ -182,45 +273,41 @@ pub(super) fn run_response(c: &Config, ctx: &Context, source: &str) -> Result<Ca
         })
         .collect();
     let (w, h) = (signal.image.width, signal.image.height);
-    // The codes made linear through `g` (ln exposure per channel and code).
-    let run_on = |g: &[Vec<f64>]| {
-        let mut result = run_case(
-            || {
-                // Each channel scaled so its top code is 1 (a scale the fit is blind to), so
-                // the top code is where a patch is clipped.
-                let data = codes
-                    .iter()
-                    .enumerate()
-                    .map(|(k, &z)| (g[k % 3][z as usize] - g[k % 3][levels - 1]).exp() as f32)
-                    .collect();
-                let image = Image { width: w, height: h, channels: 3, data };
-                let (input, pixels) = chart_input(c, &chart, &image, corners, 1.0)?;
-                let notes = vec![format!(
-                    "{} under {}, camera {}, {} spp: one exposure of {} through the sensor of case `{source}` ({} bits, response {:?}), made linear through a response.",
-                    c.scene, c.illuminant, c.camera, signal.spp, sensor.exposure, sensor.bits, sensor.response
-                )];
-                let truth = Truth { rgb: truth_rgb.clone(), pixel_variance: None, pixels };
-                Ok(Some((input, truth, Findings { notes, ..Default::default() })))
-            },
-            |i| solve(c, i),
-            |o, t| validate(c, o, t),
-        )?;
-        *result.timings_s.entry("render".into()).or_insert(0.0) += render_s;
-        Ok(result)
+    // The chart sampled in the codes made linear through `g` (ln exposure per channel and
+    // code), each channel scaled so its top code is 1 (a scale the fit is blind to), so the
+    // top code is where a patch is clipped.
+    let sample = |g: &[Vec<f64>]| -> Result<Sampled, StageError> {
+        let data = codes
+            .iter()
+            .enumerate()
+            .map(|(k, &z)| (g[k % 3][z as usize] - g[k % 3][levels - 1]).exp() as f32)
+            .collect();
+        let image = Image { width: w, height: h, channels: 3, data };
+        let (input, pixels) = chart_input(c, &chart, &image, corners, 1.0)?;
+        let notes = vec![format!(
+            "{} under {}, camera {}, {} spp: one exposure of {} through the sensor of case `{source}` ({} bits, response {:?}), made linear through a response.",
+            c.scene, c.illuminant, c.camera, signal.spp, sensor.exposure, sensor.bits, sensor.response
+        )];
+        Ok(Sampled { input, truth: Truth { rgb: truth_rgb.clone(), pixel_variance: None, pixels }, notes })
     };
-    run_chained(
-        &format!("Chained: the response recovered by case `{source}` is off the truth (g against the true g) by {}; inherited:", r.error.describe()),
-        &CHAIN,
-        &r.error.parameters(),
-        || run_on(&r.g),
-        || run_on(&g_true),
+    let mut result = run_colour_chain(
+        c,
+        &format!(
+            "Chained: the response recovered by case `{source}` is off the truth (g against the true g) by {}; inherited:",
+            r.error.describe()
+        ),
+        &r.error,
+        &sample(&r.g)?,
+        &sample(&g_true)?,
         |ch, delta| {
             // The true g with one channel's slope moved.
             let mut moved = g_true.clone();
             moved[ch].iter_mut().for_each(|v| *v *= 1.0 + delta);
-            run_on(&moved)
+            run_sampled(c, &sample(&moved)?, None)
         },
-    )
+    )?;
+    *result.timings_s.entry("render".into()).or_insert(0.0) += render_s;
+    Ok(result)
 }
 
 /// Refuses the first setting of `given` (its name, and whether the entry gives it) that the
