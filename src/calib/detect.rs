@@ -96,25 +96,61 @@ pub fn find(img: &Grey, board: BoardSize, opts: &DetectOptions) -> Result<Found,
 
 /// Saddle points that pass the X-junction check (steps 1 and 2).
 pub fn corner_candidates(img: &Grey, sampler: &Grey) -> Vec<DVec2> {
-    let blurred = img.blur(1.5);
-    let ring = ring_offsets();
-    saddle_candidates(&blurred).into_iter().filter(|p| is_x_junction(sampler, *p, &ring)).collect()
+    let ring = Ring::new();
+    saddle_candidates(img).into_iter().filter(|p| is_x_junction(sampler, *p, &ring)).collect()
 }
 
-/// Saddle points: local maxima of R = I_xy² − I_xx·I_yy above 1 % of the strongest, strongest
-/// first.
-fn saddle_candidates(b: &Grey) -> Vec<DVec2> {
-    let (w, h) = (b.width, b.height);
+/// Saddle points of the image blurred with σ = 1.5 px: local maxima of R = I_xy² − I_xx·I_yy
+/// above 1 % of the strongest, strongest first. The blurred rows are made three at a time
+/// (`Grey::blur_row`) as R's rows need them, not kept as an image.
+fn saddle_candidates(img: &Grey) -> Vec<DVec2> {
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[target_feature(enable = "avx2")]
+        fn avx2(img: &Grey) -> Vec<DVec2> {
+            saddle_candidates_with(img)
+        }
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor has AVX2.
+            return unsafe { avx2(img) };
+        }
+    }
+    saddle_candidates_with(img)
+}
+
+/// `saddle_candidates`, inlined into a caller compiled for the processor's vectors (no fused
+/// multiply-adds: the same responses at every width).
+#[inline(always)]
+fn saddle_candidates_with(img: &Grey) -> Vec<DVec2> {
+    let (w, h) = (img.width, img.height);
     let mut r = vec![0.0f32; w * h];
-    for y in 2..h.saturating_sub(2) {
-        let (up, row, down) =
-            (&b.data[(y - 1) * w..y * w], &b.data[y * w..(y + 1) * w], &b.data[(y + 1) * w..(y + 2) * w]);
-        for x in 2..w.saturating_sub(2) {
-            let c = row[x];
-            let ixx = row[x + 1] - 2.0 * c + row[x - 1];
-            let iyy = down[x] - 2.0 * c + up[x];
-            let ixy = 0.25 * (down[x + 1] - up[x + 1] - down[x - 1] + up[x - 1]);
-            r[y * w + x] = ixy * ixy - ixx * iyy;
+    if w >= 5 && h >= 5 {
+        let k = crate::image::filter::gaussian_kernel(1.5);
+        let mut buf = vec![0.0f32; w + k.len() - 1];
+        let mut rows = [vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; w]];
+        img.blur_row(&k, 1, &mut buf, &mut rows[0]);
+        img.blur_row(&k, 2, &mut buf, &mut rows[1]);
+        for y in 2..h - 2 {
+            // Blurred row j is kept in rows[(j + 2) % 3].
+            img.blur_row(&k, y + 1, &mut buf, &mut rows[y % 3]);
+            let (up, row, down) = (&rows[(y + 1) % 3], &rows[(y + 2) % 3], &rows[y % 3]);
+            // Pixels 2 … w − 3 and their neighbours as slices of one length, so that the loop
+            // has no bounds checks and vectorises.
+            let n = w - 4;
+            fn shifted(v: &[f32], dx: usize, n: usize) -> &[f32] {
+                &v[1 + dx..1 + dx + n]
+            }
+            let at = |v, dx| shifted(v, dx, n);
+            let out = &mut r[y * w + 2..y * w + 2 + n];
+            let (l, c, rr) = (at(row, 0), at(row, 1), at(row, 2));
+            let (ul, u, ur) = (at(up, 0), at(up, 1), at(up, 2));
+            let (dl, d, dr) = (at(down, 0), at(down, 1), at(down, 2));
+            for i in 0..n {
+                let ixx = rr[i] - 2.0 * c[i] + l[i];
+                let iyy = d[i] - 2.0 * c[i] + u[i];
+                let ixy = 0.25 * (dr[i] - ur[i] - dl[i] + ul[i]);
+                out[i] = ixy * ixy - ixx * iyy;
+            }
         }
     }
     // The largest response, in eight lanes so the loop vectorises.
@@ -130,10 +166,22 @@ fn saddle_candidates(b: &Grey) -> Vec<DVec2> {
         return Vec::new();
     }
     let rad = 3isize;
+    // The largest response of each 7×7 window: per row, the columns' maxima over its seven
+    // rows, then their maxima over seven columns (both vectorise); a pixel below its
+    // window's maximum is no local maximum, which settles nearly every pixel at once.
+    let mut column = vec![0.0f32; w];
     for y in 4..h.saturating_sub(4) {
+        column.copy_from_slice(&r[(y - 3) * w..(y - 2) * w]);
+        for row in r[(y - 2) * w..(y + 4) * w].chunks_exact(w) {
+            // (`max`, not a conditional store, which becomes a slow masked store.)
+            for (c, &v) in column.iter_mut().zip(row) {
+                *c = c.max(v);
+            }
+        }
         for x in 4..w.saturating_sub(4) {
             let v = r[y * w + x];
-            if v < 0.01 * max {
+            let window = column[x - 3..=x + 3].iter().fold(column[x], |m, &c| if c > m { c } else { m });
+            if v < 0.01 * max || v < window {
                 continue;
             }
             // Ties are broken towards the earlier pixel so a plateau yields one point.
@@ -141,9 +189,7 @@ fn saddle_candidates(b: &Grey) -> Vec<DVec2> {
                 let u = r[(y as isize + dy) as usize * w + (x as isize + dx) as usize];
                 (dx, dy) != (0, 0) && (u > v || (u == v && (dy < 0 || (dy == 0 && dx < 0))))
             };
-            // The 3×3 neighbours first: most pixels that are not maxima fail there.
-            let near = (-1..=1).any(|dy| (-1..=1).any(|dx| beaten(dx, dy)));
-            if !near && !(-rad..=rad).any(|dy| (-rad..=rad).any(|dx| beaten(dx, dy))) {
+            if !(-rad..=rad).any(|dy| (-rad..=rad).any(|dx| beaten(dx, dy))) {
                 out.push((v, DVec2::new(x as f64, y as f64)));
             }
         }
@@ -156,21 +202,61 @@ fn saddle_candidates(b: &Grey) -> Vec<DVec2> {
 /// Samples on the circle of the X-junction check.
 const RING: usize = 48;
 
-/// The offsets of the X-junction check's circle: `RING` samples, 4.5 px out.
-fn ring_offsets() -> Vec<DVec2> {
-    (0..RING)
-        .map(|k| {
-            let a = std::f64::consts::TAU * k as f64 / RING as f64;
-            4.5 * DVec2::new(a.cos(), a.sin())
-        })
-        .collect()
+/// The X-junction check's circle: `RING` samples, 4.5 px out. Each sample's offset, and for
+/// a whole-pixel centre (every candidate is one, so all share the samples' sub-pixel phases)
+/// its pixel offset and the bilinear weights of the 2×2 pixels there.
+struct Ring {
+    offsets: Vec<DVec2>,
+    taps: Vec<(isize, isize, [f64; 4])>,
 }
 
-/// Four alternating dark/light sectors on a circle around `p` (`ring`: the `RING` offsets of
-/// the circle's samples, 4.5 px out).
-fn is_x_junction(img: &Grey, p: DVec2, ring: &[DVec2]) -> bool {
+impl Ring {
+    fn new() -> Ring {
+        let offsets: Vec<DVec2> = (0..RING)
+            .map(|k| {
+                let a = std::f64::consts::TAU * k as f64 / RING as f64;
+                4.5 * DVec2::new(a.cos(), a.sin())
+            })
+            .collect();
+        let taps = offsets
+            .iter()
+            .map(|o| {
+                let (x0, y0) = (o.x.floor(), o.y.floor());
+                let (fx, fy) = (o.x - x0, o.y - y0);
+                (
+                    x0 as isize,
+                    y0 as isize,
+                    [(1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy],
+                )
+            })
+            .collect();
+        Ring { offsets, taps }
+    }
+
+    /// The circle's samples around `p` in `img` (bilinear, as `Grey::sample`).
+    fn values(&self, img: &Grey, p: DVec2) -> [f64; RING] {
+        let (w, h) = (img.width as isize, img.height as isize);
+        let (x, y) = (p.x as isize, p.y as isize);
+        // The taps reach 5 px to either side (4.5 px, and the next pixel).
+        let whole = p.x.fract() == 0.0 && p.y.fract() == 0.0;
+        if whole && x >= 5 && y >= 5 && x + 6 < w && y + 6 < h {
+            let d = &img.data;
+            return std::array::from_fn(|k| {
+                let (dx, dy, wt) = self.taps[k];
+                let i = ((y + dy) * w + x + dx) as usize;
+                let (a, b, c, e) =
+                    (d[i] as f64, d[i + 1] as f64, d[i + w as usize] as f64, d[i + w as usize + 1] as f64);
+                wt[0] * a + wt[1] * b + wt[2] * c + wt[3] * e
+            });
+        }
+        std::array::from_fn(|k| img.sample(p.x + self.offsets[k].x, p.y + self.offsets[k].y))
+    }
+}
+
+/// Four alternating dark/light sectors on a circle around `p` (`ring`).
+fn is_x_junction(img: &Grey, p: DVec2, ring: &Ring) -> bool {
     const N: usize = RING;
-    let v: Vec<f64> = ring.iter().map(|o| img.sample(p.x + o.x, p.y + o.y)).collect();
+    let v = ring.values(img, p);
     let (lo, hi) = v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
     if hi - lo < 0.03 {
         return false;
@@ -222,7 +308,7 @@ fn find_grid(
     img: &Grey,
 ) -> Result<(HashMap<(i32, i32), DVec2>, Option<(usize, usize)>), Invalid> {
     let mut largest = (0usize, 0i32, 0i32);
-    let ring = ring_offsets();
+    let ring = Ring::new();
     for seed in 0..points.len().min(60) {
         let s = points[seed];
         // The axes: the nearest candidates joined to the seed by a square's edge, the second
@@ -361,11 +447,11 @@ fn ring_score(at: &dyn Fn(i32, i32) -> DVec2, i0: i32, j0: i32, wi: i32, wj: i32
 }
 
 /// The range of brightness on the X-junction check's circle (`ring`) around `p`.
-fn local_contrast(img: &Grey, p: DVec2, ring: &[DVec2]) -> f64 {
-    let (lo, hi) = ring.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), o| {
-        let v = img.sample(p.x + o.x, p.y + o.y);
-        (l.min(v), h.max(v))
-    });
+fn local_contrast(img: &Grey, p: DVec2, ring: &Ring) -> f64 {
+    let (lo, hi) = ring
+        .values(img, p)
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
     hi - lo
 }
 
@@ -482,6 +568,24 @@ fn order(grid: &HashMap<(i32, i32), DVec2>, board: BoardSize, img: &Grey) -> Vec
 /// that width), at most `MAX_WINDOW_PX` along either, so on a steep view it stays inside the
 /// four squares that meet at the corner instead of reaching the edges of the next ones.
 fn refine(g: &Grey, pts: &[DVec2], board: BoardSize, opts: &DetectOptions) -> Vec<DVec2> {
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[target_feature(enable = "avx2")]
+        fn avx2(g: &Grey, pts: &[DVec2], board: BoardSize, opts: &DetectOptions) -> Vec<DVec2> {
+            refine_with(g, pts, board, opts)
+        }
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor has AVX2.
+            return unsafe { avx2(g, pts, board, opts) };
+        }
+    }
+    refine_with(g, pts, board, opts)
+}
+
+/// `refine`, inlined into a caller compiled for the processor's vectors (no fused
+/// multiply-adds: the same corners at every width).
+#[inline(always)]
+fn refine_with(g: &Grey, pts: &[DVec2], board: BoardSize, opts: &DetectOptions) -> Vec<DVec2> {
     // Central differences, taken only where a window looks.
     let gx = |x: isize, y: isize| 0.5 * (g.at_clamped(x + 1, y) - g.at_clamped(x - 1, y)) as f64;
     let gy = |x: isize, y: isize| 0.5 * (g.at_clamped(x, y + 1) - g.at_clamped(x, y - 1)) as f64;
@@ -514,23 +618,20 @@ fn refine(g: &Grey, pts: &[DVec2], board: BoardSize, opts: &DetectOptions) -> Ve
             };
             let reach = window.reach();
             let mut p = p0;
+            // The box's pixels and gradient products, made again only when p's nearest pixel
+            // moves (the weights alone follow p).
+            let mut terms = BoxTerms::default();
+            let mut centre = None;
             for _ in 0..50 {
-                let (mut a00, mut a01, mut a11, mut b0, mut b1) = (0.0, 0.0, 0.0, 0.0, 0.0);
                 let (px, py) = (p.x.round() as isize, p.y.round() as isize);
-                for dy in -reach..=reach {
-                    for dx in -reach..=reach {
-                        let (qx, qy) = (px + dx, py + dy);
-                        let q = DVec2::new(qx as f64, qy as f64);
-                        let Some(wgt) = window.weight(q - p) else { continue };
-                        let (ex, ey) = (gx(qx, qy), gy(qx, qy));
-                        let (xx, xy, yy) = (wgt * ex * ex, wgt * ex * ey, wgt * ey * ey);
-                        a00 += xx;
-                        a01 += xy;
-                        a11 += yy;
-                        b0 += xx * q.x + xy * q.y;
-                        b1 += xy * q.x + yy * q.y;
-                    }
+                if centre != Some((px, py)) {
+                    terms.fill(px, py, reach, &gx, &gy);
+                    centre = Some((px, py));
                 }
+                window.weights(p, &terms.qx, &terms.qy, &mut terms.w);
+                let w = &terms.w;
+                let (a00, a01, a11) = (dot(w, &terms.xx), dot(w, &terms.xy), dot(w, &terms.yy));
+                let (b0, b1) = (dot(w, &terms.bx), dot(w, &terms.by));
                 let det = a00 * a11 - a01 * a01;
                 if !(det.abs() > 1e-12) {
                     break;
@@ -573,7 +674,130 @@ enum Window {
     Lattice { a: DVec2, b: DVec2, det: f64, sa: f64, sb: f64 },
 }
 
+/// A sub-pixel window's box of pixels around a corner: each pixel's position q, its
+/// gradient's products gx², gx·gy, gy², and (gx², gx·gy)·q, (gx·gy, gy²)·q, the terms of the
+/// normal equations; and the weights of the current iteration.
+#[derive(Default)]
+struct BoxTerms {
+    qx: Vec<f64>,
+    qy: Vec<f64>,
+    xx: Vec<f64>,
+    xy: Vec<f64>,
+    yy: Vec<f64>,
+    bx: Vec<f64>,
+    by: Vec<f64>,
+    w: Vec<f64>,
+}
+
+impl BoxTerms {
+    /// The box of ±`reach` pixels around (px, py), gradients from `gx`, `gy`.
+    fn fill(
+        &mut self,
+        px: isize,
+        py: isize,
+        reach: isize,
+        gx: &dyn Fn(isize, isize) -> f64,
+        gy: &dyn Fn(isize, isize) -> f64,
+    ) {
+        let all = [
+            &mut self.qx,
+            &mut self.qy,
+            &mut self.xx,
+            &mut self.xy,
+            &mut self.yy,
+            &mut self.bx,
+            &mut self.by,
+        ];
+        for v in all {
+            v.clear();
+        }
+        for qy in py - reach..=py + reach {
+            for qx in px - reach..=px + reach {
+                let (x, y) = (qx as f64, qy as f64);
+                let (ex, ey) = (gx(qx, qy), gy(qx, qy));
+                let (xx, xy, yy) = (ex * ex, ex * ey, ey * ey);
+                self.qx.push(x);
+                self.qy.push(y);
+                self.xx.push(xx);
+                self.xy.push(xy);
+                self.yy.push(yy);
+                self.bx.push(xx * x + xy * y);
+                self.by.push(xy * x + yy * y);
+            }
+        }
+        self.w.resize(self.qx.len(), 0.0);
+    }
+}
+
+/// Σ aᵢ·bᵢ in four running sums, so that it vectorises.
+#[inline(always)]
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut s = [0.0f64; 4];
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let tail: f64 = ca.remainder().iter().zip(cb.remainder()).map(|(x, y)| x * y).sum();
+    for (x, y) in ca.zip(cb) {
+        for k in 0..4 {
+            s[k] += x[k] * y[k];
+        }
+    }
+    (s[0] + s[1]) + (s[2] + s[3]) + tail
+}
+
+/// eˣ for the window's weights, x in [−2, 0]: (e^(x/8))⁸ with e^(x/8) as its Taylor series
+/// to the 12th power (truncation below 10⁻¹⁷ relative there), by Horner's rule; a polynomial
+/// where libm's exp is a call per pixel, which cost a fifth of the detection.
+#[inline(always)]
+fn exp_window(x: f64) -> f64 {
+    let y = x * 0.125;
+    let mut p = INV_FACTORIAL[12];
+    for c in INV_FACTORIAL[..12].iter().rev() {
+        // (Not `mul_add`: without FMA in the target it is a call to libm.)
+        p = p * y + c;
+    }
+    let p2 = p * p;
+    let p4 = p2 * p2;
+    p4 * p4
+}
+
+/// 1/n! for n = 0 … 12.
+const INV_FACTORIAL: [f64; 13] = {
+    let mut a = [1.0; 13];
+    let mut n = 1;
+    while n < 13 {
+        a[n] = a[n - 1] / n as f64;
+        n += 1;
+    }
+    a
+};
+
 impl Window {
+    /// The weight of every pixel (qx, qy) of a box around the corner at `p` into `w`: 0
+    /// outside the window (`weight`, branch-free so that it vectorises).
+    #[inline(always)]
+    fn weights(&self, p: DVec2, qx: &[f64], qy: &[f64], w: &mut [f64]) {
+        match *self {
+            Window::Square(hw) => {
+                let k = -1.0 / (2.0 * hw * hw);
+                for ((w, &x), &y) in w.iter_mut().zip(qx).zip(qy) {
+                    let (dx, dy) = (x - p.x, y - p.y);
+                    let e = exp_window(k * (dx * dx + dy * dy));
+                    *w = if dx.abs() <= hw && dy.abs() <= hw { e } else { 0.0 };
+                }
+            }
+            Window::Lattice { a, b, det, sa, sb } => {
+                let (ia, ib) = (1.0 / (det * sa), 1.0 / (det * sb));
+                for ((w, &x), &y) in w.iter_mut().zip(qx).zip(qy) {
+                    let (dx, dy) = (x - p.x, y - p.y);
+                    // s/sa and t/sb (`weight`).
+                    let u = (dx * b.y - dy * b.x) * ia;
+                    let v = (a.x * dy - a.y * dx) * ib;
+                    let e = exp_window(-(u * u + v * v));
+                    *w = if u.abs() <= 1.0 && v.abs() <= 1.0 { e } else { 0.0 };
+                }
+            }
+        }
+    }
+
     /// The pixel box that holds the window.
     fn reach(&self) -> isize {
         match *self {

@@ -158,49 +158,61 @@ pub fn refine(
     }
     let poses = init_poses;
 
+    // The residuals, and with `normal` the normal equations JᵀJ, Jᵀr. Each corner's two rows
+    // of J are nonzero only in the free intrinsics and its view's six pose columns, so the
+    // sums are taken over those alone: (nf + 6)² products a row instead of np², and no m × np
+    // matrix (1404 × 93 for 13 views, 99 % of the time of a dense JᵀJ).
     let evaluate = |intr: &[f64; NI],
                     poses: &[(DMat3, DVec3)],
-                    jac: bool|
-     -> (f64, DVector<f64>, Option<DMatrix<f64>>) {
+                    normal: bool|
+     -> (f64, DVector<f64>, Option<(DMatrix<f64>, DVector<f64>)>) {
         let cam = camera_from(intr, w, h);
         let mut r = DVector::zeros(m);
-        let mut j = jac.then(|| DMatrix::zeros(m, np));
+        let mut ne = normal.then(|| (DMatrix::zeros(np, np), DVector::zeros(np)));
         let mut row = 0;
+        let (mut cols, mut vals) =
+            (Vec::with_capacity(nf + 6), [Vec::with_capacity(nf + 6), Vec::with_capacity(nf + 6)]);
         for (v, (pts, (rot, t))) in problem.image.iter().zip(poses).enumerate() {
             for (x, obs) in problem.board.iter().zip(pts) {
                 let (uv, jr) = project(&cam, rot, *t, *x);
                 let res = uv - *obs;
                 r[row] = res.x;
                 r[row + 1] = res.y;
-                if let Some(j) = j.as_mut() {
-                    for a in 0..2 {
-                        for (col, &p) in free.iter().enumerate() {
-                            let mut d = jr[a][p];
-                            if p == 0 && flags.fix_aspect_ratio {
-                                d += aspect * jr[a][1];
-                            }
-                            j[(row + a, col)] = d;
+                row += 2;
+                let Some((jtj, jtr)) = ne.as_mut() else { continue };
+                cols.clear();
+                cols.extend((0..nf).chain((0..6).map(|c| nf + 6 * v + c)));
+                for (a, vals) in vals.iter_mut().enumerate() {
+                    vals.clear();
+                    vals.extend(free.iter().map(|&p| {
+                        if p == 0 && flags.fix_aspect_ratio {
+                            jr[a][0] + aspect * jr[a][1]
+                        } else {
+                            jr[a][p]
                         }
-                        for c in 0..6 {
-                            j[(row + a, nf + 6 * v + c)] = jr[a][NI + c];
-                        }
+                    }));
+                    vals.extend((0..6).map(|c| jr[a][NI + c]));
+                }
+                for (i, &ci) in cols.iter().enumerate() {
+                    jtr[ci] += vals[0][i] * res.x + vals[1][i] * res.y;
+                    for (k, &ck) in cols.iter().enumerate().take(i + 1) {
+                        jtj[(ci, ck)] += vals[0][i] * vals[0][k] + vals[1][i] * vals[1][k];
                     }
                 }
-                row += 2;
             }
         }
-        (r.norm_squared(), r, j)
+        if let Some((jtj, _)) = ne.as_mut() {
+            jtj.fill_upper_triangle_with_lower_triangle();
+        }
+        (r.norm_squared(), r, ne)
     };
 
     let opts = crate::math::lm::Options { max_iterations, ..Default::default() };
     let started = std::time::Instant::now();
     let mut trace = Vec::new();
-    let solved = crate::math::lm::minimize(
+    let solved = crate::math::lm::minimize_normal(
         (intr, poses),
-        |(intr, poses)| {
-            let (_, r, j) = evaluate(intr, poses, true);
-            Some((r, j?))
-        },
+        |(intr, poses)| evaluate(intr, poses, true).2,
         |(intr, poses)| evaluate(intr, poses, false).0,
         |(intr, poses), step| {
             let mut ni = *intr;
@@ -233,10 +245,10 @@ pub fn refine(
     );
     let ((intr, poses), iterations) = (solved.params, solved.iterations);
 
-    let (cost, r, j) = evaluate(&intr, &poses, true);
-    let j = j.ok_or_else(|| Error::Numerical("no Jacobian".into()))?;
+    let (cost, r, ne) = evaluate(&intr, &poses, true);
+    let (jtj, _) = ne.ok_or_else(|| Error::Numerical("no Jacobian".into()))?;
     let sigma2 = cost / (m - np) as f64;
-    let cov = (j.transpose() * &j).try_inverse().ok_or_else(|| {
+    let cov = jtj.try_inverse().ok_or_else(|| {
         Error::Numerical(
             "the calibration is degenerate: the normal equations are singular at the optimum".into(),
         )

@@ -64,6 +64,20 @@ pub struct Solution<P> {
 pub fn minimize<P: Clone>(
     start: P,
     mut residuals: impl FnMut(&P) -> Option<(DVector<f64>, DMatrix<f64>)>,
+    cost: impl FnMut(&P) -> f64,
+    update: impl FnMut(&P, &DVector<f64>) -> P,
+    observe: impl FnMut(usize, &P, f64),
+    opts: &Options,
+) -> Solution<P> {
+    let normal = |p: &P| residuals(p).map(|(r, j)| (j.transpose() * &j, j.transpose() * &r));
+    minimize_normal(start, normal, cost, update, observe, opts)
+}
+
+/// `minimize`, given the normal equations' JᵀJ and Jᵀr at p (`normal(p)`) rather than r and
+/// J: for a problem whose Jacobian is mostly zeros, whose caller sums them block by block.
+pub fn minimize_normal<P: Clone>(
+    start: P,
+    mut normal: impl FnMut(&P) -> Option<(DMatrix<f64>, DVector<f64>)>,
     mut cost: impl FnMut(&P) -> f64,
     mut update: impl FnMut(&P, &DVector<f64>) -> P,
     mut observe: impl FnMut(usize, &P, f64),
@@ -76,9 +90,7 @@ pub fn minimize<P: Clone>(
     let mut iterations = 0;
     for it in 0..opts.max_iterations {
         iterations = it + 1;
-        let Some((r, j)) = residuals(&p) else { break };
-        let jtj = j.transpose() * &j;
-        let jtr = j.transpose() * &r;
+        let Some((jtj, jtr)) = normal(&p) else { break };
         let n = jtj.nrows();
         let mut accepted = false;
         for _ in 0..opts.max_tries {
