@@ -586,9 +586,6 @@ fn refine(g: &Grey, pts: &[DVec2], board: BoardSize, opts: &DetectOptions) -> Ve
 /// multiply-adds: the same corners at every width).
 #[inline(always)]
 fn refine_with(g: &Grey, pts: &[DVec2], board: BoardSize, opts: &DetectOptions) -> Vec<DVec2> {
-    // Central differences, taken only where a window looks.
-    let gx = |x: isize, y: isize| 0.5 * (g.at_clamped(x + 1, y) - g.at_clamped(x - 1, y)) as f64;
-    let gy = |x: isize, y: isize| 0.5 * (g.at_clamped(x, y + 1) - g.at_clamped(x, y - 1)) as f64;
     let (c, r) = (board.cols, board.rows);
     let at = |i: usize, j: usize| pts[j * c + i];
     // The local square along one direction: half the step between the two neighbours, or the
@@ -625,7 +622,7 @@ fn refine_with(g: &Grey, pts: &[DVec2], board: BoardSize, opts: &DetectOptions) 
             for _ in 0..50 {
                 let (px, py) = (p.x.round() as isize, p.y.round() as isize);
                 if centre != Some((px, py)) {
-                    terms.fill(px, py, reach, &gx, &gy);
+                    terms.fill(g, px, py, reach);
                     centre = Some((px, py));
                 }
                 window.weights(p, &terms.qx, &terms.qy, &mut terms.w);
@@ -690,15 +687,10 @@ struct BoxTerms {
 }
 
 impl BoxTerms {
-    /// The box of ±`reach` pixels around (px, py), gradients from `gx`, `gy`.
-    fn fill(
-        &mut self,
-        px: isize,
-        py: isize,
-        reach: isize,
-        gx: &dyn Fn(isize, isize) -> f64,
-        gy: &dyn Fn(isize, isize) -> f64,
-    ) {
+    /// The box of ±`reach` pixels around (px, py) of `g`.
+    /// Gradients are central differences, taken only where a window looks, edges clamped.
+    #[inline(always)]
+    fn fill(&mut self, g: &Grey, px: isize, py: isize, reach: isize) {
         let all = [
             &mut self.qx,
             &mut self.qy,
@@ -714,7 +706,8 @@ impl BoxTerms {
         for qy in py - reach..=py + reach {
             for qx in px - reach..=px + reach {
                 let (x, y) = (qx as f64, qy as f64);
-                let (ex, ey) = (gx(qx, qy), gy(qx, qy));
+                let ex = 0.5 * (g.at_clamped(qx + 1, qy) - g.at_clamped(qx - 1, qy)) as f64;
+                let ey = 0.5 * (g.at_clamped(qx, qy + 1) - g.at_clamped(qx, qy - 1)) as f64;
                 let (xx, xy, yy) = (ex * ex, ex * ey, ey * ey);
                 self.qx.push(x);
                 self.qy.push(y);
