@@ -101,8 +101,8 @@ pub fn corner_candidates(img: &Grey, sampler: &Grey) -> Vec<DVec2> {
 }
 
 /// Saddle points of the image blurred with σ = 1.5 px: local maxima of R = I_xy² − I_xx·I_yy
-/// above 1 % of the strongest, strongest first. The blurred rows are made three at a time
-/// (`Grey::blur_row`) as R's rows need them, not kept as an image.
+/// above 1 % of the strongest, strongest first. The blurred rows are made one at a time
+/// (`BlurRows`) as R's rows need them, not kept as an image.
 fn saddle_candidates(img: &Grey) -> Vec<DVec2> {
     #[cfg(target_arch = "x86_64")]
     {
@@ -125,14 +125,13 @@ fn saddle_candidates_with(img: &Grey) -> Vec<DVec2> {
     let (w, h) = (img.width, img.height);
     let mut r = vec![0.0f32; w * h];
     if w >= 5 && h >= 5 {
-        let k = crate::image::filter::gaussian_kernel(1.5);
-        let mut buf = vec![0.0f32; w + k.len() - 1];
+        let mut blurred = crate::image::filter::BlurRows::new(img, 1.5, 1);
         let mut rows = [vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; w]];
-        img.blur_row(&k, 1, &mut buf, &mut rows[0]);
-        img.blur_row(&k, 2, &mut buf, &mut rows[1]);
+        blurred.row(1, &mut rows[0]);
+        blurred.row(2, &mut rows[1]);
         for y in 2..h - 2 {
             // Blurred row j is kept in rows[(j + 2) % 3].
-            img.blur_row(&k, y + 1, &mut buf, &mut rows[y % 3]);
+            blurred.row(y + 1, &mut rows[y % 3]);
             let (up, row, down) = (&rows[(y + 1) % 3], &rows[(y + 2) % 3], &rows[y % 3]);
             // Pixels 2 … w − 3 and their neighbours as slices of one length, so that the loop
             // has no bounds checks and vectorises.

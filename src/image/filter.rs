@@ -54,65 +54,104 @@ impl Grey {
         if sigma <= 0.0 || self.width == 0 || self.height == 0 {
             return self.clone();
         }
-        let k = gaussian_kernel(sigma);
         let w = self.width;
-        // Rows in parallel, each made whole (`blur_row`) from a scratch row: no image-sized
+        // Bands of rows in parallel, each made row by row (`BlurRows`): no image-sized
         // intermediate, whose fresh pages cost more to fault in than the blur's arithmetic.
         use rayon::prelude::*;
         let mut out = vec![0.0f32; w * self.height];
-        out.par_chunks_exact_mut(w)
-            .enumerate()
-            .for_each_init(|| vec![0.0f32; w + k.len() - 1], |buf, (y, dst)| self.blur_row(&k, y, buf, dst));
+        out.par_chunks_mut(w * BAND).enumerate().for_each(|(b, band)| {
+            let mut rows = BlurRows::new(self, sigma, b * BAND);
+            for (i, dst) in band.chunks_exact_mut(w).enumerate() {
+                rows.row(b * BAND + i, dst);
+            }
+        });
         Grey { width: w, height: self.height, data: out }
     }
+}
 
-    /// Row `y` of the image convolved with the normalised kernel `k` (odd length, centred),
-    /// edges clamped, into `dst` (`width` long), with `buf` (`width + k.len() − 1` long) as
-    /// scratch: the column sums first, then the row's, each a sum of whole shifted rows
-    /// scaled, which the compiler vectorises, compiled for the widest vectors the processor
-    /// has (chosen at run time; the baseline x86-64 build has SSE2 only). The same sums in
-    /// the same order at every width (no fused multiply-adds): the same image.
-    pub fn blur_row(&self, k: &[f32], y: usize, buf: &mut [f32], dst: &mut [f32]) {
+/// Rows a parallel band of `Grey::blur` holds.
+const BAND: usize = 32;
+
+/// The rows of an image's Gaussian blur, made in order from a first row: each row is blurred
+/// along x once (edges repeated) into a ring of the 2r + 1 rows the next output row needs,
+/// which are then summed along y (edges clamped). The sums and their order are those of a
+/// whole-image pass along x and then along y, so the result is the same to the bit; the loops
+/// are compiled for the widest vectors the processor has (chosen at run time; the baseline
+/// x86-64 build has SSE2 only), with no fused multiply-adds, so the same at every width.
+pub struct BlurRows<'a> {
+    img: &'a Grey,
+    k: Vec<f32>,
+    padded: Vec<f32>,
+    ring: Vec<f32>,
+    /// The next source row (possibly outside the image: clamped) to blur along x.
+    next: isize,
+}
+
+impl<'a> BlurRows<'a> {
+    /// Rows from `first` on, blurred with standard deviation `sigma` (> 0) pixels.
+    pub fn new(img: &'a Grey, sigma: f64, first: usize) -> BlurRows<'a> {
+        let k = gaussian_kernel(sigma);
+        let (w, n) = (img.width, k.len());
+        BlurRows {
+            img,
+            padded: vec![0.0; w + n - 1],
+            ring: vec![0.0; n * w],
+            next: first as isize - (n / 2) as isize,
+            k,
+        }
+    }
+
+    /// Blurred row `y` into `dst` (`width` long); rows are asked for in order, one after another.
+    pub fn row(&mut self, y: usize, dst: &mut [f32]) {
         #[cfg(target_arch = "x86_64")]
         {
             #[target_feature(enable = "avx512f")]
-            fn avx512(g: &Grey, k: &[f32], y: usize, buf: &mut [f32], dst: &mut [f32]) {
-                g.blur_row_with(k, y, buf, dst)
+            fn avx512(b: &mut BlurRows, y: usize, dst: &mut [f32]) {
+                b.row_with(y, dst)
             }
             #[target_feature(enable = "avx2")]
-            fn avx2(g: &Grey, k: &[f32], y: usize, buf: &mut [f32], dst: &mut [f32]) {
-                g.blur_row_with(k, y, buf, dst)
+            fn avx2(b: &mut BlurRows, y: usize, dst: &mut [f32]) {
+                b.row_with(y, dst)
             }
             if std::is_x86_feature_detected!("avx512f") {
                 // SAFETY: the processor has AVX-512F.
-                return unsafe { avx512(self, k, y, buf, dst) };
+                return unsafe { avx512(self, y, dst) };
             }
             if std::is_x86_feature_detected!("avx2") {
                 // SAFETY: the processor has AVX2.
-                return unsafe { avx2(self, k, y, buf, dst) };
+                return unsafe { avx2(self, y, dst) };
             }
         }
-        self.blur_row_with(k, y, buf, dst)
+        self.row_with(y, dst)
     }
 
     #[inline(always)]
-    fn blur_row_with(&self, k: &[f32], y: usize, buf: &mut [f32], dst: &mut [f32]) {
-        let (w, h) = (self.width, self.height);
-        let r = k.len() / 2;
-        let mid = &mut buf[r..r + w];
-        mid.fill(0.0);
-        for (t, &kv) in k.iter().enumerate() {
-            let sy = (y + t).saturating_sub(r).min(h - 1);
-            for (d, s) in mid.iter_mut().zip(&self.data[sy * w..(sy + 1) * w]) {
-                *d += kv * s;
+    fn row_with(&mut self, y: usize, dst: &mut [f32]) {
+        let (w, h) = (self.img.width, self.img.height);
+        let n = self.k.len();
+        let r = (n / 2) as isize;
+        // Rows up to y + r blurred along x, each into ring slot (row mod n).
+        while self.next <= y as isize + r {
+            let sy = self.next.clamp(0, h as isize - 1) as usize;
+            let src = &self.img.data[sy * w..(sy + 1) * w];
+            let p = &mut self.padded;
+            p[..n / 2].fill(src[0]);
+            p[n / 2..n / 2 + w].copy_from_slice(src);
+            p[n / 2 + w..].fill(src[w - 1]);
+            let slot = self.next.rem_euclid(n as isize) as usize;
+            let out = &mut self.ring[slot * w..(slot + 1) * w];
+            out.fill(0.0);
+            for (t, &kv) in self.k.iter().enumerate() {
+                for (d, s) in out.iter_mut().zip(&p[t..t + w]) {
+                    *d += kv * s;
+                }
             }
+            self.next += 1;
         }
-        let (first, last) = (buf[r], buf[r + w - 1]);
-        buf[..r].fill(first);
-        buf[r + w..].fill(last);
         dst.fill(0.0);
-        for (t, &kv) in k.iter().enumerate() {
-            for (d, s) in dst.iter_mut().zip(&buf[t..t + w]) {
+        for (t, &kv) in self.k.iter().enumerate() {
+            let slot = (y as isize - r + t as isize).rem_euclid(n as isize) as usize;
+            for (d, s) in dst.iter_mut().zip(&self.ring[slot * w..(slot + 1) * w]) {
                 *d += kv * s;
             }
         }
