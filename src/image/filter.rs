@@ -159,7 +159,7 @@ impl<'a> BlurRows<'a> {
 }
 
 /// The normalised Gaussian kernel of standard deviation `sigma` pixels, radius ⌈3σ⌉.
-pub fn gaussian_kernel(sigma: f64) -> Vec<f32> {
+fn gaussian_kernel(sigma: f64) -> Vec<f32> {
     let r = (3.0 * sigma).ceil() as isize;
     let k: Vec<f32> = (-r..=r).map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp() as f32).collect();
     let norm: f32 = k.iter().sum();
