@@ -652,3 +652,61 @@ fn bad_media() {
     let e = common::scene(text, dir.path()).err().expect("an unknown camera medium is refused");
     assert!(e.to_string().contains("camera.medium") && e.to_string().contains("'fog'"), "{e}");
 }
+
+/// The settings that let cases share one scene, each looking at its own part: a degenerate
+/// `look_at`, an `object` no material names, board axes not at right angles, and a chart
+/// lit from behind or by a light that is not distant, refused before anything is rendered,
+/// naming the field or the light.
+#[test]
+fn one_scene_settings_are_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = common::root().join("pipelines/scenes");
+    let case = |stage: &str, scene: &str, fields: &str| {
+        format!("seed = 1\n[[stages]]\nstage = \"{stage}\"\ncase = \"c\"\nscene = \"{scene}\"\n{fields}\n")
+    };
+    let sphere = scenes.join("ps-sphere.toml").display().to_string();
+    refused_naming(
+        dir.path(),
+        &case(
+            "photometric",
+            &sphere,
+            "look_at = { origin = [0.0, 0.0, 1.0], target = [0.0, 0.0, 1.0], up = [0.0, 1.0, 0.0] }",
+        ),
+        &["look_at = { origin = [0.0, 0.0, 1.0]", "the target apart from the origin"],
+    );
+    refused_naming(
+        dir.path(),
+        &case(
+            "photometric",
+            &sphere,
+            "look_at = { origin = [0.0, 0.0, 3.0], target = [0.0, 0.0, 0.0], up = [0.0, 0.0, 1.0] }",
+        ),
+        &["`up` not along the line of sight"],
+    );
+    refused_naming(
+        dir.path(),
+        &case("photometric", &sphere, "object = \"teapot\""),
+        &["object = \"teapot\"", "no material of that name"],
+    );
+    let board = scenes.join("calib-board.toml").display().to_string();
+    refused_naming(
+        dir.path(),
+        &case("calibrate", &board, "board_axes = [[1.0, 0.0, 0.0], [1.0, 1.0, 0.0]]"),
+        &["board_axes = [[1.0, 0.0, 0.0], [1.0, 1.0, 0.0]]", "at right angles"],
+    );
+    let chart = std::fs::read_to_string(scenes.join("color-chart.toml")).unwrap();
+    for (light, words) in [
+        (
+            "[[lights]]\ntype = \"directional\"\nto_light = [0.0, 0.0, 1.0]\nirradiance = [1.0, 1.0, 1.0]\n",
+            &["light 2 does not reach the chart's face the camera sees"][..],
+        ),
+        (
+            "[[lights]]\ntype = \"point\"\nposition = [0.0, 0.0, -1.0]\nintensity = [1.0, 1.0, 1.0]\n",
+            &["directional lights only"][..],
+        ),
+    ] {
+        let file = dir.path().join("chart.toml");
+        std::fs::write(&file, format!("{chart}\n{light}")).unwrap();
+        refused_naming(dir.path(), &case("color", &file.display().to_string(), ""), words);
+    }
+}

@@ -104,15 +104,17 @@ fn chained_colour_cases_take_the_merged_radiance_and_the_response() {
 fn chained_case_takes_the_upstream_output() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
-    let scenes = common::root().join("pipelines/scenes");
+    // The room of pipelines/session.toml (the board on the ground, the courtyard around it),
+    // and the object of its photometric case.
+    let room = common::root().join("pipelines/scenes/session-room.toml");
+    let object = common::root().join("pipelines/scenes/session-object.toml");
     let session = |seed: u64| {
         format!(
-            "[[stages]]\nstage = \"calibrate\"\ncase = \"cal\"\nseed = {seed}\nscene = \"{}\"\nviews = 12\nspp = 8\nbounds = {{ views_missed = 0, fx_rel_err = 0.001, cx_err_px = 0.5, cy_err_px = 0.5 }}\n\
-             [[stages]]\nstage = \"sfm\"\ncase = \"s\"\nscene = \"{}\"\ncamera = \"from:cal\"\ntarget = [0.0, 0.5, 0.6]\nradius = 3.5\nheight = 1.3\narc_deg = 40\nviews = 4\nbounds = {{ unregistered_images = 0 }}\n\
-             [[stages]]\nstage = \"photometric\"\ncase = \"p\"\nscene = \"{}\"\ncamera = \"from:cal\"\nlights = 8\nspp = 1\ndiffuse_only = true\n",
-            scenes.join("session-board.toml").display(),
-            scenes.join("sfm-courtyard-wide.toml").display(),
-            scenes.join("session-object.toml").display()
+            "[[stages]]\nstage = \"calibrate\"\ncase = \"cal\"\nseed = {seed}\nscene = \"{0}\"\nboard_origin = [0.875, -1.225, 0.002]\nboard_axes = [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]\nviews = 12\nspp = 8\nbounds = {{ views_missed = 0, fx_rel_err = 0.001, cx_err_px = 0.5, cy_err_px = 0.5 }}\n\
+             [[stages]]\nstage = \"sfm\"\ncase = \"s\"\nscene = \"{0}\"\ncamera = \"from:cal\"\ntarget = [0.0, 0.5, 0.6]\nradius = 3.5\nheight = 1.3\narc_deg = 40\nviews = 4\nbounds = {{ unregistered_images = 0 }}\n\
+             [[stages]]\nstage = \"photometric\"\ncase = \"p\"\nscene = \"{1}\"\ncamera = \"from:cal\"\nlights = 8\nspp = 1\ndiffuse_only = true\n",
+            room.display(),
+            object.display()
         )
     };
     let metrics = |seed: u64| {
@@ -174,7 +176,12 @@ fn chained_case_takes_the_upstream_output() {
     let (code, err) = run(&session(1).replace("camera = \"from:cal\"\n", "perturb = { k1 = 0.1 }\n"), &out);
     assert!(code == 1 && err.contains("perturb: only on a chained case"), "{err}");
     // A source of another camera, and a source that ended in a declared error.
-    let other = session(1).replace("session-board.toml", "calib-board.toml");
+    let board = common::root().join("pipelines/scenes/calib-board.toml");
+    let other = session(1).replacen(&room.display().to_string(), &board.display().to_string(), 1).replacen(
+        "board_origin = [0.875, -1.225, 0.002]\nboard_axes = [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]\n",
+        "",
+        1,
+    );
     let (code, err) = run(&other, &out);
     assert!(
         code == 1 && err.contains("a chained case must see through the camera its source calibrated"),

@@ -82,6 +82,17 @@ pub enum Texture {
 }
 
 impl Texture {
+    /// The mean value over the texture's domain.
+    pub fn mean(&self) -> Vec3A {
+        match self {
+            Texture::Constant(v) => *v,
+            Texture::Image { texels, .. } => {
+                texels.iter().fold(Vec3A::ZERO, |s, t| s + *t) / texels.len().max(1) as f32
+            }
+            Texture::Checker { even, odd, .. } => (*even + *odd) / 2.0,
+        }
+    }
+
     /// Multiplies every value by `s` (in [0, 1], so an albedo stays an albedo).
     pub fn scale(&mut self, s: f32) {
         match self {

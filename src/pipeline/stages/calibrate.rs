@@ -48,8 +48,8 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Config {
-    /// Scene file with the board (its inner corner (0, 0) at `board_origin`, in the z = 0
-    /// plane), relative to the pipeline file.
+    /// Scene file with the board (its inner corner (0, 0) at `board_origin`, its rows along
+    /// `board_axes`), relative to the pipeline file.
     pub scene: String,
     /// Number of views (default 16, 2 to 1000). View k's pose does not depend on the count,
     /// so a sweep over `views` renders each view once.
@@ -80,6 +80,10 @@ pub struct Config {
     pub square: f64,
     /// World position of inner corner 0 (default [square, square, 0]).
     pub board_origin: Option<[f64; 3]>,
+    /// World directions from corner (0, 0) to corner (1, 0) and to corner (0, 1), at right
+    /// angles (default [[1, 0, 0], [0, 1, 0]]: the board in a plane z = constant). The camera
+    /// sees the board's face from the side opposite to their cross product.
+    pub board_axes: Option<[[f64; 3]; 2]>,
     /// Whether the scene's sensor adds noise and quantises (default true); without it the
     /// linear radiance image is used.
     #[serde(default = "yes")]
@@ -243,6 +247,21 @@ pub fn poses(
         .collect()
 }
 
+/// The board's frame in the world (`Config::board_axes`): its columns the directions to the
+/// next corner along a row, down a column, and their cross product.
+fn board_axes(axes: Option<[[f64; 3]; 2]>) -> Result<DMat3, StageError> {
+    let Some([u, v]) = axes else { return Ok(DMat3::IDENTITY) };
+    let [du, dv] = [u, v].map(DVec3::from_array);
+    let (nu, nv) = (du.try_normalize(), dv.try_normalize());
+    match (nu, nv) {
+        (Some(a), Some(b)) if a.dot(b).abs() < 1e-9 => Ok(DMat3::from_cols(a, b, a.cross(b))),
+        _ => Err(StageError::Config(format!(
+            "board_axes = {axes:?}: expected two finite, nonzero directions at right angles",
+            axes = [u, v]
+        ))),
+    }
+}
+
 /// Distortion displacement of a model at pixel p: p − K·undistort(p).
 fn displacement(cam: &CameraModel, p: DVec2) -> Option<DVec2> {
     cam.undistort_pixel(p).map(|n| p - cam.normalized_to_pixel(n))
@@ -291,6 +310,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<calib::Input, T
     if !origin.is_finite() {
         return Err(StageError::Config(format!("board_origin = {origin}: expected finite numbers")));
     }
+    let axes = board_axes(c.board_axes)?;
     let camera = scene.camera;
     let mut settings = render::Settings::from_scene(&scene);
     apply_overrides(&mut settings, c.spp, None)?;
@@ -310,8 +330,9 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<calib::Input, T
                 c.square
             )));
         };
-        // Camera from world: X_cam = R (X_world − origin) + t.
-        let cam_from_world = WorldToCamera(Pose { rotation: r, translation: t - r * origin });
+        // Camera from world: X_cam = R Bᵀ (X_world − origin) + t, B the board's axes.
+        let rotation = r * axes.transpose();
+        let cam_from_world = WorldToCamera(Pose { rotation, translation: t - rotation * origin });
         scene.t_world_cam = cam_from_world.inverse();
         settings.seed = render::sampler::mix64(ctx.seed ^ (k as u64 + 1));
         let pose = super::pose_key(&scene.t_world_cam);

@@ -105,6 +105,8 @@ pub struct Radiance {
     /// The scene file, resolved, and for a chart's camera signal its camera and illuminant.
     pub scene: std::path::PathBuf,
     pub spectral: Option<super::hdr::Spectral>,
+    /// The camera's pose given by the case (`look_at`), when not the scene's own.
+    pub look_at: Option<crate::render::scene::LookAt>,
     /// The estimate's error in ln radiance against the truth's ln radiance.
     pub error: LnError,
 }

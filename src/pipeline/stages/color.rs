@@ -6,9 +6,10 @@
 //! wavelength, independent, so the chart is rendered once per three wavelengths of the
 //! tables' 81 (380–780 nm every 5 nm; 27 renders), each channel carrying one wavelength:
 //! every `patch-NN` material's albedo becomes that patch's reflectance at the three
-//! wavelengths, every other material keeps the mean of its RGB albedo as a flat spectrum, and
-//! the scene's one directional light emits the illuminant's power there, scaled so that a
-//! perfect white facing the light would give 1 in the camera's strongest channel. The
+//! wavelengths, every other material keeps the mean of its RGB albedo (over its texture) as
+//! a flat spectrum, and the scene's directional lights emit the illuminant's power there,
+//! each at its share of their summed irradiance, scaled so that a perfect white facing a
+//! lone light would give 1 in the camera's strongest channel. The
 //! camera's signal is then c = Σ_λ L_λ·c̄(λ) per pixel, with its measured sensitivities c̄.
 //! Only this stage pays for spectra; the RGB tracer is untouched. The renders go through the
 //! render cache: exposure, noise and model changes reuse them.
@@ -19,7 +20,8 @@
 //! patch-01, patch-02 and patch-07 quads of the scene file) through its camera.
 //!
 //! Truth: each patch's XYZ under the illuminant (CIE 1931 2°, Y = 1 for a perfect white), and
-//! its noise-free camera value at the sensor (exposure × cos θ × Σ S·R·c̄ / norm). With
+//! its noise-free camera value at the sensor (exposure × Σ share·cos θ × Σ S·R·c̄ / norm, the
+//! first sum over the lights, each θ off the chart's normal; the chart must be unshadowed). With
 //! `reference = "spectral"` the solver fits against that XYZ, relative to the illuminant's
 //! white (what a spectrophotometer reading the chart under the same light gives); with
 //! `"published"`, against the published D50 values.
@@ -50,8 +52,11 @@ use serde::{Deserialize, Serialize};
 #[serde(deny_unknown_fields)]
 pub struct Config {
     /// Scene file with the chart (materials `patch-01` … `patch-24`), its camera, sensor and
-    /// one directional light, relative to the pipeline file.
+    /// directional lights, relative to the pipeline file.
     pub scene: String,
+    /// The camera's pose instead of the scene's (`{ origin, target, up }`, as a scene's
+    /// `[camera] look_at`): one view of a scene other cases share.
+    pub look_at: Option<render::scene::LookAt>,
     /// `nikon-d5100` or `sigma-sd-merrill` (default nikon-d5100).
     #[serde(default = "default_camera")]
     pub camera: String,
@@ -184,10 +189,12 @@ pub(super) struct Chart {
     digest: String,
     /// The chart's cell grid in the world (`chart_grid`).
     grid: (DVec3, DVec3, DVec3, DVec3),
-    to_light: Vec3A,
+    /// The scene's directional lights: towards each, and its share of their summed irradiance.
+    lights: Vec<(Vec3A, f32)>,
     /// Each patch's material.
     patch_material: Vec<usize>,
-    /// The cosine of the light's angle off the chart's normal.
+    /// The chart's irradiance over that of a surface facing every light: each light's share
+    /// times the cosine of its angle off the chart's normal, summed.
     pub cos_theta: f64,
     pub camera: [spectra::Spectrum; 3],
     pub illuminant: spectra::Spectrum,
@@ -252,6 +259,7 @@ fn camera_and_illuminant(
 /// light, refused by name where the stage cannot render it.
 pub(super) fn load_chart(
     scene_file: &str,
+    look_at: Option<&render::scene::LookAt>,
     camera: &str,
     illuminant: &str,
     ctx: &Context,
@@ -259,35 +267,51 @@ pub(super) fn load_chart(
     let (cam, ill) = camera_and_illuminant(camera, illuminant)?;
     let scene_path = ctx.dir.join(scene_file);
     let mut scene = render::load(&scene_path)?;
-    let digest = scene_digest(&scene_path)?;
+    let mut digest = scene_digest(&scene_path)?;
+    super::aim(&mut scene, &mut digest, look_at)?;
     let grid = chart_grid(&scene_path)?;
-    let to_light = match scene.lights.as_slice() {
-        [Light::Directional { to_light, .. }] => to_light.normalize(),
-        _ => {
-            return Err(StageError::Config(format!(
-            "{scene_file}: the colour stage needs exactly one directional light (it replaces its spectrum)"
-        )))
+    // Every light becomes the illuminant, at its own strength: distant lights only, whose
+    // irradiance on the flat chart is the same on every patch.
+    let mut lights = Vec::new();
+    for light in &scene.lights {
+        match light {
+            Light::Directional { to_light, irradiance } => {
+                lights.push((to_light.normalize(), (irradiance.x + irradiance.y + irradiance.z) / 3.0))
+            }
+            _ => {
+                return Err(StageError::Config(format!(
+                    "{scene_file}: the colour stage needs directional lights only (it gives each the illuminant's spectrum)"
+                )))
+            }
         }
-    };
-    let cos_theta = grid.3.dot(to_light.as_dvec3()).abs();
+    }
+    let total: f32 = lights.iter().map(|l| l.1).sum();
+    if lights.is_empty() || !(total > 0.0) {
+        return Err(StageError::Config(format!(
+            "{scene_file}: the colour stage needs a directional light that shines on the chart"
+        )));
+    }
+    lights.iter_mut().for_each(|l| l.1 /= total);
+    let (origin, step_u, step_v, normal) = grid;
+    let centre = origin + 3.0 * step_u + 2.0 * step_v;
+    let facing = normal.dot(scene.t_world_cam.translation - centre);
+    if let Some(k) = lights.iter().position(|(d, _)| normal.dot(d.as_dvec3()) * facing <= 0.0) {
+        return Err(StageError::Config(format!(
+            "{scene_file}: light {} does not reach the chart's face the camera sees",
+            k + 1
+        )));
+    }
+    let cos_theta = lights.iter().map(|(d, w)| *w as f64 * grid.3.dot(d.as_dvec3()).abs()).sum::<f64>();
 
-    // Materials: the patches by name; the others keep a flat spectrum.
+    // Materials: the patches by name; the others keep a flat spectrum, their mean.
     let mut patch_material = vec![None; 24];
     let mut flat = Vec::new();
     for (m, mat) in scene.materials.iter().enumerate() {
         match mat.name.strip_prefix("patch-").and_then(|n| n.parse::<usize>().ok()) {
             Some(k @ 1..=24) => patch_material[k - 1] = Some(m),
             _ => {
-                let mean = match &mat.albedo {
-                    Texture::Constant(v) => (v.x + v.y + v.z) / 3.0,
-                    _ => {
-                        return Err(StageError::Config(format!(
-                            "material `{}`: the colour stage needs constant albedos outside the patches",
-                            mat.name
-                        )))
-                    }
-                };
-                flat.push((m, mean));
+                let mean = mat.albedo.mean();
+                flat.push((m, (mean.x + mean.y + mean.z) / 3.0));
             }
         }
     }
@@ -299,7 +323,7 @@ pub(super) fn load_chart(
     }
 
     let patch_material = patch_material.into_iter().map(|m| m.unwrap_or(0)).collect();
-    Ok(Chart { scene, digest, grid, to_light, patch_material, cos_theta, camera: cam, illuminant: ill })
+    Ok(Chart { scene, digest, grid, lights, patch_material, cos_theta, camera: cam, illuminant: ill })
 }
 
 /// Renders the chart spectrally and integrates the renders against the camera's
@@ -311,7 +335,8 @@ pub(super) fn chart_signal(
     denoise: &super::Denoise,
     ctx: &Context,
 ) -> Result<Option<Signal>, StageError> {
-    let (cam, ill, to_light) = (chart.camera, chart.illuminant, chart.to_light);
+    let (cam, ill) = (chart.camera, chart.illuminant);
+    let lights = &chart.lights;
     let scene = &mut chart.scene;
     let digest = &chart.digest;
     let patch_material = &chart.patch_material;
@@ -335,7 +360,14 @@ pub(super) fn chart_signal(
         for (k, m) in patch_material.iter().enumerate() {
             scene.materials[*m].albedo = Texture::Constant(Vec3A::from_array(patches[k]));
         }
-        scene.replace_lights(&[Light::Directional { to_light, irradiance: Vec3A::from_array(irradiance) }]);
+        let each: Vec<Light> = lights
+            .iter()
+            .map(|&(to_light, share)| Light::Directional {
+                to_light,
+                irradiance: Vec3A::from_array(irradiance) * share,
+            })
+            .collect();
+        scene.replace_lights(&each);
         let recipe = BandRecipe {
             product: "color-band",
             scene: digest,
@@ -395,7 +427,7 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<color::Input, T
     sensor.full_well = c.full_well.unwrap_or(sensor.full_well);
     sensor.validate()?;
 
-    let mut chart = load_chart(&c.scene, &c.camera, &c.illuminant, ctx)?;
+    let mut chart = load_chart(&c.scene, c.look_at.as_ref(), &c.camera, &c.illuminant, ctx)?;
     let Some(signal) = chart_signal(&mut chart, c.spp, &c.denoise, ctx)? else {
         return Ok(None);
     };

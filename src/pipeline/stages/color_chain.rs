@@ -190,6 +190,13 @@ pub(super) fn run_radiance(
     let here = super::render::clean(&ctx.dir.join(&c.scene));
     let same_chart =
         r.spectral.as_ref().is_some_and(|sp| sp.camera == c.camera && sp.illuminant == c.illuminant);
+    if r.look_at != c.look_at {
+        return Err(StageError::Config(format!(
+            "{field}: that case saw the chart from {}, this case from {}: a chained colour case must look at the chart its source merged from the same pose",
+            r.look_at.as_ref().map_or("the scene's camera".into(), |l| format!("look_at {l:?}")),
+            c.look_at.as_ref().map_or("the scene's camera".into(), |l| format!("look_at {l:?}")),
+        )));
+    }
     if r.scene != here || !same_chart {
         return Err(StageError::Config(format!(
             "{field}: that case merged {} ({}); this case's chart is {} ({} under {}): a chained colour case must fit the chart its source merged",
@@ -200,7 +207,7 @@ pub(super) fn run_radiance(
             c.illuminant
         )));
     }
-    let chart = load_chart(&c.scene, &c.camera, &c.illuminant, ctx)?;
+    let chart = load_chart(&c.scene, c.look_at.as_ref(), &c.camera, &c.illuminant, ctx)?;
     let chained = sample_radiance(c, &chart, &r.estimate, source)?;
     let alone = sample_radiance(c, &chart, &r.truth, source)?;
     run_colour_chain(
@@ -247,7 +254,7 @@ pub(super) fn run_response(c: &Config, ctx: &Context, source: &str) -> Result<Ca
         r.error.raised(s);
     }
     let t = std::time::Instant::now();
-    let mut chart = load_chart(&c.scene, &c.camera, &c.illuminant, ctx)?;
+    let mut chart = load_chart(&c.scene, c.look_at.as_ref(), &c.camera, &c.illuminant, ctx)?;
     let mut sensor = r.sensor;
     let scene_exposure = chart.scene.sensor.clone().unwrap_or_default().exposure;
     sensor.exposure = c.exposure.unwrap_or(scene_exposure);

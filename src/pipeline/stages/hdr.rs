@@ -59,6 +59,9 @@ use serde::{Deserialize, Serialize};
 pub struct Config {
     /// Scene file, relative to the pipeline file.
     pub scene: String,
+    /// The camera's pose instead of the scene's (`{ origin, target, up }`, as a scene's
+    /// `[camera] look_at`): one view of a scene other cases share.
+    pub look_at: Option<render::scene::LookAt>,
     /// Number of exposures (default 7, at least 2).
     #[serde(default = "default_exposures")]
     pub exposures: usize,
@@ -212,7 +215,8 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<hdr::Input, Tru
     let (_, weights) = method(c)?;
     let (radiance, spp) = match &c.spectral {
         Some(sp) => {
-            let mut chart = super::color::load_chart(&c.scene, &sp.camera, &sp.illuminant, ctx)?;
+            let mut chart =
+                super::color::load_chart(&c.scene, c.look_at.as_ref(), &sp.camera, &sp.illuminant, ctx)?;
             let Some(signal) = super::color::chart_signal(&mut chart, c.spp, &c.denoise, ctx)? else {
                 return Ok(None);
             };
@@ -220,8 +224,9 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<hdr::Input, Tru
         }
         None => {
             let scene_path = ctx.dir.join(&c.scene);
-            let scene = render::load(&scene_path)?;
-            let digest = scene_digest(&scene_path)?;
+            let mut scene = render::load(&scene_path)?;
+            let mut digest = scene_digest(&scene_path)?;
+            super::aim(&mut scene, &mut digest, c.look_at.as_ref())?;
             let mut settings = render::Settings::from_scene(&scene);
             apply_overrides(&mut settings, c.spp, None)?;
             settings.seed = ctx.seed;
@@ -802,6 +807,7 @@ fn export(c: &Config, ctx: &Context, out: &hdr::Output, truth: &Truth) -> super:
             truth: r.clone(),
             scene: super::render::clean(&ctx.dir.join(&c.scene)),
             spectral: c.spectral.clone(),
+            look_at: c.look_at.clone(),
             error: radiance_error,
         }),
         response: Some(super::chain::InheritedResponse {

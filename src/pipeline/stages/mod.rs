@@ -393,6 +393,32 @@ pub struct ViewRecipe<'a> {
     pub settings: SettingsKey,
 }
 
+/// Points a scene's camera as a case's `look_at` says (the scene's own pose when absent): a
+/// scene shared by several cases, each looking at its own part of it, as a session's room is.
+/// The scene's `digest` then names the pose too, so the cache keeps each view's renders apart.
+pub fn aim(
+    scene: &mut crate::render::Scene,
+    digest: &mut String,
+    look_at: Option<&crate::render::scene::LookAt>,
+) -> Result<(), StageError> {
+    let Some(l) = look_at else { return Ok(()) };
+    let [o, t, u] = [l.origin, l.target, l.up].map(glam::DVec3::from_array);
+    let pose = [o, t, u]
+        .iter()
+        .all(|v| v.is_finite())
+        .then(|| crate::math::CameraToWorld::look_at(o, t, u))
+        .flatten()
+        .ok_or_else(|| {
+            StageError::Config(format!(
+                "look_at = {{ origin = {:?}, target = {:?}, up = {:?} }}: expected finite points, the target apart from the origin and `up` not along the line of sight",
+                l.origin, l.target, l.up
+            ))
+        })?;
+    scene.t_world_cam = pose;
+    digest.push_str(&format!(" look_at {:?}", pose_key(&pose)));
+    Ok(())
+}
+
 /// A camera pose as a cache key holds it: the rotation's columns, then the translation.
 pub fn pose_key(p: &crate::math::Pose) -> [f64; 12] {
     let mut key = [0.0; 12];

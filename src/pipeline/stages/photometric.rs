@@ -60,6 +60,13 @@ pub struct Config {
     /// Scene file with the object and camera, relative to the pipeline file; its own point and
     /// directional lights are replaced by the stage's.
     pub scene: String,
+    /// The camera's pose instead of the scene's (`{ origin, target, up }`, as a scene's
+    /// `[camera] look_at`): one view of a scene other cases share.
+    pub look_at: Option<crate::render::scene::LookAt>,
+    /// The object's material: the mask is the pixels that see it (default: every shape, the
+    /// object alone before an empty background). The other shapes (a room around the object)
+    /// stay in every render, where they shadow the object and light it.
+    pub object: Option<String>,
     /// Number of distant lights (default 24, 3 to 1000).
     #[serde(default = "default_lights")]
     pub lights: usize,
@@ -231,7 +238,27 @@ fn synthesize_given(
     }
     let scene_path = ctx.dir.join(&c.scene);
     let mut scene = render::load(&scene_path)?;
-    let digest = scene_digest(&scene_path)?;
+    let mut digest = scene_digest(&scene_path)?;
+    super::aim(&mut scene, &mut digest, c.look_at.as_ref())?;
+    // The ids of the shapes that are the object.
+    let object_ids: Option<Vec<u32>> = match &c.object {
+        None => None,
+        Some(name) => {
+            let m = scene.materials.iter().position(|m| &m.name == name).ok_or_else(|| {
+                StageError::Config(format!(
+                    "object = \"{name}\": {} has no material of that name (it has {})",
+                    c.scene,
+                    scene.materials.iter().map(|m| format!("`{}`", m.name)).collect::<Vec<_>>().join(", ")
+                ))
+            })?;
+            let mut ids: Vec<u32> =
+                scene.info.iter().filter(|i| i.material as usize == m).map(|i| i.object_id).collect();
+            ids.sort_unstable();
+            ids.dedup();
+            Some(ids)
+        }
+    };
+    let is_object = |id: f32| id > 0.0 && object_ids.as_ref().is_none_or(|ids| ids.contains(&(id as u32)));
     if c.diffuse_only {
         for m in &mut scene.materials {
             m.bsdf = render::bsdf::Bsdf::Lambertian;
@@ -287,7 +314,7 @@ fn synthesize_given(
                 let s = crate::calib::undistort::source_pixel(&camera, &pinhole.intrinsics, p);
                 let inside = s.x >= 0.0 && s.y >= 0.0 && s.x < (w - 1) as f64 && s.y < (h - 1) as f64;
                 let (x0, y0) = (s.x.floor() as usize, s.y.floor() as usize);
-                let object = |x: usize, y: usize| seen.id.data[y * w + x] > 0.0;
+                let object = |x: usize, y: usize| is_object(seen.id.data[y * w + x]);
                 (inside
                     && object(x0, y0)
                     && object(x0 + 1, y0)
@@ -303,7 +330,7 @@ fn synthesize_given(
 
     // Truth and mask, in the frame the solver sees.
     let truth = render::truth(&scene, None);
-    let object = |x: usize, y: usize| truth.id.data[y * w + x] > 0.0;
+    let object = |x: usize, y: usize| is_object(truth.id.data[y * w + x]);
     let pixels: Vec<usize> = (1..h.saturating_sub(1))
         .flat_map(|y| (1..w.saturating_sub(1)).map(move |x| (x, y)))
         .filter(|&(x, y)| (0..3).all(|dy| (0..3).all(|dx| object(x + dx - 1, y + dy - 1))))

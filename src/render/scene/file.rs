@@ -98,7 +98,7 @@ pub struct CameraSpec {
     pub medium: Option<String>,
 }
 
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct LookAt {
     pub origin: [f64; 3],
