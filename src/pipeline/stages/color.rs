@@ -255,8 +255,9 @@ fn camera_and_illuminant(
     Ok((cam, ill))
 }
 
-/// Loads the chart of `scene_file` (relative to the pipeline file): its patches, grid and
-/// light, refused by name where the stage cannot render it.
+/// Loads the chart of `scene_file` (relative to the pipeline file), its camera posed by
+/// `look_at` when given: its patches, grid and lights, refused by name where the stage cannot
+/// render it.
 pub(super) fn load_chart(
     scene_file: &str,
     look_at: Option<&render::scene::LookAt>,
@@ -301,7 +302,7 @@ pub(super) fn load_chart(
             k + 1
         )));
     }
-    let cos_theta = lights.iter().map(|(d, w)| *w as f64 * grid.3.dot(d.as_dvec3()).abs()).sum::<f64>();
+    let cos_theta = lights.iter().map(|(d, w)| *w as f64 * normal.dot(d.as_dvec3()).abs()).sum::<f64>();
 
     // Materials: the patches by name; the others keep a flat spectrum, their mean.
     let mut patch_material = vec![None; 24];
