@@ -10,8 +10,8 @@ use common::run::{read_json, run};
 /// response. With the hdr case's seed changed (its frames' noise) the chained fits change and
 /// the alone ones (on the true radiance, through the true response) do not. With what they
 /// inherit raised to the power 1.02, the error that adds shows and the sensitivity predicts it
-/// within a factor of 2. A source of another chart, or of RGB radiance, and sensor settings
-/// on a chained case are named.
+/// within a factor of 2. A source of another chart, or of RGB radiance, or seen from another
+/// pose, and sensor settings on a chained case are named.
 #[test]
 fn chained_colour_cases_take_the_merged_radiance_and_the_response() {
     let dir = tempfile::tempdir().unwrap();
@@ -78,6 +78,16 @@ fn chained_colour_cases_take_the_merged_radiance_and_the_response() {
     let other = session(1, "").replace("illuminant = \"d65\" }", "illuminant = \"a\" }");
     let (code, err) = run(&other, &out);
     assert!(code == 1 && err.contains("a chained colour case must fit the chart its source merged"), "{err}");
+    let moved = session(1, "").replacen(
+        "image = \"from:h/radiance\"\n",
+        "image = \"from:h/radiance\"\nlook_at = { origin = [0.12, 0.08, -0.9], target = [0.12, 0.08, 0.0], up = [0.0, -1.0, 0.0] }\n",
+        1,
+    );
+    let (code, err) = run(&moved, &out);
+    assert!(
+        code == 1 && err.contains("must look at the chart its source merged from the same pose"),
+        "{err}"
+    );
     let rgb = session(1, "").replace("spectral = { camera = \"nikon-d5100\", illuminant = \"d65\" }\n", "");
     let (code, err) = run(&rgb, &out);
     assert!(code == 1 && err.contains("RGB radiance, not spectral"), "{err}");
