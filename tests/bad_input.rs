@@ -654,9 +654,10 @@ fn bad_media() {
 }
 
 /// The settings that let cases share one scene, each looking at its own part: a degenerate
-/// `look_at`, an `object` no material names, board axes not at right angles, and a chart
-/// lit from behind or by a light that is not distant, refused before anything is rendered,
-/// naming the field or the light.
+/// `look_at`, an `object` no material names, board axes not at right angles, the scene's
+/// sensor asked for beside sensor settings or where the scene has none, and a chart lit from
+/// behind or by a light that is not distant, refused before anything is rendered, naming the
+/// field or the light.
 #[test]
 fn one_scene_settings_are_checked() {
     let dir = tempfile::tempdir().unwrap();
@@ -693,6 +694,18 @@ fn one_scene_settings_are_checked() {
         dir.path(),
         &case("calibrate", &board, "board_axes = [[1.0, 0.0, 0.0], [1.0, 1.0, 0.0]]"),
         &["board_axes = [[1.0, 0.0, 0.0], [1.0, 1.0, 0.0]]", "at right angles"],
+    );
+    let chart_file = scenes.join("color-chart.toml").display().to_string();
+    refused_naming(
+        dir.path(),
+        &case("hdr", &chart_file, "scene_sensor = true\nbits = 12\nread_noise = 2.0"),
+        &["scene_sensor = true and bits, read_noise: the scene's sensor sets them"],
+    );
+    let box_file = scenes.join("cornell-box.toml").display().to_string();
+    refused_naming(
+        dir.path(),
+        &case("hdr", &box_file, "scene_sensor = true"),
+        &["cornell-box.toml has no [sensor]"],
     );
     let chart = std::fs::read_to_string(scenes.join("color-chart.toml")).unwrap();
     for (light, words) in [

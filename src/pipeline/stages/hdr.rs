@@ -54,7 +54,7 @@ use crate::pipeline::metric::{Better, Metric};
 use crate::render::{self, sensor::Response};
 use serde::{Deserialize, Serialize};
 
-#[derive(Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Config {
     /// Scene file, relative to the pipeline file.
@@ -72,16 +72,18 @@ pub struct Config {
     #[serde(default = "one")]
     pub exposure: f64,
     /// The sensor's response (default: a gamma of 2.2), as a scene's `[sensor] response`.
-    #[serde(default = "default_response")]
-    pub response: Response,
+    pub response: Option<Response>,
     /// Bits per sample: 8, 10, 12 or 16 (default 8).
-    #[serde(default = "default_bits")]
-    pub bits: u8,
+    pub bits: Option<u8>,
     /// Electrons at full scale (default 20000) and read noise in electrons (default 3).
-    #[serde(default = "default_full_well")]
-    pub full_well: f64,
-    #[serde(default = "default_read_noise")]
-    pub read_noise: f64,
+    pub full_well: Option<f64>,
+    pub read_noise: Option<f64>,
+    /// `true`: the stack is photographed through the scene's own `[sensor]` (its response,
+    /// bits, full well and read noise; this case's `exposure` sets the longest frame), the one
+    /// camera of a whole session; `response`, `bits`, `full_well` and `read_noise` are then
+    /// not given (default false).
+    #[serde(default)]
+    pub scene_sensor: bool,
     /// `debevec` or `robertson` (default debevec).
     #[serde(default = "default_method")]
     pub method: String,
@@ -140,17 +142,52 @@ fn one() -> f64 {
 fn default_samples_per_value() -> usize {
     hdr::DEFAULT_SAMPLES_PER_VALUE
 }
-fn default_response() -> Response {
-    Response::Gamma { gamma: 2.2 }
-}
-fn default_bits() -> u8 {
-    8
-}
-fn default_full_well() -> f64 {
-    20000.0
-}
-fn default_read_noise() -> f64 {
-    3.0
+impl Config {
+    fn response(&self) -> Response {
+        self.response.unwrap_or(Response::Gamma { gamma: 2.2 })
+    }
+    fn bits(&self) -> u8 {
+        self.bits.unwrap_or(8)
+    }
+    fn full_well(&self) -> f64 {
+        self.full_well.unwrap_or(20000.0)
+    }
+    fn read_noise(&self) -> f64 {
+        self.read_noise.unwrap_or(3.0)
+    }
+
+    /// The case with `scene_sensor` resolved: the scene's sensor in the four fields it sets.
+    fn resolved(&self, ctx: &Context) -> Result<Config, StageError> {
+        if !self.scene_sensor {
+            return Ok(self.clone());
+        }
+        let given: Vec<&str> = [
+            ("response", self.response.is_some()),
+            ("bits", self.bits.is_some()),
+            ("full_well", self.full_well.is_some()),
+            ("read_noise", self.read_noise.is_some()),
+        ]
+        .into_iter()
+        .filter_map(|(name, is)| is.then_some(name))
+        .collect();
+        if !given.is_empty() {
+            return Err(StageError::Config(format!(
+                "scene_sensor = true and {}: the scene's sensor sets them",
+                given.join(", ")
+            )));
+        }
+        let scene = render::load(&ctx.dir.join(&self.scene))?;
+        let Some(sn) = scene.sensor else {
+            return Err(StageError::Config(format!("scene_sensor = true: {} has no [sensor]", self.scene)));
+        };
+        Ok(Config {
+            response: Some(sn.response),
+            bits: Some(sn.bits),
+            full_well: Some(sn.full_well),
+            read_noise: Some(sn.read_noise),
+            ..self.clone()
+        })
+    }
 }
 fn default_method() -> String {
     "debevec".into()
@@ -194,11 +231,11 @@ struct FilmRecipe<'a> {
 fn sensor(c: &Config) -> render::sensor::Sensor {
     render::sensor::Sensor {
         exposure: c.exposure,
-        full_well: c.full_well,
+        full_well: c.full_well(),
         photon_noise: true,
-        read_noise: c.read_noise,
-        bits: c.bits,
-        response: c.response,
+        read_noise: c.read_noise(),
+        bits: c.bits(),
+        response: c.response(),
     }
 }
 
@@ -283,13 +320,13 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<hdr::Input, Tru
     };
     let luminance_range = crate::image::luminance_range(radiance.data.chunks_exact(3));
     // The noise floor: the stack merged through the true curve with the stage's weights.
-    let (g_true, pinned) = true_response(&c.response, max_code, c.full_well, c.read_noise, levels);
+    let (g_true, pinned) = true_response(&c.response(), max_code, c.full_well(), c.read_noise(), levels);
     let true_curve = hdr::Response { levels, g: g_true.clone() };
     let codes: Vec<&[u16]> = input.frames.iter().map(|f| f.codes.as_slice()).collect();
     let times: Vec<f64> = input.frames.iter().map(|f| f.time_s).collect();
     // Weights from the stack are judged against the sensor's true constants.
     let floor_weights = match weights {
-        Weights::NoiseFromStack => Weights::Noise { full_well: c.full_well, read_noise: c.read_noise },
+        Weights::NoiseFromStack => Weights::Noise { full_well: c.full_well(), read_noise: c.read_noise() },
         w => w,
     };
     let (floor_radiance, _) = hdr::merge::merge(&codes, &times, &true_curve, floor_weights);
@@ -302,10 +339,10 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<hdr::Input, Tru
         spp,
         c.exposures,
         c.stop_step,
-        c.bits,
-        c.response,
-        c.full_well,
-        c.read_noise
+        c.bits(),
+        c.response(),
+        c.full_well(),
+        c.read_noise()
     )];
     if let Some(sp) = &c.spectral {
         notes.push(format!(
@@ -316,10 +353,10 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<hdr::Input, Tru
     notes.extend(super::denoise_note(&c.denoise, spp));
     let mut truth = Truth {
         radiance,
-        response: c.response,
+        response: c.response(),
         max_code,
-        full_well: c.full_well,
-        read_noise: c.read_noise,
+        full_well: c.full_well(),
+        read_noise: c.read_noise(),
         occurs,
         well_exposed,
         g_true,
@@ -350,7 +387,7 @@ fn method(c: &Config) -> Result<(Method, Weights), StageError> {
     let w = c
         .weights
         .parse::<hdr::WeightsName>()
-        .and_then(|w| w.resolve(Some(c.full_well), c.read_noise))
+        .and_then(|w| w.resolve(Some(c.full_well()), c.read_noise()))
         .map_err(|e| StageError::Config(format!("weights = {e}")))?;
     Ok((m, w))
 }
@@ -824,18 +861,19 @@ impl Settings for Config {
         "radiance_median_rel_err"
     }
     fn run(&self, ctx: &Context) -> Result<CaseResult, StageError> {
+        let c = &self.resolved(ctx)?;
         super::run_case_exporting(
-            || synthesize(self, ctx),
-            |i| solve(self, i),
-            |o, t| validate(self, o, t),
-            |o, t| export(self, ctx, o, t),
+            || synthesize(c, ctx),
+            |i| solve(c, i),
+            |o, t| validate(c, o, t),
+            |o, t| export(c, ctx, o, t),
         )
     }
     fn provides(&self) -> &'static [&'static str] {
         &["radiance", "response"]
     }
     fn share(&self, ctx: &Context, pass: Pass) -> Option<Result<(), StageError>> {
-        (pass == Pass::Renders).then(|| synthesize(self, ctx).map(|_| ()))
+        (pass == Pass::Renders).then(|| synthesize(&self.resolved(ctx)?, ctx).map(|_| ()))
     }
 }
 
