@@ -686,6 +686,15 @@ fn one_scene_settings_are_checked() {
     );
     refused_naming(
         dir.path(),
+        &case(
+            "photometric",
+            &sphere,
+            "look_at = { origin = [1e31, 0.0, 3.0], target = [0.0, 0.0, 0.0], up = [0.0, 1.0, 0.0] }",
+        ),
+        &["expected finite points within ±1e30"],
+    );
+    refused_naming(
+        dir.path(),
         &case("photometric", &sphere, "object = \"teapot\""),
         &["object = \"teapot\"", "no material of that name"],
     );

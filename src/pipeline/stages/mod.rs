@@ -402,18 +402,12 @@ pub fn aim(
     look_at: Option<&crate::render::scene::LookAt>,
 ) -> Result<(), StageError> {
     let Some(l) = look_at else { return Ok(()) };
-    let [o, t, u] = [l.origin, l.target, l.up].map(glam::DVec3::from_array);
-    let pose = [o, t, u]
-        .iter()
-        .all(|v| v.is_finite())
-        .then(|| crate::math::CameraToWorld::look_at(o, t, u))
-        .flatten()
-        .ok_or_else(|| {
-            StageError::Config(format!(
-                "look_at = {{ origin = {:?}, target = {:?}, up = {:?} }}: expected finite points, the target apart from the origin and `up` not along the line of sight",
-                l.origin, l.target, l.up
-            ))
-        })?;
+    let pose = l.pose().ok_or_else(|| {
+        StageError::Config(format!(
+            "look_at = {{ origin = {:?}, target = {:?}, up = {:?} }}: expected finite points within ±{:e}, the target apart from the origin and `up` not along the line of sight",
+            l.origin, l.target, l.up, crate::render::scene::MAX_SCENE_VALUE
+        ))
+    })?;
     scene.t_world_cam = pose;
     digest.push_str(&format!(" look_at {:?}", pose_key(&pose)));
     Ok(())

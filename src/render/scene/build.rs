@@ -39,6 +39,19 @@ fn finite3(path: &Path, field: &str, v: [f64; 3]) -> Result<DVec3, Error> {
     }
 }
 
+impl LookAt {
+    /// The camera-to-world pose it describes, its points within the range a scene holds
+    /// (±`MAX_SCENE_VALUE`); `None` where one is not, the target is the origin, or `up` lies
+    /// along the line of sight.
+    pub fn pose(&self) -> Option<CameraToWorld> {
+        let points = [self.origin, self.target, self.up];
+        points.iter().flatten().all(|&v| representable(v)).then(|| {
+            let [o, t, u] = points.map(DVec3::from_array);
+            CameraToWorld::look_at(o, t, u)
+        })?
+    }
+}
+
 fn non_negative3(path: &Path, field: &str, v: [f64; 3]) -> Result<Vec3A, Error> {
     let d = finite3(path, field, v)?;
     if d.min_element() < 0.0 {
@@ -737,10 +750,10 @@ pub(super) fn build_camera(c: &CameraSpec, path: &Path) -> Result<(CameraModel, 
     }
     let pose = match (&c.look_at, &c.t_world_cam) {
         (Some(l), None) => {
-            let o = finite3(path, "camera.look_at.origin", l.origin)?;
-            let t = finite3(path, "camera.look_at.target", l.target)?;
-            let u = finite3(path, "camera.look_at.up", l.up)?;
-            CameraToWorld::look_at(o, t, u).ok_or_else(|| {
+            finite3(path, "camera.look_at.origin", l.origin)?;
+            finite3(path, "camera.look_at.target", l.target)?;
+            finite3(path, "camera.look_at.up", l.up)?;
+            l.pose().ok_or_else(|| {
                 field_err(
                     path,
                     "camera.look_at",

@@ -19,7 +19,7 @@ mod query;
 pub use query::{epsilon, Surface};
 
 pub use aim::Aim;
-pub use build::build;
+pub use build::{build, MAX_SCENE_VALUE};
 pub use emission::Emission;
 pub use file::*;
 
