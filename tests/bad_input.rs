@@ -704,6 +704,16 @@ fn one_scene_settings_are_checked() {
         &case("calibrate", &board, "board_axes = [[1.0, 0.0, 0.0], [1.0, 1.0, 0.0]]"),
         &["board_axes = [[1.0, 0.0, 0.0], [1.0, 1.0, 0.0]]", "at right angles"],
     );
+    refused_naming(
+        dir.path(),
+        &case("calibrate", &board, "sensor = false\nresponse = { type = \"srgb\" }"),
+        &["response = Srgb", "a response applies to code values"],
+    );
+    refused_naming(
+        dir.path(),
+        &case("calibrate", &board, "response = { type = \"gamma\", gamma = 0.0 }"),
+        &["response: response gamma = 0: expected 0.1 to 10"],
+    );
     let chart_file = scenes.join("color-chart.toml").display().to_string();
     refused_naming(
         dir.path(),

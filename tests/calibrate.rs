@@ -171,6 +171,13 @@ fn cli_bad_input() {
     let (code, err) = lumen(&["calibrate", "--images", "x.jpg", "--board", "9by6", "--out", o]);
     assert_eq!(code, 1);
     assert!(err.contains("9by6"), "{err}");
+    for response in ["gamma:0", "log", "gamma:x"] {
+        let (code, err) =
+            lumen(&["calibrate", "--images", "x.jpg", "--board", "9x6", "--out", o, "--response", response]);
+        assert_eq!(code, 1);
+        assert!(err.contains(&format!("--response: response \"{response}\"")), "{err}");
+        assert!(err.contains("expected linear, srgb or gamma:G"), "{err}");
+    }
     let (code, err) = lumen(&[
         "calibrate",
         "--images",

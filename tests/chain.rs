@@ -117,11 +117,12 @@ fn chained_case_takes_the_upstream_output() {
     // The room of pipelines/session.toml: the board on the ground, the courtyard around it,
     // the object on its cloth seen from above. Twelve views of 8 spp give the principal point
     // to a standard deviation of about 0.6 px in x and 0.45 in y (the calibration's own
-    // figures in its notes): its bounds are three of those.
+    // figures in its notes): its bounds are three of those. The room's sensor writes through a
+    // gamma of 2.2, which the calibration assumes (`response`), as session.toml's does.
     let room = common::root().join("pipelines/scenes/session-room.toml");
     let session = |seed: u64| {
         format!(
-            "[[stages]]\nstage = \"calibrate\"\ncase = \"cal\"\nseed = {seed}\nscene = \"{0}\"\nboard_origin = [0.875, -1.225, 0.002]\nboard_axes = [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]\nviews = 12\nspp = 8\nbounds = {{ views_missed = 0, fx_rel_err = 0.001, cx_err_px = 1.8, cy_err_px = 1.3 }}\n\
+            "[[stages]]\nstage = \"calibrate\"\ncase = \"cal\"\nseed = {seed}\nscene = \"{0}\"\nboard_origin = [0.875, -1.225, 0.002]\nboard_axes = [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]\nresponse = {{ type = \"gamma\", gamma = 2.2 }}\nviews = 12\nspp = 8\nbounds = {{ views_missed = 0, fx_rel_err = 0.001, cx_err_px = 1.8, cy_err_px = 1.3 }}\n\
              [[stages]]\nstage = \"sfm\"\ncase = \"s\"\nscene = \"{0}\"\ncamera = \"from:cal\"\ntarget = [0.0, 0.5, 0.6]\nradius = 3.5\nheight = 1.3\narc_deg = 40\nviews = 4\nbounds = {{ unregistered_images = 0 }}\n\
              [[stages]]\nstage = \"photometric\"\ncase = \"p\"\nscene = \"{0}\"\nlook_at = {{ origin = [-0.6, -3.85, 4.52], target = [-0.6, -3.85, 0.52], up = [0.0, 1.0, 0.0] }}\nobject = \"glossy\"\ncamera = \"from:cal\"\nlights = 8\nspp = 1\ndiffuse_only = true\n",
             room.display()

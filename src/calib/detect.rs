@@ -29,10 +29,12 @@
 //!    p) rather than interpolated at p + offsets: bilinear interpolation at one shared
 //!    sub-pixel phase biases every sample the same way, and on renders this alone cut the
 //!    corner error from 0.042 to 0.030 px RMS. Gradients are central differences of the image
-//!    blurred with σ = 1 px (0.7 px: 0.031, 1.4 px: 0.053 px).
+//!    blurred with σ = 1 px (0.7 px: 0.031, 1.4 px: 0.053 px). With a response given
+//!    (`DetectOptions::response`), that image is the codes made linear (`calib::linear`).
 
 use crate::error::Invalid;
 use crate::image::filter::Grey;
+use crate::render::sensor::Response;
 use glam::DVec2;
 use std::collections::HashMap;
 
@@ -49,11 +51,14 @@ pub struct DetectOptions {
     /// Half-size of a square sub-pixel window in pixels, as `cornerSubPix`'s; `None` (the
     /// default) shapes the window by the board around each corner (`refine`).
     pub subpix_half_window: Option<usize>,
+    /// The response the codes were written through, undone before the corners are refined
+    /// (`calib::linear`; default linear: the codes as they are).
+    pub response: Response,
 }
 
 impl Default for DetectOptions {
     fn default() -> Self {
-        DetectOptions { subpix_half_window: None }
+        DetectOptions { subpix_half_window: None, response: Response::Linear }
     }
 }
 
@@ -91,6 +96,11 @@ pub fn find(img: &Grey, board: BoardSize, opts: &DetectOptions) -> Result<Found,
     }
     let (grid, larger_grid) = find_grid(&points, board, &sampler)?;
     let ordered = order(&grid, board, &sampler);
+    // The board is found on the codes; its corners are refined where light is linear.
+    let sampler = match opts.response {
+        Response::Linear => sampler,
+        r => super::linear::linearise(img, &r).blur(1.0),
+    };
     Ok(Found { corners: refine(&sampler, &ordered, board, opts), larger_grid })
 }
 

@@ -7,6 +7,7 @@
 
 pub mod detect;
 pub mod file;
+pub mod linear;
 pub mod overlay;
 pub mod refine;
 pub mod undistort;

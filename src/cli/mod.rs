@@ -168,6 +168,12 @@ enum Command {
         /// Set k3 = 0.
         #[arg(long)]
         fix_k3: bool,
+        /// The response the images' codes were written through, undone before the corners
+        /// are refined: linear (the codes as they are, as OpenCV takes them), srgb (most
+        /// JPEGs) or gamma:G. On the codes of a non-linear curve, edges move towards their
+        /// dark side and corners are found biased.
+        #[arg(long, default_value = "linear")]
+        response: String,
         /// Write an overlay PNG per view into this folder: the detected corners, rows in
         /// colour, or the candidate corners of a view without a whole board.
         #[arg(long)]
@@ -408,6 +414,7 @@ pub fn main() -> i32 {
             fix_principal_point,
             zero_tangential,
             fix_k3,
+            response,
             debug,
         } => {
             let flags = lumen::calib::refine::Flags {
@@ -416,7 +423,7 @@ pub fn main() -> i32 {
                 zero_tangential,
                 fix_k3,
             };
-            calibrate_cmd(&images, &board, square, &out, flags, debug.as_deref()).map(|_| 0)
+            calibrate_cmd(&images, &board, square, &out, flags, &response, debug.as_deref()).map(|_| 0)
         }
         Command::Ps { dataset, model, start_iterations, out } => {
             ps_cmd(&dataset, &model, start_iterations, &out).map(|_| 0)
@@ -577,9 +584,12 @@ fn calibrate_cmd(
     square: f64,
     out: &Path,
     flags: lumen::calib::refine::Flags,
+    response: &str,
     debug: Option<&Path>,
 ) -> Result<()> {
     let board = parse_board(board)?;
+    let response =
+        lumen::calib::linear::parse_response(response).map_err(|e| anyhow::anyhow!("--response: {e}"))?;
     lumen::calib::check_square(square).map_err(|e| anyhow::anyhow!("--square: {e}"))?;
     let ext = out.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     if !["yaml", "yml", "json"].contains(&ext.as_str()) {
@@ -591,8 +601,8 @@ fn calibrate_cmd(
         let img = lumen::image::io::read(f)?;
         images.push((f.display().to_string(), lumen::image::filter::Grey::from_image(&img)));
     }
-    let config =
-        lumen::calib::Config { board, square, flags, detect: Default::default(), max_iterations: 100 };
+    let detect = lumen::calib::detect::DetectOptions { response, ..Default::default() };
+    let config = lumen::calib::Config { board, square, flags, detect, max_iterations: 100 };
     let input = lumen::calib::Input { images };
     let t = std::time::Instant::now();
     let calibrated = lumen::calib::run(&input, &config);

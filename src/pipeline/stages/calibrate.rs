@@ -35,13 +35,13 @@
 use super::Synthesis;
 use super::{apply_overrides, Context, Findings, Kept, SettingsKey, StageError, MAX_RENDERS};
 use super::{run_case, CaseResult, Settings};
-use crate::calib::{self, detect::BoardSize};
+use crate::calib::{self, detect::BoardSize, detect::DetectOptions};
 use crate::image::{filter::Grey, Image};
 use crate::math::{CameraModel, Pose, WorldToCamera};
 use crate::pipeline::cache::scene_digest;
 use crate::pipeline::cache::Pass;
 use crate::pipeline::metric::{Better, Metric};
-use crate::render::{self, sampler::Sampler};
+use crate::render::{self, sampler::Sampler, sensor::Response};
 use glam::{DMat3, DVec2, DVec3};
 use serde::{Deserialize, Serialize};
 
@@ -88,6 +88,12 @@ pub struct Config {
     /// linear radiance image is used.
     #[serde(default = "yes")]
     pub sensor: bool,
+    /// The response the views' codes are assumed to have been written through, undone before
+    /// the corners are refined (`calib::linear`), written as the scene's `[sensor]` writes one
+    /// (`{ type = "gamma", gamma = 2.2 }`, `{ type = "srgb" }` …); default linear: the codes
+    /// as they are, as `lumen calibrate --response`. It is the user's assumption, not the
+    /// truth: a case may assume a curve the sensor does not have. Needs `sensor = true`.
+    pub response: Option<Response>,
     /// The solver's settings, as `lumen calibrate`'s flags of the same names (default false).
     #[serde(default)]
     pub fix_aspect_ratio: bool,
@@ -100,9 +106,10 @@ pub struct Config {
     /// Levenberg–Marquardt iteration limit (default 100, as `lumen calibrate`).
     #[serde(default = "default_iterations")]
     pub max_iterations: usize,
-    /// Keep the views the solver reads, as `<case>/viewNN.exr` (one linear channel; the case
-    /// name with characters other than letters, digits, `-`, `_`, `.` as `_`) in the output
-    /// folder, so `lumen calibrate` can be run on exactly them (default false).
+    /// Keep the views the solver reads, as `<case>/viewNN.exr` (one channel: the mean code
+    /// over full scale, or the radiance without a sensor; the case name with characters other
+    /// than letters, digits, `-`, `_`, `.` as `_`) in the output folder, so `lumen calibrate`
+    /// (with the case's response as `--response`) can be run on exactly them (default false).
     #[serde(default)]
     pub save_views: bool,
 }
@@ -120,6 +127,9 @@ pub struct DataConfig {
     pub board: [usize; 2],
     #[serde(default = "default_square")]
     pub square: f64,
+    /// The response the photographs' codes are undone through before the corners are refined
+    /// (as the synthetic case's `response`; default linear).
+    pub response: Option<Response>,
 }
 
 fn default_views() -> usize {
@@ -153,7 +163,7 @@ impl DataConfig {
             board: BoardSize { cols: self.board[0], rows: self.board[1] },
             square: self.square,
             flags: Default::default(),
-            detect: Default::default(),
+            detect: DetectOptions { response: self.response.unwrap_or_default(), ..Default::default() },
             max_iterations: default_iterations(),
         }
     }
@@ -171,7 +181,7 @@ impl Config {
                 zero_tangential: self.zero_tangential,
                 fix_k3: self.fix_k3,
             },
-            detect: Default::default(),
+            detect: DetectOptions { response: self.response.unwrap_or_default(), ..Default::default() },
             max_iterations: self.max_iterations,
         }
     }
@@ -262,6 +272,13 @@ fn board_axes(axes: Option<[[f64; 3]; 2]>) -> Result<DMat3, StageError> {
     }
 }
 
+/// A case's `response`, validated (default linear).
+fn checked_response(r: Option<Response>) -> Result<Response, StageError> {
+    let r = r.unwrap_or_default();
+    r.validate().map_err(|e| StageError::Config(format!("response: {e}")))?;
+    Ok(r)
+}
+
 /// Distortion displacement of a model at pixel p: p − K·undistort(p).
 fn displacement(cam: &CameraModel, p: DVec2) -> Option<DVec2> {
     cam.undistort_pixel(p).map(|n| p - cam.normalized_to_pixel(n))
@@ -315,6 +332,13 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<calib::Input, T
     let mut settings = render::Settings::from_scene(&scene);
     apply_overrides(&mut settings, c.spp, None)?;
     let sensor = if c.sensor { scene.sensor.clone() } else { None };
+    let response = checked_response(c.response)?;
+    if sensor.is_none() && response != Response::Linear {
+        return Err(StageError::Config(format!(
+            "response = {response:?}: the views are linear radiance without a sensor (sensor = false, or no [sensor] in {}); a response applies to code values",
+            c.scene
+        )));
+    }
     let board_pts = calib::board_points(board, c.square);
     let bar = render::progress_bar(c.views as u64, &format!("{} views", ctx.case), ctx.progress);
     let mut images = Vec::new();
@@ -396,7 +420,11 @@ pub fn synthesize(c: &Config, ctx: &Context) -> Result<Synthesis<calib::Input, T
         camera.width,
         camera.height,
         settings.spp,
-        if sensor.is_some() { "on" } else { "off" }
+        match (&sensor, response) {
+            (None, _) => "off".to_string(),
+            (Some(_), Response::Linear) => "on, corners refined on the codes as they are".to_string(),
+            (Some(_), r) => format!("on, corners refined on the codes made linear through the assumed {r:?}"),
+        }
     ));
     found.notes.extend(super::denoise_note(&c.denoise, settings.spp));
     Ok(Some((calib::Input { images }, Truth { camera, corners }, found)))
@@ -418,6 +446,7 @@ pub fn read(c: &DataConfig, ctx: &Context) -> Result<(calib::Input, (), Findings
             c.board, c.square
         )));
     }
+    checked_response(c.response)?;
     let dir = super::dataset_path(ctx, &c.images)?;
     let files = crate::image::io::files_with_extensions(&dir, &PHOTO_EXTENSIONS)
         .map_err(|e| StageError::Config(format!("images = \"{}\": {}: {e}", c.images, dir.display())))?;
