@@ -106,8 +106,9 @@ fn for_each_splat(
                 let p = t_tgt_src.transform_point(DVec3::new(n.x, n.y, 1.0) * z as f64);
                 if let Some(px) = target.project(p) {
                     // `project` keeps both coordinates above −0.5: truncating x + 0.5 rounds
-                    // (a conversion instruction, where `round` is a call into libm).
-                    let (u, v) = ((px.x + 0.5) as usize, (px.y + 0.5) as usize);
+                    // (a conversion instruction, where `round` is a call into libm; to i64,
+                    // one instruction, where f64 to usize takes a branch and two).
+                    let (u, v) = ((px.x + 0.5) as i64 as usize, (px.y + 0.5) as i64 as usize);
                     visit(v * tw + u, p.z as f32, i);
                 }
             }
@@ -230,54 +231,36 @@ fn forward(
     Ok((image, mask, depth))
 }
 
-/// Normalises the blended sums; the image, the mask and the depth.
-fn finish(
-    mut sum: Vec<f32>,
-    weight: &[f32],
-    zbuf: &[f32],
-    w: u32,
-    h: u32,
-    channels: u32,
-) -> (Image, Image, Image) {
-    let c = channels as usize;
-    let mut mask = Image::new(w, h, 1);
-    let mut depth = Image::new(w, h, 1);
-    for (i, &wt) in weight.iter().enumerate() {
-        if wt > 0.0 {
-            sum[i * c..][..c].iter_mut().for_each(|v| *v /= wt);
-            mask.data[i] = 1.0;
-            depth.data[i] = zbuf[i];
-        }
-    }
-    (Image { width: w, height: h, channels, data: sum }, mask, depth)
-}
-
 /// One pass of the 3×3 median over the depths present (`INFINITY`: none): a depth behind the
 /// median by more than `tolerance` (relative) takes it, and so does an empty pixel when at
 /// least 5 of its 8 neighbours have a depth.
 fn median_fill(z: &[f32], w: usize, h: usize, tolerance: f32) -> Vec<f32> {
-    (0..w * h)
-        .into_par_iter()
-        .map(|i| {
-            let (x, y) = (i % w, i / w);
+    let mut out = vec![0.0f32; w * h];
+    out.par_chunks_mut(w).enumerate().for_each(|(y, out_row)| {
+        let rows: Vec<&[f32]> = (y.saturating_sub(1)..(y + 2).min(h)).map(|yy| &z[yy * w..][..w]).collect();
+        let row = &z[y * w..][..w];
+        for (x, out) in out_row.iter_mut().enumerate() {
+            let (x0, x1) = (x.saturating_sub(1), (x + 2).min(w));
+            let zi = row[x];
+            let present = zi.is_finite();
+            // The nearest depth around, the pixel's own included (∞ where none).
+            let nearest = rows.iter().flat_map(|r| &r[x0..x1]).fold(f32::INFINITY, |m, &d| m.min(d));
+            // Not behind the nearest neighbour, so not behind the median: kept.
+            if present && zi <= nearest * (1.0 + tolerance) {
+                *out = zi;
+                continue;
+            }
             let mut v = [0.0f32; 9];
             let mut n = 0;
-            for yy in y.saturating_sub(1)..(y + 2).min(h) {
-                for xx in x.saturating_sub(1)..(x + 2).min(w) {
-                    let d = z[yy * w + xx];
-                    if d.is_finite() {
-                        v[n] = d;
-                        n += 1;
-                    }
+            for &d in rows.iter().flat_map(|r| &r[x0..x1]) {
+                if d.is_finite() {
+                    v[n] = d;
+                    n += 1;
                 }
             }
-            let present = z[i].is_finite();
             if n == 0 || (!present && n < 5) {
-                return z[i];
-            }
-            // Not behind the nearest neighbour, so not behind the median: kept.
-            if present && z[i] <= v[..n].iter().fold(f32::INFINITY, |m, &d| m.min(d)) * (1.0 + tolerance) {
-                return z[i];
+                *out = zi;
+                continue;
             }
             let v = &mut v[..n];
             v.sort_unstable_by(f32::total_cmp);
@@ -285,13 +268,10 @@ fn median_fill(z: &[f32], w: usize, h: usize, tolerance: f32) -> Vec<f32> {
             // A depth present is replaced only where it lies behind its neighbourhood: the
             // background through a crack. At a silhouette the median could pick the other
             // layer; a depth that agrees or is nearer stays.
-            if present && z[i] <= median * (1.0 + tolerance) {
-                z[i]
-            } else {
-                median
-            }
-        })
-        .collect()
+            *out = if present && zi <= median * (1.0 + tolerance) { zi } else { median };
+        }
+    });
+    out
 }
 
 /// Backward mapping: each target pixel with a depth looked up in every source.
@@ -313,14 +293,22 @@ fn backward(
         .zip(t_tgt_src)
         .map(|(s, pose)| (Projector::new(&s.view.camera), pose.inverse(), pose.translation))
         .collect();
-    let mut sum = vec![0.0f32; zbuf.len() * c];
-    let mut weight = vec![0.0f32; zbuf.len()];
-    sum.par_chunks_mut(w as usize * c).zip(weight.par_chunks_mut(w as usize)).enumerate().for_each_init(
-        || (vec![None; w as usize], vec![0.0f32; c]),
-        |(rays, colour), (y, (sum_row, weight_row))| {
+    let mut image = Image::new(w, h, channels);
+    let mut mask = Image::new(w, h, 1);
+    let mut depth = Image::new(w, h, 1);
+    // Each row is blended in scratch rows and written out once. Summing into the output
+    // itself would read its fresh pages before writing them: each page would first map the
+    // shared zero page, then be copied on the write, with a flush of every other processor's
+    // TLB (an interrupt to each, costly in a virtual machine), which took most of the time.
+    let rows = image.data.par_chunks_mut(w as usize * c).zip(mask.data.par_chunks_mut(w as usize));
+    rows.zip(depth.data.par_chunks_mut(w as usize)).enumerate().for_each_init(
+        || (vec![None; w as usize], vec![0.0f32; c], vec![0.0f32; w as usize * c], vec![0.0f32; w as usize]),
+        |(rays, colour, sum, weight), (y, ((image_row, mask_row), depth_row))| {
             cam.undistort_row(y as u32, rays);
-            for (x, n) in rays.iter().enumerate() {
-                let z = zbuf[y * w as usize + x];
+            sum.fill(0.0);
+            weight.fill(0.0);
+            let zrow = &zbuf[y * w as usize..][..w as usize];
+            for (x, (n, &z)) in rays.iter().zip(zrow).enumerate() {
                 let Some(n) = n.filter(|_| z.is_finite()) else {
                     continue;
                 };
@@ -335,15 +323,24 @@ fn backward(
                         continue;
                     }
                     let wt = angle_weight(p_tgt, *c_source) * agreed;
-                    for (acc, v) in sum_row[x * c..][..c].iter_mut().zip(colour.iter()) {
+                    for (acc, v) in sum[x * c..][..c].iter_mut().zip(colour.iter()) {
                         *acc += wt * v;
                     }
-                    weight_row[x] += wt;
+                    weight[x] += wt;
                 }
+            }
+            // Normalised, with the mask and the depth: every output value written once.
+            for (x, &wt) in weight.iter().enumerate() {
+                let seen = wt > 0.0;
+                for (out, &v) in image_row[x * c..][..c].iter_mut().zip(&sum[x * c..][..c]) {
+                    *out = if seen { v / wt } else { 0.0 };
+                }
+                mask_row[x] = if seen { 1.0 } else { 0.0 };
+                depth_row[x] = if seen { zrow[x] } else { 0.0 };
             }
         },
     );
-    finish(sum, &weight, zbuf, w, h, channels)
+    (image, mask, depth)
 }
 
 /// The source's colour at `px`, bilinear over the four pixels around it whose depth is within
