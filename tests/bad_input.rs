@@ -714,6 +714,20 @@ fn one_scene_settings_are_checked() {
         &case("calibrate", &board, "response = { type = \"gamma\", gamma = 0.0 }"),
         &["response: response gamma = 0: expected 0.1 to 10"],
     );
+    // Photographs as OpenEXR files are linear already: a response on them is refused.
+    let photos = dir.path().join("photos");
+    std::fs::create_dir(&photos).unwrap();
+    for name in ["a.exr", "b.exr"] {
+        lumen::image::io::write(&photos.join(name), &lumen::image::Image::new(8, 8, 1)).unwrap();
+    }
+    refused_naming(
+        dir.path(),
+        &format!(
+            "seed = 1\n[[stages]]\nstage = \"calibrate\"\ncase = \"c\"\nimages = \"{}\"\nresponse = {{ type = \"srgb\" }}\n",
+            photos.display()
+        ),
+        &["a.exr: an OpenEXR image holds linear values, not codes"],
+    );
     let chart_file = scenes.join("color-chart.toml").display().to_string();
     refused_naming(
         dir.path(),

@@ -171,6 +171,22 @@ fn cli_bad_input() {
     let (code, err) = lumen(&["calibrate", "--images", "x.jpg", "--board", "9by6", "--out", o]);
     assert_eq!(code, 1);
     assert!(err.contains("9by6"), "{err}");
+    // A response on an OpenEXR file, linear already, is refused with the file named.
+    let exr = dir.path().join("view.exr");
+    lumen::image::io::write(&exr, &lumen::image::Image::new(8, 8, 1)).unwrap();
+    let (code, err) = lumen(&[
+        "calibrate",
+        "--images",
+        exr.to_str().unwrap(),
+        "--board",
+        "9x6",
+        "--out",
+        o,
+        "--response",
+        "srgb",
+    ]);
+    assert_eq!(code, 1);
+    assert!(err.contains("view.exr: an OpenEXR image holds linear values, not codes"), "{err}");
     for response in ["gamma:0", "log", "gamma:x"] {
         let (code, err) =
             lumen(&["calibrate", "--images", "x.jpg", "--board", "9x6", "--out", o, "--response", response]);

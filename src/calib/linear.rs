@@ -52,6 +52,19 @@ pub fn linearise(img: &Grey, response: &Response) -> Grey {
     Grey { data, ..*img }
 }
 
+/// Refuses a non-linear response for an OpenEXR file, whose values are linear already: the
+/// curve would bend them, and clip every value above 1.
+pub fn check_codes(path: &std::path::Path, response: &Response) -> Result<(), String> {
+    let exr = path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("exr"));
+    if exr && *response != Response::Linear {
+        return Err(format!(
+            "{}: an OpenEXR image holds linear values, not codes; the response {response:?} applies to the codes of a PNG, JPEG or TIFF (use linear)",
+            path.display()
+        ));
+    }
+    Ok(())
+}
+
 /// `--response`'s values: `linear`, `srgb` or `gamma:G` (G from 0.1 to 10, the exponent the
 /// codes were raised to the reciprocal of).
 pub fn parse_response(s: &str) -> Result<Response, String> {

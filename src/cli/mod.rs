@@ -598,6 +598,7 @@ fn calibrate_cmd(
     let files = expand_images(patterns)?;
     let mut images = Vec::new();
     for f in &files {
+        lumen::calib::linear::check_codes(f, &response).map_err(|e| anyhow::anyhow!("--response: {e}"))?;
         let img = lumen::image::io::read(f)?;
         images.push((f.display().to_string(), lumen::image::filter::Grey::from_image(&img)));
     }

@@ -446,7 +446,7 @@ pub fn read(c: &DataConfig, ctx: &Context) -> Result<(calib::Input, (), Findings
             c.board, c.square
         )));
     }
-    checked_response(c.response)?;
+    let response = checked_response(c.response)?;
     let dir = super::dataset_path(ctx, &c.images)?;
     let files = crate::image::io::files_with_extensions(&dir, &PHOTO_EXTENSIONS)
         .map_err(|e| StageError::Config(format!("images = \"{}\": {}: {e}", c.images, dir.display())))?;
@@ -461,6 +461,7 @@ pub fn read(c: &DataConfig, ctx: &Context) -> Result<(calib::Input, (), Findings
     }
     let mut images = Vec::new();
     for f in &files {
+        calib::linear::check_codes(f, &response).map_err(|e| StageError::Config(format!("response: {e}")))?;
         let img = crate::image::io::read(f)?;
         let name = f.file_name().map_or_else(|| f.display().to_string(), |n| n.to_string_lossy().into());
         images.push((name, Grey::from_image(&img)));
