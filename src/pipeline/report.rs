@@ -108,7 +108,7 @@ pub struct Report {
     pub git_commit: String,
     /// When the run started (UTC, RFC 3339).
     pub started: String,
-    /// The machine: processor model and logical cores.
+    /// The machine: processor model (family, model), widest vectors and logical cores.
     pub machine: String,
     pub threads: usize,
     /// Wall time of the whole run, in seconds.
@@ -445,19 +445,41 @@ pub fn sweep_table(s: &mut String, cases: &[&StageReport]) {
     let _ = writeln!(s);
 }
 
-/// The processor model (from /proc/cpuinfo where there is one) and the logical cores.
+/// The processor model with its family and model numbers (from /proc/cpuinfo where there is
+/// one: a name such as "AMD EPYC" covers several generations), its widest vectors, and the
+/// logical cores.
 fn machine() -> String {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let model = std::fs::read_to_string("/proc/cpuinfo")
-        .ok()
-        .and_then(|t| {
-            t.lines()
-                .find(|l| l.starts_with("model name"))
-                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())
-        })
-        .filter(|m| !m.is_empty())
-        .unwrap_or_else(|| std::env::consts::ARCH.to_string());
-    format!("{model}, {cores} logical cores")
+    let info = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
+    let field = |name: &str| {
+        info.lines()
+            .find(|l| l.split(':').next().is_some_and(|k| k.trim() == name))
+            .and_then(|l| l.split(':').nth(1))
+            .map(|v| v.trim().to_string())
+            .filter(|v| !v.is_empty())
+    };
+    let model = field("model name").unwrap_or_else(|| std::env::consts::ARCH.to_string());
+    let generation = match (field("cpu family"), field("model")) {
+        (Some(f), Some(m)) => format!(" (family {f}, model {m})"),
+        _ => String::new(),
+    };
+    format!("{model}{generation}, {}, {cores} logical cores", vectors())
+}
+
+/// The widest vector instructions the processor has, as lumen's run-time dispatch sees them.
+fn vectors() -> &'static str {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::is_x86_feature_detected!("avx512f") {
+            return "AVX-512";
+        }
+        if std::is_x86_feature_detected!("avx2") {
+            return "AVX2";
+        }
+        "SSE2"
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    "no x86 vectors"
 }
 
 /// Each case's (time, error): solve time for solver stages, the render's time for the
