@@ -20,6 +20,7 @@
 //! error is at most h²/8·max|f⁻¹''| = 2.64/(8·4096²) = 2·10⁻⁸ of full scale, far under an 8- or
 //! 16-bit code's step.
 
+use super::Error;
 use crate::image::filter::Grey;
 use crate::render::sensor::Response;
 
@@ -54,30 +55,30 @@ pub fn linearise(img: &Grey, response: &Response) -> Grey {
 
 /// Refuses a non-linear response for an OpenEXR file, whose values are linear already: the
 /// curve would bend them, and clip every value above 1.
-pub fn check_codes(path: &std::path::Path, response: &Response) -> Result<(), String> {
+pub fn check_codes(path: &std::path::Path, response: &Response) -> Result<(), Error> {
     let exr = path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("exr"));
     if exr && *response != Response::Linear {
-        return Err(format!(
+        return Err(Error::BadInput(format!(
             "{}: an OpenEXR image holds linear values, not codes; the response {response:?} applies to the codes of a PNG, JPEG or TIFF (use linear)",
             path.display()
-        ));
+        )));
     }
     Ok(())
 }
 
 /// `--response`'s values: `linear`, `srgb` or `gamma:G` (G from 0.1 to 10, the exponent the
 /// codes were raised to the reciprocal of).
-pub fn parse_response(s: &str) -> Result<Response, String> {
+pub fn parse_response(s: &str) -> Result<Response, Error> {
     let expected = "expected linear, srgb or gamma:G (G from 0.1 to 10, e.g. gamma:2.2)";
     let r = match s.trim().to_ascii_lowercase().as_str() {
         "linear" => Response::Linear,
         "srgb" => Response::Srgb,
         other => match other.strip_prefix("gamma:").map(|g| g.trim().parse::<f64>()) {
             Some(Ok(gamma)) => Response::Gamma { gamma },
-            _ => return Err(format!("response \"{s}\": {expected}")),
+            _ => return Err(Error::BadInput(format!("response \"{s}\": {expected}"))),
         },
     };
-    r.validate().map_err(|e| format!("response \"{s}\": {e}; {expected}"))?;
+    r.validate().map_err(|e| Error::BadInput(format!("response \"{s}\": {e}; {expected}")))?;
     Ok(r)
 }
 
@@ -108,11 +109,13 @@ mod tests {
 
     #[test]
     fn response_names() {
-        assert_eq!(parse_response("sRGB"), Ok(Response::Srgb));
-        assert_eq!(parse_response("linear"), Ok(Response::Linear));
-        assert_eq!(parse_response("gamma:2.2"), Ok(Response::Gamma { gamma: 2.2 }));
+        assert_eq!(parse_response("sRGB").ok(), Some(Response::Srgb));
+        assert_eq!(parse_response("linear").ok(), Some(Response::Linear));
+        assert_eq!(parse_response("gamma:2.2").ok(), Some(Response::Gamma { gamma: 2.2 }));
         for bad in ["gamma:0", "gamma:nan", "gamma:", "gamma", "log", ""] {
             let e = parse_response(bad).unwrap_err();
+            assert_eq!(e.fault(), crate::Fault::BadInput);
+            let e = e.to_string();
             assert!(e.contains("expected linear, srgb or gamma:G"), "{bad}: {e}");
         }
     }
