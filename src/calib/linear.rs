@@ -33,14 +33,7 @@ pub fn linearise(img: &Grey, response: &Response) -> Grey {
     if *response == Response::Linear {
         return img.clone();
     }
-    // The common curves in closed form: `Response::inverse` bisects, 60 steps a value.
-    let inverse = |y: f64| match *response {
-        Response::Gamma { gamma } => y.powf(gamma),
-        Response::Srgb if y <= 0.040_45 => y / 12.92,
-        Response::Srgb => ((y + 0.055) / 1.055).powf(2.4),
-        _ => response.inverse(y),
-    };
-    let table: Vec<f32> = (0..=TABLE).map(|i| inverse(i as f64 / TABLE as f64) as f32).collect();
+    let table: Vec<f32> = (0..=TABLE).map(|i| response.inverse(i as f64 / TABLE as f64) as f32).collect();
     let data = img
         .data
         .iter()
@@ -101,7 +94,8 @@ mod tests {
         for y in [0.0, 0.02, 0.04045, 0.3, 1.0f64] {
             let one = Grey { width: 1, height: 1, data: vec![y as f32] };
             let back = linearise(&one, &Response::Srgb).data[0] as f64;
-            assert!((back - Response::Srgb.inverse(y)).abs() < 1e-6, "{y}: {back}");
+            let want = if y <= 0.04045 { y / 12.92 } else { ((y + 0.055) / 1.055).powf(2.4) };
+            assert!((back - want).abs() < 1e-6, "{y}: {back}");
         }
         let outside = Grey { width: 2, height: 1, data: vec![-0.5, 1.5] };
         assert_eq!(linearise(&outside, &Response::Srgb).data, vec![0.0, 1.0]);
